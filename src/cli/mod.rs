@@ -1,0 +1,73 @@
+//! The command line: `optimis run` and `optimis bench`, thin shells around [`crate::sim`].
+
+mod bench;
+mod run;
+mod table;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::sim::spec::SpecError;
+
+/// optimis — optimal MIS weights for bidirectional photon mapping by direct variance minimisation.
+#[derive(Debug, Parser)]
+#[command(name = "optimis", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run a simulation job locally and print its noise and weights tables.
+    Run(run::RunArgs),
+    /// Measure light paths per second at the paper's parameters.
+    Bench(bench::BenchArgs),
+}
+
+/// Everything the command line can fail with.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    #[error("cannot read {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("{path} is not valid JSON: {source}")]
+    Json { path: PathBuf, source: serde_json::Error },
+    #[error("invalid job specification: {0}")]
+    Spec(#[from] SpecError),
+    #[error("cannot start the worker threads: {0}")]
+    Threads(#[from] rayon::ThreadPoolBuildError),
+    #[error("cannot write the output: {0}")]
+    Output(#[from] std::io::Error),
+}
+
+/// A rayon pool of `threads` workers (default: one per available core).
+pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if let Some(t) = threads {
+        builder = builder.num_threads(t.max(1));
+    }
+    Ok(builder.build()?)
+}
+
+/// The machine's core count as the OS reports it.
+pub(crate) fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Parses the command line and runs it; errors go to stderr with exit status 1 (2 for usage).
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Bench(args) => bench::bench(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("optimis: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,110 @@
+//! `optimis run`: one job, locally, from a spec file and/or a preset with flag overrides.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::{Value, json};
+
+use super::{CliError, table, thread_pool};
+use crate::sim::moments::Moments;
+use crate::sim::quadrature::reference_luminance;
+use crate::sim::report::build_report;
+use crate::sim::runner::run_iterations;
+use crate::sim::spec::{ValidJob, merge_patch, parse_job_spec};
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// A JSON job specification (the document `POST /v1/jobs` accepts); flags override it.
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    /// Preset to start from (paper-table1, uniform-illumination); overrides the spec's preset.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Iterations M.
+    #[arg(long)]
+    pub iterations: Option<u64>,
+    /// Light paths per iteration N_F.
+    #[arg(long)]
+    pub light_paths: Option<u64>,
+    /// Camera paths per iteration N_B.
+    #[arg(long)]
+    pub camera_paths: Option<u64>,
+    /// Seed of the random streams.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Worker threads (default: one per core). Results do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Print the result as JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Reads a JSON file.
+pub(crate) fn read_json(path: &PathBuf) -> Result<Value, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
+    serde_json::from_str(&text).map_err(|source| CliError::Json { path: path.clone(), source })
+}
+
+/// The job of a spec file (or `{}`) with the flags applied, validated.
+fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
+    let mut doc = match &args.spec {
+        Some(path) => read_json(path)?,
+        None => json!({}),
+    };
+    let mut overrides = serde_json::Map::new();
+    let mut set = |key: &str, value: Option<Value>| {
+        if let Some(v) = value {
+            overrides.insert(key.to_string(), v);
+        }
+    };
+    set("preset", args.preset.clone().map(Value::from));
+    set("iterations", args.iterations.map(Value::from));
+    set("light_paths", args.light_paths.map(Value::from));
+    set("camera_paths", args.camera_paths.map(Value::from));
+    set("seed", args.seed.map(Value::from));
+    if args.preset.is_some() && doc.is_object() {
+        // A preset flag starts over from that preset; the file's other fields still override it.
+        doc["preset"] = Value::Null;
+    }
+    merge_patch(&mut doc, &Value::Object(overrides));
+    Ok(parse_job_spec(&doc)?.validate()?)
+}
+
+pub fn run(args: RunArgs) -> Result<(), CliError> {
+    let job = job_from_args(&args)?;
+    let pool = thread_pool(args.threads)?;
+    let config = &job.config;
+    let total = job.spec.iterations;
+    let progress = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} iterations, ETA {eta} {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let started = Instant::now();
+    let mut moments = Moments::new(config);
+    let never = AtomicBool::new(false);
+    pool.install(|| {
+        run_iterations(config, job.spec.seed, 0..total, &mut moments, &never, |_, done| {
+            let rate = (done * config.light_paths) as f64 / started.elapsed().as_secs_f64();
+            progress.set_message(format!("{rate:.3e} light paths/s"));
+            progress.set_position(done);
+        })
+    })
+    .expect("a fresh run is neither cancelled nor overlapping");
+    progress.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene));
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
+        writeln!(out)?;
+    } else {
+        table::write_report(&mut out, &job, &report, seconds, pool.current_num_threads())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,5 @@
+//! The `optimis` binary: parses the command line and hands over to the library.
+
+fn main() -> std::process::ExitCode {
+    optimis::cli::main()
+}

@@ -1,0 +1,117 @@
+//! The statistical configuration of a job — everything that changes the law of one iteration — and
+//! its fingerprint.
+//!
+//! Two moments values may be merged only if they were drawn under the same configuration, so the
+//! fingerprint hashes exactly that: the scene, R, N_F, N_B, the cell grid, the generator scheme and
+//! the moments format. Not the seed (different seeds are independent draws of the same law), not
+//! the iteration count, not the solver options.
+
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+use super::cells::CellGrid;
+use super::rng::GENERATOR_ID;
+use super::scene::Scene;
+use super::spec::{CellSpec, SceneSpec};
+
+/// Version of the moments layout; part of the fingerprint.
+pub const MOMENTS_FORMAT_VERSION: u32 = 1;
+
+/// Light paths per chunk: the unit of parallel work and of random streams (stream c of an
+/// iteration draws light paths [c·CHUNK, (c+1)·CHUNK)). Part of [`GENERATOR_ID`].
+pub const LIGHT_CHUNK: u64 = 1 << 16;
+
+/// A validated configuration, shared read-only by every iteration.
+#[derive(Debug, Clone)]
+pub struct SimConfig {
+    pub scene: Scene,
+    /// Merge radius R.
+    pub merge_radius: f64,
+    /// N_F.
+    pub light_paths: u64,
+    /// N_B.
+    pub camera_paths: u64,
+    pub cells: CellGrid,
+    fingerprint: String,
+}
+
+/// What the fingerprint hashes, serialised canonically (fixed field order, shortest float text).
+#[derive(Serialize)]
+struct FingerprintInput<'a> {
+    format: u32,
+    generator: &'a str,
+    scene: &'a SceneSpec,
+    merge_radius: f64,
+    light_paths: u64,
+    camera_paths: u64,
+    cells: CellSpec,
+}
+
+/// Lower-case hex of SHA-256.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl SimConfig {
+    /// Builds the configuration from validated parts.
+    pub fn new(scene: Scene, merge_radius: f64, light_paths: u64, camera_paths: u64, cells: CellGrid) -> Self {
+        let input = FingerprintInput {
+            format: MOMENTS_FORMAT_VERSION,
+            generator: GENERATOR_ID,
+            scene: &scene.spec,
+            merge_radius,
+            light_paths,
+            camera_paths,
+            cells: CellSpec {
+                r2_edges: cells.r2_edges().to_vec(),
+                r3_edges: cells.r3_edges().to_vec(),
+                phi_bins: cells.phi_bins(),
+            },
+        };
+        let canonical = serde_json::to_vec(&input).expect("a fingerprint input always serialises");
+        let fingerprint = sha256_hex(&canonical);
+        Self { scene, merge_radius, light_paths, camera_paths, cells, fingerprint }
+    }
+
+    /// The configuration fingerprint (hex SHA-256).
+    pub fn fingerprint(&self) -> &str {
+        &self.fingerprint
+    }
+
+    /// Number of light-path chunks (random streams) per iteration.
+    pub fn chunks(&self) -> u64 {
+        self.light_paths.div_ceil(LIGHT_CHUNK)
+    }
+
+    /// Light paths in chunk `c`.
+    pub fn chunk_len(&self, c: u64) -> u64 {
+        (self.light_paths - c * LIGHT_CHUNK).min(LIGHT_CHUNK)
+    }
+
+    /// Dimension of the moment vector Y = (A⁽⁰⁾, A⁽¹⁾, B): 2K + 1.
+    pub fn dimension(&self) -> usize {
+        2 * self.cells.len() + 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::spec::parse_job_spec;
+    use serde_json::json;
+
+    fn fp(doc: serde_json::Value) -> String {
+        parse_job_spec(&doc).unwrap().validate().unwrap().config.fingerprint().to_string()
+    }
+
+    #[test]
+    fn fingerprint_tracks_statistics_only() {
+        let base = fp(json!({}));
+        assert_eq!(base.len(), 64);
+        assert_eq!(base, fp(json!({ "seed": 99, "iterations": 5, "solver": { "lambda": 1 } })));
+        assert_ne!(base, fp(json!({ "merge_radius": 0.004 })));
+        assert_ne!(base, fp(json!({ "light_paths": 1000 })));
+        assert_ne!(base, fp(json!({ "camera_paths": 10 })));
+        assert_ne!(base, fp(json!({ "scene": { "beta_deg": 4 } })));
+        assert_ne!(base, fp(json!({ "cells": { "phi_bins": 2 } })));
+    }
+}

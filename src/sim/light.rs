@@ -1,0 +1,230 @@
+//! The streamed light paths of one chunk: the hot loop of optimis.
+//!
+//! Each light path (model.md) starts at x3l with density I/Φ, leaves plane 3 in a cosine-distributed
+//! direction to x2l, is deflected by the plane-2 lobe and reaches plane 1 at x1l. Its energy is 1
+//! up to x2l, and sin ϑ/ϑ after the lobe (the exact-pdf throughput, see [`super::scene::Lobe`]).
+//! It merges with every camera vertex within R:
+//!
+//! * plane 3: C2 = E_c(x3c)·E_l·K/π, join path (x2c, x3c);
+//! * plane 2: C1 = E_l·K·f2(x3l→x2l, x2c→x1c), join path (x2c, x3l);
+//! * plane 1: C0 = E_l(x1l)·K/π with each of the N_B camera paths (they share x1c = 0), join path
+//!   (x2l, x3l);
+//!
+//! with K = 1/(πR²). Paths are never stored: each is generated, tested and dropped.
+//!
+//! Speed: the loop allocates nothing, takes no lock and dispatches nothing dynamically. The common
+//! path (no merge at all, > 99.99%) costs two disc samples by rejection, two square roots, two
+//! divisions and two bitset probes. Plane 1 needs the lobe sample, but a path whose direction
+//! misses the pixel by more than the lobe can ever deflect (8.57β, see
+//! [`super::sampling::LOBE_MAX_SIGMAS`]) plus the angular radius of the merge disc cannot hit it;
+//! that exact cone test skips the logarithm and trigonometry for most paths. Merges are rare and
+//! handled out of line.
+
+use std::f64::consts::PI;
+
+use nalgebra::Vector3;
+
+use super::camera::CameraSet;
+use super::config::SimConfig;
+use super::rng::stream;
+use super::sampling::{LOBE_MAX_SIGMAS, cosine_direction, sample_lobe};
+use super::scene::{angle_between, theta_over_sin};
+use super::tally::{ChunkScratch, ChunkTally, strategy_weights};
+
+/// Constants of the light-path loop, derived once per configuration.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelCone {
+    /// cos of the widest angle between a path's incident direction at x2l and the direction to
+    /// the pixel for which the path can still land within R of the pixel.
+    cos_reach: f64,
+    /// The widest angle reaches π: every path must sample the lobe.
+    always: bool,
+}
+
+impl PixelCone {
+    /// The cone for lobe width `beta`, plane distance `l2` and merge radius `radius` < l2.
+    ///
+    /// Proof of the bound: the lobe deflects the incident direction d by ϑ ≤ ϑ_max =
+    /// LOBE_MAX_SIGMAS·β into d'. If d' hits plane 1 within R of the pixel, d' points into the ball
+    /// of radius R about the pixel, which from x2l (at distance ≥ L2 > R) subtends a half-angle
+    /// ≤ δ = asin(R/L2); so angle(d', t) ≤ δ for t the direction to the pixel. By the triangle
+    /// inequality on the sphere, angle(d, t) ≤ ϑ_max + δ. A relative margin of 10⁻⁶ covers rounding.
+    pub fn new(beta: f64, l2: f64, radius: f64) -> Self {
+        assert!(radius < l2, "the merge radius must be smaller than L2 for the pixel cone bound");
+        let reach = (LOBE_MAX_SIGMAS * beta + (radius / l2).asin()) * (1.0 + 1e-6);
+        Self { cos_reach: reach.cos(), always: reach >= PI }
+    }
+
+    /// Whether a path at `x2` on plane 2 travelling along unit `d` can reach the pixel's merge disc.
+    #[inline(always)]
+    pub fn may_reach(&self, x2: [f64; 2], d: &Vector3<f64>, l2: f64) -> bool {
+        // t = pixel − x2l (unnormalised); compare d·t with cos_reach·|t| without a square root.
+        let dot = -d.x * x2[0] - d.y * x2[1] - d.z * l2;
+        let t2 = x2[0] * x2[0] + x2[1] * x2[1] + l2 * l2;
+        let bound2 = self.cos_reach * self.cos_reach * t2;
+        if self.always {
+            true
+        } else if self.cos_reach >= 0.0 {
+            dot >= 0.0 && dot * dot >= bound2
+        } else {
+            dot >= 0.0 || dot * dot <= bound2
+        }
+    }
+}
+
+/// Traces chunk `chunk` of iteration `iteration` and returns its tally.
+pub fn trace_chunk(
+    config: &SimConfig,
+    cameras: &CameraSet,
+    seed: u64,
+    iteration: u64,
+    chunk: u64,
+    scratch: &mut ChunkScratch,
+) -> ChunkTally {
+    let scene = &config.scene;
+    let (l2, l3) = (scene.l2, scene.l3);
+    let cone = PixelCone::new(scene.lobe.beta, l2, config.merge_radius);
+    let mut rng = stream(seed, iteration, chunk);
+    for _ in 0..config.chunk_len(chunk) {
+        let x3 = scene.illumination.sample(&mut rng);
+        let up = cosine_direction(&mut rng);
+        // Travel is downwards, from plane 3 to plane 2.
+        let d = Vector3::new(up.x, up.y, -up.z);
+        let x2 = [x3[0] + l3 * up.x / up.z, x3[1] + l3 * up.y / up.z];
+
+        let near3 = cameras.plane3.candidates(x3);
+        if !near3.is_empty() {
+            merge_plane3(config, cameras, near3, x3, scratch);
+        }
+        let near2 = cameras.plane2.candidates(x2);
+        if !near2.is_empty() {
+            merge_plane2(config, cameras, near2, x2, x3, &d, scratch);
+        }
+        if cone.may_reach(x2, &d, l2) {
+            // The lobe is sampled only here: its draws follow the path's others in the stream.
+            let (out, theta) = sample_lobe(&scene.lobe, &d, &mut rng);
+            if out.z < 0.0 {
+                let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+                let r = config.merge_radius;
+                if x1[0] * x1[0] + x1[1] * x1[1] <= r * r {
+                    merge_plane1(config, theta, x2, x3, scratch);
+                }
+            }
+        }
+    }
+    scratch.take()
+}
+
+/// K = 1/(πR²).
+#[inline]
+fn kernel(config: &SimConfig) -> f64 {
+    1.0 / (PI * config.merge_radius * config.merge_radius)
+}
+
+#[inline]
+fn within(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    dx * dx + dy * dy <= r * r
+}
+
+#[cold]
+#[inline(never)]
+fn merge_plane3(config: &SimConfig, cameras: &CameraSet, near: &[u32], x3l: [f64; 2], scratch: &mut ChunkScratch) {
+    let k = config.cells.len();
+    for &j in near {
+        let cam = &cameras.paths[j as usize];
+        let Some(x3c) = cam.x3 else { continue };
+        if within(x3l, x3c, config.merge_radius) {
+            let c = cam.energy3 * kernel(config) / PI;
+            let weights = strategy_weights(&config.scene, 2, cam.x2, x3c);
+            scratch.record(2, config.cells.index(cam.x2, x3c), k, c, &weights);
+            scratch.count_merge(2);
+        }
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn merge_plane2(
+    config: &SimConfig,
+    cameras: &CameraSet,
+    near: &[u32],
+    x2l: [f64; 2],
+    x3l: [f64; 2],
+    d: &Vector3<f64>,
+    scratch: &mut ChunkScratch,
+) {
+    let k = config.cells.len();
+    for &j in near {
+        let cam = &cameras.paths[j as usize];
+        if within(x2l, cam.x2, config.merge_radius) {
+            // f2(dir x3l→x2l, dir x2c→x1c): deflection between the light's incident direction and
+            // the direction to the pixel; γ is that direction's angle to the normal.
+            let theta = angle_between(d, &cam.to_pixel);
+            let c = kernel(config) * config.scene.lobe.bdf(theta, cam.cos1);
+            let weights = strategy_weights(&config.scene, 1, cam.x2, x3l);
+            scratch.record(1, config.cells.index(cam.x2, x3l), k, c, &weights);
+            scratch.count_merge(1);
+        }
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn merge_plane1(config: &SimConfig, theta: f64, x2l: [f64; 2], x3l: [f64; 2], scratch: &mut ChunkScratch) {
+    // Energy after the lobe: sin ϑ/ϑ. The merge happens with all N_B camera paths at the shared
+    // pixel, so the pair sum over j is N_B times one contribution.
+    let energy = 1.0 / theta_over_sin(theta);
+    let c = energy * kernel(config) / PI * config.camera_paths as f64;
+    let weights = strategy_weights(&config.scene, 0, x2l, x3l);
+    scratch.record(0, config.cells.index(x2l, x3l), config.cells.len(), c, &weights);
+    scratch.count_merge(0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::rng::stream;
+    use crate::sim::sampling::deflect;
+
+    /// The cone test must never skip a path that can hit the pixel disc: for random x2 near the
+    /// axis and directions aimed near the pixel, any deflection within the lobe's bound that lands
+    /// in the disc must come from a direction the cone admits.
+    #[test]
+    fn pixel_cone_never_rejects_a_possible_hit() {
+        let beta = 3f64.to_radians();
+        let (l2, r) = (1.0, 0.05);
+        let cone = PixelCone::new(beta, l2, r);
+        let mut rng = stream(9, 9, 9);
+        let mut hits = 0;
+        for _ in 0..200_000 {
+            let u = |rng: &mut _| crate::sim::rng::uniform(rng);
+            let x2 = [u(&mut rng) * 2.0 - 1.0, u(&mut rng) * 2.0 - 1.0];
+            let (t, _) = crate::sim::scene::Scene::from_spec(&crate::sim::spec::SceneSpec {
+                l2,
+                l3: 3.0,
+                beta_deg: 3.0,
+                illumination: crate::sim::spec::IlluminationSpec::Uniform { r_ls: 1.0 },
+            })
+            .towards_pixel(x2);
+            // An incident direction up to 10β away from the pixel direction…
+            let d = deflect(&t, u(&mut rng) * 10.0 * beta, u(&mut rng) * std::f64::consts::TAU);
+            if d.z >= 0.0 {
+                continue;
+            }
+            // …deflected by up to the lobe's largest angle.
+            let out = deflect(&d, u(&mut rng) * LOBE_MAX_SIGMAS * beta, u(&mut rng) * std::f64::consts::TAU);
+            if out.z >= 0.0 {
+                continue;
+            }
+            let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+            if x1[0].hypot(x1[1]) <= r {
+                hits += 1;
+                assert!(cone.may_reach(x2, &d, l2), "cone rejected a hit at {x2:?}");
+            }
+        }
+        assert!(hits > 100, "the test must exercise hits ({hits})");
+        // And it does reject: a direction pointing away from the pixel.
+        assert!(!cone.may_reach([0.0, 0.0], &Vector3::new(0.9, 0.0, -0.1).normalize(), l2));
+    }
+}

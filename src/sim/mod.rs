@@ -1,0 +1,45 @@
+//! The simulation core: a pure, deterministic model of the paper's scene, with no I/O.
+//!
+//! # Layout
+//!
+//! Specification and configuration:
+//! * [`spec`] — the JSON job specification, presets, validation (the only place values are checked);
+//! * [`config`] — the validated statistical configuration and its fingerprint;
+//! * [`scene`], [`illumination`], [`cells`] — geometry and BDFs, the light's profile, the cell grid.
+//!
+//! One iteration (camera paths → grid → streamed light paths → merges → tallies):
+//! * [`rng`] — the random stream of each (seed, iteration, chunk);
+//! * [`sampling`] — Lambert and lobe directions;
+//! * [`camera`], [`grid`] — the N_B camera paths and the hash grid of their vertices;
+//! * [`light`] — the streamed light-path loop (the hot path);
+//! * [`heuristics`], [`tally`] — per-path MIS weights and per-chunk/per-iteration tallies.
+//!
+//! Statistics and results:
+//! * [`exact_sum`], [`coverage`], [`moments`] — exact additive moments and what they cover;
+//! * [`runner`] — runs iterations on the current rayon pool, in order;
+//! * [`solver`], [`noise`], [`report`] — optimal weights, the noise table, the result document;
+//! * [`quadrature`] — the analytic reference luminance.
+//!
+//! Nothing here touches a file, a socket, a clock or a database, so all of it is testable and
+//! benchmarkable alone; the CLI and the server wrap it.
+
+pub mod camera;
+pub mod cells;
+pub mod config;
+pub mod coverage;
+pub mod exact_sum;
+pub mod grid;
+pub mod heuristics;
+pub mod illumination;
+pub mod light;
+pub mod moments;
+pub mod noise;
+pub mod quadrature;
+pub mod report;
+pub mod rng;
+pub mod runner;
+pub mod sampling;
+pub mod scene;
+pub mod solver;
+pub mod spec;
+pub mod tally;

@@ -1,0 +1,154 @@
+//! The model scene of model.md: three parallel diffusely transmitting planes, the sharp plane-2
+//! lobe, and the light's profile on plane 3.
+//!
+//! Frames and units: plane 1 is z = 0, plane 2 is z = L2, plane 3 is z = L2 + L3; positions on a
+//! plane are 2-D `(x, y)`; directions are unit 3-D vectors of *travel* (a light particle going from
+//! plane 3 to plane 2 has a negative z component). Angles are in radians inside the core (the spec
+//! gives β in degrees). Flux is normalised to Φ = 1 (model.md, "decision").
+
+use std::f64::consts::PI;
+
+use nalgebra::Vector3;
+
+use super::illumination::Illumination;
+use super::spec::SceneSpec;
+
+/// The plane-2 transmission lobe.
+///
+/// BDF (model.md): f2(ω_in, ω_out) = g(ϑ) / cos γ with g(ϑ) = exp(−ϑ²/2β²) / (2πβ²), ϑ the angle
+/// between the incident and the scattered direction of travel, γ the angle between the scattered
+/// direction and the normal.
+///
+/// Sampling (see [`super::sampling::sample_lobe`]) draws ϑ = β·√(−2 ln u) and a uniform azimuth
+/// around the incident direction: ϑ has the Rayleigh density (ϑ/β²)·exp(−ϑ²/2β²), so the exact
+/// solid-angle pdf of the sampled direction is `pdf_w(ϑ) = g(ϑ)·ϑ/sin ϑ`. A particle scattered this
+/// way carries the throughput f2·cos γ / pdf_w = sin ϑ/ϑ (≈ 1 − ϑ²/6): we keep this exact factor
+/// rather than model.md's "energy 1", which is its small-angle limit.
+#[derive(Debug, Clone, Copy)]
+pub struct Lobe {
+    /// β in radians.
+    pub beta: f64,
+    /// 1 / (2πβ²): the peak value g(0).
+    norm: f64,
+    /// 1 / (2β²).
+    inv_two_beta2: f64,
+}
+
+impl Lobe {
+    pub fn new(beta: f64) -> Self {
+        Self { beta, norm: 1.0 / (2.0 * PI * beta * beta), inv_two_beta2: 1.0 / (2.0 * beta * beta) }
+    }
+
+    /// g(ϑ), the angular part of the BDF.
+    #[inline]
+    pub fn g(&self, theta: f64) -> f64 {
+        self.norm * libm::exp(-theta * theta * self.inv_two_beta2)
+    }
+
+    /// The BDF f2 for a deflection ϑ and a scattered direction with cos γ = `cos_out`.
+    #[inline]
+    pub fn bdf(&self, theta: f64, cos_out: f64) -> f64 {
+        self.g(theta) / cos_out
+    }
+
+    /// Solid-angle pdf of a direction at angle ϑ from the axis, as drawn by `sample_lobe`.
+    #[inline]
+    pub fn pdf_w(&self, theta: f64) -> f64 {
+        self.g(theta) * theta_over_sin(theta)
+    }
+}
+
+/// ϑ / sin ϑ, continuous at 0 (where it is 1).
+#[inline]
+pub fn theta_over_sin(theta: f64) -> f64 {
+    if theta < 1e-4 { 1.0 + theta * theta / 6.0 } else { theta / libm::sin(theta) }
+}
+
+/// The angle between two unit vectors, accurate for small angles (atan2 of |a×b| and a·b).
+#[inline]
+pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    libm::atan2(a.cross(b).norm(), a.dot(b))
+}
+
+/// The scene with its derived constants.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The specification it was built from (kept for fingerprints and reports).
+    pub spec: SceneSpec,
+    /// Distance plane 1 → plane 2.
+    pub l2: f64,
+    /// Distance plane 2 → plane 3.
+    pub l3: f64,
+    pub lobe: Lobe,
+    pub illumination: Illumination,
+}
+
+impl Scene {
+    /// Builds the scene from a validated specification.
+    pub fn from_spec(spec: &SceneSpec) -> Self {
+        Self {
+            spec: spec.clone(),
+            l2: spec.l2,
+            l3: spec.l3,
+            lobe: Lobe::new(spec.beta_deg.to_radians()),
+            illumination: Illumination::from_spec(&spec.illumination),
+        }
+    }
+
+    /// The unit direction of travel from a point `x2` of plane 2 to the camera's pixel at the
+    /// origin of plane 1, and cos γ of that direction.
+    #[inline]
+    pub fn towards_pixel(&self, x2: [f64; 2]) -> (Vector3<f64>, f64) {
+        let d = Vector3::new(-x2[0], -x2[1], -self.l2);
+        let len = d.norm();
+        (d / len, self.l2 / len)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lobe_is_normalised_on_the_sphere() {
+        // ∫ g(ϑ)·(ϑ/sinϑ) dω = 1 exactly (it is the sampler's pdf), i.e. ∫₀^∞ g·ϑ·2π dϑ = 1.
+        let lobe = Lobe::new(3f64.to_radians());
+        let n = 200_000;
+        let upper = 12.0 * lobe.beta;
+        let h = upper / n as f64;
+        let integral: f64 = (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) * h;
+                lobe.pdf_w(t) * libm::sin(t) * 2.0 * PI * h
+            })
+            .sum();
+        assert!((integral - 1.0).abs() < 1e-9, "{integral}");
+    }
+
+    #[test]
+    fn bdf_conserves_energy_to_order_beta_squared() {
+        // ∫ f2 cos γ dω = ∫ g dω ≈ 1 − β²/3 for a narrow lobe around the normal.
+        let beta = 3f64.to_radians();
+        let lobe = Lobe::new(beta);
+        let n = 200_000;
+        let upper = 12.0 * beta;
+        let h = upper / n as f64;
+        let integral: f64 = (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) * h;
+                lobe.g(t) * libm::sin(t) * 2.0 * PI * h
+            })
+            .sum();
+        let expected = 1.0 - beta * beta / 3.0;
+        assert!((integral - expected).abs() < 1e-6, "{integral} vs {expected}");
+    }
+
+    #[test]
+    fn angles_are_accurate_near_zero() {
+        let a = Vector3::new(0.0, 0.0, 1.0);
+        let b = Vector3::new(1e-9, 0.0, 1.0).normalize();
+        assert!((angle_between(&a, &b) - 1e-9).abs() < 1e-20);
+        assert!((theta_over_sin(1e-5) - 1.0).abs() < 1e-10);
+        assert!((theta_over_sin(0.5) - 0.5 / 0.5f64.sin()).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,529 @@
+//! The job specification: the JSON document users submit (CLI `--spec` and `POST /v1/jobs` alike),
+//! its presets, and its validation.
+//!
+//! A document names a `preset` (default `paper-table1`) and overrides any of its fields. Overrides
+//! follow JSON Merge Patch (RFC 7386): objects merge field by field, arrays and numbers replace, and
+//! `null` removes a field (so `{"solver": {"fixed": {"w0": null}}}` frees w₀). One exception keeps
+//! tagged objects sane: an object whose `kind` differs from the preset's replaces it whole, so
+//! `{"scene": {"illumination": {"kind": "uniform", "r_ls": 20}}}` does not inherit the spot's `a`.
+//!
+//! Unknown fields are errors, never ignored. Parsing gives a [`JobSpec`]; [`JobSpec::validate`] is
+//! the one place where values are checked, and yields the [`ValidJob`] everything else consumes.
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Deserializer, Serialize};
+use serde_json::{Value, json};
+
+use super::cells::CellGrid;
+use super::config::SimConfig;
+use super::scene::Scene;
+
+/// The preset used when a document names none.
+pub const DEFAULT_PRESET: &str = "paper-table1";
+
+/// Most cells a grid may have: the moments hold a dense (2K+1)² matrix per fold.
+pub const MAX_CELLS: usize = 256;
+
+/// Most λ values a cross-validation grid may try.
+pub const MAX_CV_LAMBDAS: usize = 32;
+
+/// A rejected field: which one (a JSON path such as `scene.illumination.a`) and why, with the
+/// allowed range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct SpecError {
+    /// JSON path of the offending field (`""` for the document itself).
+    pub field: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl SpecError {
+    pub fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self { field: field.into(), message: message.into() }
+    }
+}
+
+/// A fully resolved job specification (preset applied). Field names are the JSON API.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobSpec {
+    /// The preset the document started from (provenance; every field below is explicit).
+    pub preset: String,
+    pub scene: SceneSpec,
+    /// Merge (kernel) radius R.
+    pub merge_radius: f64,
+    /// N_F: light paths per iteration.
+    #[serde(deserialize_with = "count")]
+    pub light_paths: u64,
+    /// N_B: camera paths per iteration.
+    #[serde(deserialize_with = "count")]
+    pub camera_paths: u64,
+    /// M: iterations to run.
+    #[serde(deserialize_with = "count")]
+    pub iterations: u64,
+    /// Seed of every random stream of the job.
+    #[serde(deserialize_with = "count")]
+    pub seed: u64,
+    pub cells: CellSpec,
+    pub solver: SolverOptions,
+}
+
+/// The three planes and the light.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// Distance from plane 1 (z = 0) to plane 2.
+    pub l2: f64,
+    /// Distance from plane 2 to plane 3.
+    pub l3: f64,
+    /// Width β of the plane-2 transmission lobe, in degrees.
+    pub beta_deg: f64,
+    pub illumination: IlluminationSpec,
+}
+
+/// The radial illumination profile I(r) of plane 3 (normalised to total flux 1 by the model).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum IlluminationSpec {
+    /// The paper's profile: `contrast` for r ≤ a, 1 for a < r < r_ls, 0 beyond.
+    Spot { a: f64, r_ls: f64, contrast: f64 },
+    /// 1 for r < r_ls, 0 beyond.
+    Uniform { r_ls: f64 },
+    /// Piecewise constant: `level` up to `outer_radius`, ring after ring, 0 beyond the last.
+    Rings { rings: Vec<RingSpec> },
+}
+
+/// One ring of a `rings` profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RingSpec {
+    pub outer_radius: f64,
+    pub level: f64,
+}
+
+/// The cell grid of the tabulated weights over the join path's (r2, r3, φ).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellSpec {
+    /// Cell edges on r2, starting at 0; the last edge opens a tail cell to infinity.
+    pub r2_edges: Vec<f64>,
+    /// Cell edges on r3, starting at 0; the last edge opens a tail cell to infinity.
+    pub r3_edges: Vec<f64>,
+    /// Number of equal φ bins on [0, π].
+    #[serde(deserialize_with = "count_u32")]
+    pub phi_bins: u32,
+}
+
+/// How the optimal weights are fitted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverOptions {
+    /// Weights held fixed in every cell (the paper: w0 = 0).
+    pub fixed: FixedWeights,
+    /// Gradient penalty λ ≥ 0 between neighbouring cells (dimensionless; see the solver).
+    pub lambda: f64,
+    /// The λ grid searched by the `optimal_cv` strategy.
+    pub cv_lambdas: Vec<f64>,
+}
+
+/// Per-component fixed weights; `None` means fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixedWeights {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w0: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w1: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w2: Option<f64>,
+}
+
+impl FixedWeights {
+    /// The fixed value of component m (0, 1, 2).
+    pub fn get(&self, m: usize) -> Option<f64> {
+        [self.w0, self.w1, self.w2][m]
+    }
+}
+
+/// Accepts integers and integral floats (`1e7`) for counts: users write both.
+fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+    use serde::de::Error;
+    let v = Value::deserialize(d)?;
+    if let Some(n) = v.as_u64() {
+        return Ok(n);
+    }
+    match v.as_f64() {
+        Some(x) if x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0 => Ok(x as u64),
+        _ => Err(D::Error::custom(format!("expected a non-negative integer, got {v}"))),
+    }
+}
+
+fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    use serde::de::Error;
+    let n = count(d)?;
+    u32::try_from(n).map_err(|_| D::Error::custom(format!("expected at most {}, got {n}", u32::MAX)))
+}
+
+/// The names of the presets.
+pub const PRESETS: &[&str] = &["paper-table1", "uniform-illumination"];
+
+/// A preset as a complete JSON document.
+pub fn preset(name: &str) -> Option<Value> {
+    // The paper's grid: r2 ∈ [0, ½] + tail; r3: 25 cells of 0.002 on [0, 0.05] + tail; one φ bin.
+    let r3_edges: Vec<f64> = (0..=25).map(|i| f64::from(i) * 0.002).collect();
+    let (a, r_ls) = (0.02, 20.0);
+    let paper = json!({
+        "preset": "paper-table1",
+        "scene": {
+            "l2": 1.0, "l3": 3.0, "beta_deg": 3.0,
+            "illumination": { "kind": "spot", "a": a, "r_ls": r_ls, "contrast": (r_ls / a) * (r_ls / a) / 300.0 }
+        },
+        "merge_radius": 0.003,
+        "light_paths": 10_000_000u64,
+        "camera_paths": 100,
+        "iterations": 10_000,
+        "seed": 1,
+        "cells": { "r2_edges": [0.0, 0.5], "r3_edges": r3_edges, "phi_bins": 1 },
+        "solver": {
+            "fixed": { "w0": 0.0 },
+            "lambda": 0.0,
+            "cv_lambdas": [0.0, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0]
+        }
+    });
+    match name {
+        "paper-table1" => Some(paper),
+        // The paper's closing comparison: the same scene under uniform illumination.
+        "uniform-illumination" => {
+            let mut doc = paper;
+            doc["preset"] = json!("uniform-illumination");
+            doc["scene"]["illumination"] = json!({ "kind": "uniform", "r_ls": r_ls });
+            Some(doc)
+        }
+        _ => None,
+    }
+}
+
+/// Applies `patch` to `base` by JSON Merge Patch, except that an object whose `kind` differs from
+/// the base's replaces it whole.
+pub fn merge_patch(base: &mut Value, patch: &Value) {
+    match (base, patch) {
+        (Value::Object(base_map), Value::Object(patch_map)) => {
+            for (key, value) in patch_map {
+                if value.is_null() {
+                    base_map.remove(key);
+                    continue;
+                }
+                match base_map.get_mut(key) {
+                    Some(slot) if slot.is_object() && value.is_object() && !kind_differs(slot, value) => {
+                        merge_patch(slot, value)
+                    }
+                    _ => {
+                        base_map.insert(key.clone(), value.clone());
+                    }
+                }
+            }
+        }
+        (base, patch) => *base = patch.clone(),
+    }
+}
+
+fn kind_differs(a: &Value, b: &Value) -> bool {
+    match (a.get("kind"), b.get("kind")) {
+        (Some(x), Some(y)) => x != y,
+        _ => false,
+    }
+}
+
+/// Parses a submitted document (preset + overrides) into a resolved [`JobSpec`].
+///
+/// Only structure is checked here (types, unknown fields, the preset name); values are checked by
+/// [`JobSpec::validate`].
+pub fn parse_job_spec(document: &Value) -> Result<JobSpec, SpecError> {
+    let Value::Object(fields) = document else {
+        return Err(SpecError::new("", "the job specification must be a JSON object"));
+    };
+    let name = match fields.get("preset") {
+        None | Some(Value::Null) => DEFAULT_PRESET,
+        Some(Value::String(s)) => s.as_str(),
+        Some(other) => return Err(SpecError::new("preset", format!("must be a string, got {other}"))),
+    };
+    let mut resolved = preset(name).ok_or_else(|| {
+        SpecError::new("preset", format!("unknown preset {name:?}; known presets: {}", PRESETS.join(", ")))
+    })?;
+    merge_patch(&mut resolved, document);
+    resolved["preset"] = json!(name);
+    serde_path_to_error::deserialize::<_, JobSpec>(&resolved).map_err(|e| {
+        let path = e.path().to_string();
+        let field = if path == "." { String::new() } else { path };
+        SpecError::new(field, e.into_inner().to_string())
+    })
+}
+
+/// A specification that passed validation, with the simulation configuration built from it.
+#[derive(Debug, Clone)]
+pub struct ValidJob {
+    pub spec: JobSpec,
+    pub config: Arc<SimConfig>,
+}
+
+fn check(ok: bool, field: &str, message: impl FnOnce() -> String) -> Result<(), SpecError> {
+    if ok { Ok(()) } else { Err(SpecError::new(field, message())) }
+}
+
+/// `x` is finite and in (lo, hi].
+fn in_open_closed(x: f64, lo: f64, hi: f64) -> bool {
+    x.is_finite() && x > lo && x <= hi
+}
+
+/// Largest length accepted anywhere in a scene: far beyond any sensible scene, small enough that
+/// squares and products stay finite.
+pub const MAX_LENGTH: f64 = 1e6;
+
+impl JobSpec {
+    /// Checks every value and builds the simulation configuration. The one place values are
+    /// validated: everything downstream trusts a [`ValidJob`].
+    pub fn validate(&self) -> Result<ValidJob, SpecError> {
+        let s = &self.scene;
+        for (name, v) in [("scene.l2", s.l2), ("scene.l3", s.l3)] {
+            check(in_open_closed(v, 0.0, MAX_LENGTH), name, || {
+                format!("must be a distance in (0, {MAX_LENGTH:e}], got {v}")
+            })?;
+        }
+        check(in_open_closed(s.beta_deg, 0.0, 45.0), "scene.beta_deg", || {
+            format!("must be in (0, 45] degrees, got {}", s.beta_deg)
+        })?;
+        validate_illumination(&s.illumination)?;
+        let max_r = s.l2.min(s.l3);
+        check(self.merge_radius.is_finite() && self.merge_radius > 0.0 && self.merge_radius < max_r, "merge_radius", || {
+            format!("must be in (0, min(l2, l3) = {max_r}), got {}", self.merge_radius)
+        })?;
+        check((1..=1_000_000_000_000).contains(&self.light_paths), "light_paths", || {
+            format!("must be in [1, 10^12], got {}", self.light_paths)
+        })?;
+        check((1..=1_000_000).contains(&self.camera_paths), "camera_paths", || {
+            format!("must be in [1, 10^6], got {}", self.camera_paths)
+        })?;
+        check((1..=1_000_000_000).contains(&self.iterations), "iterations", || {
+            format!("must be in [1, 10^9], got {}", self.iterations)
+        })?;
+        let cells = validate_cells(&self.cells)?;
+        validate_solver(&self.solver)?;
+        let scene = Scene::from_spec(&self.scene);
+        let config = SimConfig::new(scene, self.merge_radius, self.light_paths, self.camera_paths, cells);
+        Ok(ValidJob { spec: self.clone(), config: Arc::new(config) })
+    }
+}
+
+fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
+    let f = "scene.illumination";
+    match *ill {
+        IlluminationSpec::Spot { a, r_ls, contrast } => {
+            check(in_open_closed(a, 0.0, MAX_LENGTH), &format!("{f}.a"), || {
+                format!("must be a radius in (0, {MAX_LENGTH:e}], got {a}")
+            })?;
+            check(in_open_closed(r_ls, a, MAX_LENGTH), &format!("{f}.r_ls"), || {
+                format!("must be a radius in (a = {a}, {MAX_LENGTH:e}], got {r_ls}")
+            })?;
+            check(in_open_closed(contrast, 0.0, 1e12), &format!("{f}.contrast"), || {
+                format!("must be in (0, 1e12], got {contrast}")
+            })
+        }
+        IlluminationSpec::Uniform { r_ls } => check(in_open_closed(r_ls, 0.0, MAX_LENGTH), &format!("{f}.r_ls"), || {
+            format!("must be a radius in (0, {MAX_LENGTH:e}], got {r_ls}")
+        }),
+        IlluminationSpec::Rings { ref rings } => {
+            check((1..=64).contains(&rings.len()), &format!("{f}.rings"), || {
+                format!("must list 1 to 64 rings, got {}", rings.len())
+            })?;
+            let mut inner = 0.0;
+            let mut flux = 0.0;
+            for (i, ring) in rings.iter().enumerate() {
+                let field = format!("{f}.rings[{i}]");
+                check(in_open_closed(ring.outer_radius, inner, MAX_LENGTH), &format!("{field}.outer_radius"), || {
+                    format!("must be in ({inner}, {MAX_LENGTH:e}] (radii strictly increasing), got {}", ring.outer_radius)
+                })?;
+                check(ring.level.is_finite() && (0.0..=1e12).contains(&ring.level), &format!("{field}.level"), || {
+                    format!("must be in [0, 1e12], got {}", ring.level)
+                })?;
+                flux += ring.level * (ring.outer_radius.powi(2) - inner * inner);
+                inner = ring.outer_radius;
+            }
+            check(flux > 0.0, &format!("{f}.rings"), || "must emit some light: every level is 0".to_string())
+        }
+    }
+}
+
+fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
+    check(!edges.is_empty() && edges[0] == 0.0, field, || {
+        format!("must start at 0 (the first cell begins at r = 0), got {edges:?}")
+    })?;
+    for (i, pair) in edges.windows(2).enumerate() {
+        check(pair[1].is_finite() && pair[1] > pair[0] && pair[1] <= MAX_LENGTH, &format!("{field}[{}]", i + 1), || {
+            format!("edges must be finite and strictly increasing (≤ {MAX_LENGTH:e}), got {} after {}", pair[1], pair[0])
+        })?;
+    }
+    Ok(())
+}
+
+fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
+    validate_edges(&cells.r2_edges, "cells.r2_edges")?;
+    validate_edges(&cells.r3_edges, "cells.r3_edges")?;
+    check((1..=360).contains(&cells.phi_bins), "cells.phi_bins", || {
+        format!("must be in [1, 360], got {}", cells.phi_bins)
+    })?;
+    let total = cells.r2_edges.len() * cells.r3_edges.len() * cells.phi_bins as usize;
+    check(total <= MAX_CELLS, "cells", || {
+        format!(
+            "{} r2 cells × {} r3 cells × {} φ bins = {total} cells; at most {MAX_CELLS} are allowed",
+            cells.r2_edges.len(),
+            cells.r3_edges.len(),
+            cells.phi_bins
+        )
+    })?;
+    Ok(CellGrid::new(cells.r2_edges.clone(), cells.r3_edges.clone(), cells.phi_bins))
+}
+
+/// Checks solver options (also used alone when a stored job is re-solved with new options).
+pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
+    for (m, w) in [solver.fixed.w0, solver.fixed.w1, solver.fixed.w2].into_iter().enumerate() {
+        if let Some(w) = w {
+            check(w.is_finite() && w.abs() <= 1e6, &format!("solver.fixed.w{m}"), || {
+                format!("must be a finite weight with |w| ≤ 1e6, got {w}")
+            })?;
+        }
+    }
+    if let (Some(a), Some(b), Some(c)) = (solver.fixed.w0, solver.fixed.w1, solver.fixed.w2) {
+        check((a + b + c - 1.0).abs() <= 1e-9, "solver.fixed", || {
+            format!("w0 + w1 + w2 must equal 1 when all three are fixed, got {}", a + b + c)
+        })?;
+    }
+    check(solver.lambda.is_finite() && (0.0..=1e12).contains(&solver.lambda), "solver.lambda", || {
+        format!("must be in [0, 1e12], got {}", solver.lambda)
+    })?;
+    check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
+        format!("must list 1 to {MAX_CV_LAMBDAS} values, got {}", solver.cv_lambdas.len())
+    })?;
+    for (i, &l) in solver.cv_lambdas.iter().enumerate() {
+        check(l.is_finite() && (0.0..=1e12).contains(&l), &format!("solver.cv_lambdas[{i}]"), || {
+            format!("must be in [0, 1e12], got {l}")
+        })?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(doc: Value) -> Result<JobSpec, SpecError> {
+        parse_job_spec(&doc)
+    }
+
+    fn invalid(doc: Value) -> SpecError {
+        match parse(doc) {
+            Err(e) => e,
+            Ok(spec) => spec.validate().expect_err("the spec should be rejected"),
+        }
+    }
+
+    #[test]
+    fn paper_preset_is_valid_and_matches_the_paper() {
+        let spec = parse(json!({})).unwrap();
+        assert_eq!(spec.preset, "paper-table1");
+        assert_eq!(spec.light_paths, 10_000_000);
+        assert_eq!(spec.camera_paths, 100);
+        assert_eq!(spec.merge_radius, 0.003);
+        assert_eq!(spec.cells.r3_edges.len(), 26);
+        let IlluminationSpec::Spot { contrast, .. } = spec.scene.illumination else { panic!() };
+        assert!((contrast - 3333.333).abs() < 1e-3);
+        let job = spec.validate().unwrap();
+        assert_eq!(job.config.cells.len(), 52);
+    }
+
+    #[test]
+    fn overrides_merge_and_kind_changes_replace() {
+        let spec = parse(json!({
+            "scene": { "beta_deg": 5, "illumination": { "kind": "uniform", "r_ls": 7 } },
+            "light_paths": 1e5,
+            "solver": { "fixed": { "w0": null, "w2": 0.5 } }
+        }))
+        .unwrap();
+        assert_eq!(spec.scene.beta_deg, 5.0);
+        assert_eq!(spec.scene.l3, 3.0, "untouched fields keep the preset's value");
+        assert_eq!(spec.scene.illumination, IlluminationSpec::Uniform { r_ls: 7.0 });
+        assert_eq!(spec.light_paths, 100_000);
+        assert_eq!(spec.solver.fixed, FixedWeights { w0: None, w1: None, w2: Some(0.5) });
+        spec.validate().unwrap();
+    }
+
+    #[test]
+    fn unknown_fields_are_errors_with_their_path() {
+        let e = parse(json!({ "scene": { "l4": 1 } })).unwrap_err();
+        assert_eq!(e.field, "scene.l4");
+        assert!(e.message.contains("unknown field `l4`"), "{e}");
+        let e = parse(json!({ "scene": { "illumination": { "kind": "spot", "b": 1 } } })).unwrap_err();
+        assert!(e.field.starts_with("scene.illumination"), "{e}");
+        let e = parse(json!({ "iterationz": 3 })).unwrap_err();
+        assert!(e.message.contains("iterationz"), "{e}");
+        let e = parse(json!({ "preset": "nope" })).unwrap_err();
+        assert_eq!(e.field, "preset");
+        let e = parse(json!({ "light_paths": -3 })).unwrap_err();
+        assert_eq!(e.field, "light_paths");
+        let e = parse(json!({ "light_paths": 2.5 })).unwrap_err();
+        assert_eq!(e.field, "light_paths");
+    }
+
+    #[test]
+    fn invalid_values_name_the_field_and_range() {
+        let cases = [
+            (json!({ "merge_radius": -1 }), "merge_radius"),
+            (json!({ "merge_radius": 0 }), "merge_radius"),
+            (json!({ "merge_radius": 2 }), "merge_radius"),
+            (json!({ "scene": { "beta_deg": 50 } }), "scene.beta_deg"),
+            (json!({ "scene": { "beta_deg": 0 } }), "scene.beta_deg"),
+            (json!({ "scene": { "l2": 0 } }), "scene.l2"),
+            (json!({ "scene": { "illumination": { "a": -0.1 } } }), "scene.illumination.a"),
+            (json!({ "scene": { "illumination": { "r_ls": 0.01 } } }), "scene.illumination.r_ls"),
+            (json!({ "scene": { "illumination": { "kind": "rings", "rings": [
+                { "outer_radius": 1, "level": 1 }, { "outer_radius": 0.5, "level": 1 } ] } } }),
+             "scene.illumination.rings[1].outer_radius"),
+            (json!({ "scene": { "illumination": { "kind": "rings", "rings": [
+                { "outer_radius": 1, "level": 0 } ] } } }), "scene.illumination.rings"),
+            (json!({ "light_paths": 0 }), "light_paths"),
+            (json!({ "camera_paths": 0 }), "camera_paths"),
+            (json!({ "iterations": 0 }), "iterations"),
+            (json!({ "cells": { "r3_edges": [0, 0.2, 0.1] } }), "cells.r3_edges[2]"),
+            (json!({ "cells": { "r2_edges": [0.1, 0.2] } }), "cells.r2_edges"),
+            (json!({ "cells": { "phi_bins": 0 } }), "cells.phi_bins"),
+            (json!({ "cells": { "phi_bins": 10 } }), "cells"),
+            (json!({ "solver": { "lambda": -1 } }), "solver.lambda"),
+            (json!({ "solver": { "fixed": { "w0": 0.2, "w1": 0.2, "w2": 0.2 } } }), "solver.fixed"),
+            (json!({ "solver": { "cv_lambdas": [] } }), "solver.cv_lambdas"),
+        ];
+        for (doc, field) in cases {
+            let e = invalid(doc.clone());
+            assert_eq!(e.field, field, "{doc} gave {e}");
+            assert!(!e.message.is_empty());
+        }
+        let e = invalid(json!({ "scene": { "beta_deg": 50 } }));
+        assert!(e.message.contains("(0, 45]"), "the message states the range: {e}");
+    }
+
+    #[test]
+    fn nan_cannot_be_smuggled_in() {
+        // JSON has no NaN; serde_json rejects the bare token at parse time, and infinity overflows
+        // to a parse error too. A huge exponent is the closest a document can get.
+        assert!(serde_json::from_str::<Value>("{\"merge_radius\": NaN}").is_err());
+        let e = invalid(json!({ "merge_radius": 1e308 }));
+        assert_eq!(e.field, "merge_radius");
+    }
+
+    #[test]
+    fn resolved_spec_round_trips() {
+        let spec = parse(json!({ "preset": "uniform-illumination", "seed": 42 })).unwrap();
+        let again = parse(serde_json::to_value(&spec).unwrap()).unwrap();
+        assert_eq!(spec, again);
+    }
+}

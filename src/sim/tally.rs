@@ -1,0 +1,235 @@
+//! Tallies of merge events: per chunk of light paths, then per iteration.
+//!
+//! Every merge event (light path i, camera path j, plane m) adds its contribution C_m to the cell
+//! of its join path, and w·C_m to each per-path strategy. Chunks tally into a reusable dense
+//! scratch and hand over only the cells they touched; an iteration adds its chunks' tallies in
+//! chunk order, so the floating-point sums do not depend on which thread ran which chunk.
+//!
+//! Contributions are tallied without the 1/(N_F·N_B) of model.md's C_s; [`IterationTally`] applies
+//! it once per iteration.
+
+use serde::{Deserialize, Serialize};
+
+use super::heuristics::{balance, power, technique_densities};
+use super::scene::Scene;
+
+/// The strategies whose weights are functions of the whole join path, tallied per iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PathStrategy {
+    /// w0 = 1.
+    Plane1,
+    /// w1 = 1.
+    Plane2,
+    /// w2 = 1.
+    Plane3,
+    /// w1 = 1 if the join path's r3 ≤ a (exactly, not by cell), else w2 = 1.
+    Switch,
+    /// Veach's balance heuristic with VCM pdfs.
+    Balance,
+    /// Veach's power heuristic (exponent 2) with VCM pdfs.
+    Power,
+}
+
+impl PathStrategy {
+    pub const ALL: [PathStrategy; 6] = [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power];
+    pub const COUNT: usize = Self::ALL.len();
+
+    /// The name used in results.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Plane1 => "plane1",
+            Self::Plane2 => "plane2",
+            Self::Plane3 => "plane3",
+            Self::Switch => "switch",
+            Self::Balance => "balance",
+            Self::Power => "power",
+        }
+    }
+}
+
+/// Weights every per-path strategy gives a merge at `plane` of the join path (x2, x3).
+#[inline]
+pub fn strategy_weights(scene: &Scene, plane: usize, x2: [f64; 2], x3: [f64; 2]) -> [f64; PathStrategy::COUNT] {
+    let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
+    let inside = x3[0].hypot(x3[1]) <= scene.illumination.switch_radius();
+    let switch = match plane {
+        1 if inside => 1.0,
+        2 if !inside => 1.0,
+        _ => 0.0,
+    };
+    let p = technique_densities(scene, x2, x3);
+    [one_hot(0), one_hot(1), one_hot(2), switch, balance(p)[plane], power(p)[plane]]
+}
+
+/// Dense per-chunk accumulator, reused across chunks by one worker.
+#[derive(Debug, Clone)]
+pub struct ChunkScratch {
+    /// Σ C per slot m·K + α.
+    sums: Vec<f64>,
+    /// Merge events per slot.
+    counts: Vec<u64>,
+    /// Slots with a non-zero count, in first-touch order.
+    touched: Vec<u32>,
+    strategies: [f64; PathStrategy::COUNT],
+    merges: [u64; 3],
+}
+
+/// What one chunk hands to its iteration: the touched slots in slot order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ChunkTally {
+    /// (slot m·K + α, Σ C, events).
+    pub entries: Vec<(u32, f64, u64)>,
+    pub strategies: [f64; PathStrategy::COUNT],
+    pub merges: [u64; 3],
+}
+
+impl ChunkScratch {
+    /// A scratch for a grid of `cells` cells.
+    pub fn new(cells: usize) -> Self {
+        Self {
+            sums: vec![0.0; 3 * cells],
+            counts: vec![0; 3 * cells],
+            touched: Vec::new(),
+            strategies: [0.0; PathStrategy::COUNT],
+            merges: [0; 3],
+        }
+    }
+
+    /// Records one merge event: contribution `c` at `plane`, in cell `cell` of a grid of `cells`
+    /// cells, with the per-path strategy weights `weights`.
+    #[inline]
+    pub fn record(&mut self, plane: usize, cell: usize, cells: usize, c: f64, weights: &[f64; PathStrategy::COUNT]) {
+        let slot = plane * cells + cell;
+        if self.counts[slot] == 0 {
+            self.touched.push(slot as u32);
+        }
+        self.sums[slot] += c;
+        self.counts[slot] += 1;
+        for (acc, w) in self.strategies.iter_mut().zip(weights) {
+            *acc += w * c;
+        }
+    }
+
+    /// Counts a merge event at `plane` (a plane-1 hit counts once per light path, although it merges
+    /// with all N_B camera paths at the shared pixel).
+    #[inline]
+    pub fn count_merge(&mut self, plane: usize) {
+        self.merges[plane] += 1;
+    }
+
+    /// Hands over the chunk's tally and resets the scratch for the next chunk.
+    pub fn take(&mut self) -> ChunkTally {
+        if self.touched.is_empty() && self.merges == [0; 3] {
+            return ChunkTally::default();
+        }
+        self.touched.sort_unstable();
+        let entries = self
+            .touched
+            .drain(..)
+            .map(|slot| {
+                let s = slot as usize;
+                let entry = (slot, self.sums[s], self.counts[s]);
+                self.sums[s] = 0.0;
+                self.counts[s] = 0;
+                entry
+            })
+            .collect();
+        let tally = ChunkTally { entries, strategies: self.strategies, merges: self.merges };
+        self.strategies = [0.0; PathStrategy::COUNT];
+        self.merges = [0; 3];
+        tally
+    }
+}
+
+/// Everything one iteration contributes to the moments.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IterationTally {
+    /// Global iteration index s.
+    pub iteration: u64,
+    /// C^(m)_α,s for slot m·K + α (normalised by 1/(N_F·N_B)).
+    pub cell_values: Vec<f64>,
+    /// Merge events per slot.
+    pub cell_counts: Vec<u64>,
+    /// C_s of each per-path strategy (normalised).
+    pub strategies: [f64; PathStrategy::COUNT],
+    /// Merge events per plane (plane-1 hits counted once per light path).
+    pub merges: [u64; 3],
+}
+
+impl IterationTally {
+    /// Adds the chunk tallies of iteration `iteration` in chunk order and normalises.
+    pub fn from_chunks<'a>(iteration: u64, cells: usize, norm: f64, chunks: impl IntoIterator<Item = &'a ChunkTally>) -> Self {
+        let mut sums = vec![0.0; 3 * cells];
+        let mut cell_counts = vec![0u64; 3 * cells];
+        let mut strategies = [0.0; PathStrategy::COUNT];
+        let mut merges = [0u64; 3];
+        for chunk in chunks {
+            for &(slot, sum, count) in &chunk.entries {
+                sums[slot as usize] += sum;
+                cell_counts[slot as usize] += count;
+            }
+            for (acc, v) in strategies.iter_mut().zip(chunk.strategies) {
+                *acc += v;
+            }
+            for (acc, v) in merges.iter_mut().zip(chunk.merges) {
+                *acc += v;
+            }
+        }
+        Self {
+            iteration,
+            cell_values: sums.into_iter().map(|s| s * norm).collect(),
+            cell_counts,
+            strategies: strategies.map(|s| s * norm),
+            merges,
+        }
+    }
+
+    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of model.md as sparse (index, value) pairs in index
+    /// order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at 2K.
+    pub fn moment_vector(&self, cells: usize) -> Vec<(usize, f64)> {
+        let c = |m: usize, a: usize| self.cell_values[m * cells + a];
+        let mut y = Vec::new();
+        for m in 0..2 {
+            for a in 0..cells {
+                let v = c(m, a) - c(2, a);
+                if v != 0.0 {
+                    y.push((m * cells + a, v));
+                }
+            }
+        }
+        let b: f64 = (0..cells).map(|a| c(2, a)).sum();
+        if b != 0.0 {
+            y.push((2 * cells, b));
+        }
+        y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunks_reduce_in_order_and_normalise() {
+        let cells = 2;
+        let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25];
+        let mut scratch = ChunkScratch::new(cells);
+        scratch.record(0, 1, cells, 4.0, &w);
+        scratch.count_merge(0);
+        scratch.record(2, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        scratch.count_merge(2);
+        let a = scratch.take();
+        assert_eq!(a.entries, vec![(1, 4.0, 1), (4, 2.0, 1)], "slots sorted, counts kept");
+        assert_eq!(scratch.take(), ChunkTally::default(), "take resets the scratch");
+        scratch.record(2, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        let b = scratch.take();
+        let t = IterationTally::from_chunks(3, cells, 0.5, [&a, &b]);
+        assert_eq!(t.cell_values, vec![0.0, 2.0, 0.0, 0.0, 4.0, 0.0]);
+        assert_eq!(t.cell_counts, vec![0, 1, 0, 0, 2, 0]);
+        assert_eq!(t.strategies, [2.0, 0.0, 4.0, 4.0, 3.0, 3.5]);
+        assert_eq!(t.merges, [1, 0, 1]);
+        // Y = (A0, A1, B): A0 = C0 − C2 = (0 − 4, 2 − 0), A1 = (0 − 4, 0), B = 4.
+        assert_eq!(t.moment_vector(cells), vec![(0, -4.0), (1, 2.0), (2, -4.0), (4, 4.0)]);
+    }
+}
