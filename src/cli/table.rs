@@ -17,7 +17,13 @@ fn bound(x: Option<f64>) -> String {
 }
 
 /// Writes the noise table, merge rates and weights table.
-pub fn write_report(out: &mut impl Write, job: &ValidJob, report: &RunReport, seconds: f64, threads: usize) -> io::Result<()> {
+pub fn write_report(
+    out: &mut impl Write,
+    job: &ValidJob,
+    report: &RunReport,
+    seconds: f64,
+    threads: usize,
+) -> io::Result<()> {
     let spec = &job.spec;
     writeln!(
         out,
@@ -60,7 +66,11 @@ pub fn write_report(out: &mut impl Write, job: &ValidJob, report: &RunReport, se
         return writeln!(out, "optimal weights: not available: {e}");
     }
     writeln!(out, "optimal weights (λ = {}):", spec.solver.lambda)?;
-    writeln!(out, "{:<16} {:<18} {:<14} {:>8} {:>8} {:>8} {:>9}  status", "r2", "r3", "φ", "w0", "w1", "w2", "samples")?;
+    writeln!(
+        out,
+        "{:<16} {:<18} {:<14} {:>8} {:>8} {:>8} {:>9}  status",
+        "r2", "r3", "φ", "w0", "w1", "w2", "samples"
+    )?;
     for w in &report.weights {
         writeln!(
             out,

@@ -59,10 +59,7 @@ impl Coverage {
 
     /// Whether iteration `s` of `seed` is covered.
     pub fn contains(&self, seed: u64, s: u64) -> bool {
-        self.seeds
-            .iter()
-            .find(|x| x.seed == seed)
-            .is_some_and(|x| x.ranges.iter().any(|r| r[0] <= s && s < r[1]))
+        self.seeds.iter().find(|x| x.seed == seed).is_some_and(|x| x.ranges.iter().any(|r| r[0] <= s && s < r[1]))
     }
 
     /// The ranges covered by both `self` and `other`.
@@ -97,11 +94,11 @@ impl Coverage {
         };
         let ranges = &mut self.seeds[pos].ranges;
         // Fast path for the runner, which appends iteration after iteration.
-        if let Some(last) = ranges.last_mut() {
-            if last[1] == start {
-                last[1] = end;
-                return;
-            }
+        if let Some(last) = ranges.last_mut()
+            && last[1] == start
+        {
+            last[1] = end;
+            return;
         }
         ranges.push([start, end]);
         ranges.sort_unstable();
@@ -127,9 +124,10 @@ impl Coverage {
     /// Checks the invariants (for documents read from outside).
     pub fn is_well_formed(&self) -> bool {
         self.seeds.windows(2).all(|w| w[0].seed < w[1].seed)
-            && self.seeds.iter().all(|s| {
-                s.ranges.iter().all(|r| r[0] < r[1]) && s.ranges.windows(2).all(|w| w[0][1] < w[1][0])
-            })
+            && self
+                .seeds
+                .iter()
+                .all(|s| s.ranges.iter().all(|r| r[0] < r[1]) && s.ranges.windows(2).all(|w| w[0][1] < w[1][0]))
     }
 }
 

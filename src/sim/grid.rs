@@ -34,6 +34,17 @@ const EMPTY: Slot = Slot { ix: 0, iy: 0, start: 0, len: 0 };
 /// Bits of the occupancy hash: 2¹⁴ bits = 2 KiB.
 const OCCUPANCY_BITS: u32 = 14;
 
+/// The cell coordinate of `x` (in units of the cell side): truncation towards zero, one
+/// instruction (baseline x86-64 has no floor instruction, and libm's is a call). Cells are
+/// [k, k+1) for k > 0, (k−1, k] for k < 0 and (−1, 1) for k = 0: the zero cell is twice as wide,
+/// which is harmless, because insertion and query use the same function and the function is
+/// monotone — a 2R-wide disc still spans at most two cells per axis. Out-of-range values saturate,
+/// consistently on both sides.
+#[inline(always)]
+fn cell_of(x: f64) -> i64 {
+    x as i64
+}
+
 #[inline(always)]
 fn hash(ix: i64, iy: i64) -> u64 {
     ((ix as u64) ^ (iy as u64).rotate_left(32)).wrapping_mul(0x9e37_79b9_7f4a_7c15)
@@ -46,8 +57,8 @@ impl MergeGrid {
         let inv_cell = 1.0 / cell;
         let mut entries: Vec<(i64, i64, u32)> = Vec::new();
         for (j, [x, y]) in points {
-            let (x0, x1) = (((x - radius) * inv_cell).floor() as i64, ((x + radius) * inv_cell).floor() as i64);
-            let (y0, y1) = (((y - radius) * inv_cell).floor() as i64, ((y + radius) * inv_cell).floor() as i64);
+            let (x0, x1) = (cell_of((x - radius) * inv_cell), cell_of((x + radius) * inv_cell));
+            let (y0, y1) = (cell_of((y - radius) * inv_cell), cell_of((y + radius) * inv_cell));
             for ix in x0..=x1 {
                 for iy in y0..=y1 {
                     entries.push((ix, iy, j));
@@ -89,11 +100,20 @@ impl MergeGrid {
         self.slots[k] = slot;
     }
 
+    /// Whether any vertex may lie within R of `p`: the occupancy bit of p's cell (false means
+    /// certainly none).
+    #[inline(always)]
+    pub fn may_hold(&self, p: [f64; 2]) -> bool {
+        let h = hash(cell_of(p[0] * self.inv_cell), cell_of(p[1] * self.inv_cell));
+        let bit = h >> (64 - OCCUPANCY_BITS);
+        self.occupancy[(bit >> 6) as usize] & (1 << (bit & 63)) != 0
+    }
+
     /// Indices of the vertices that may lie within R of `p` (a superset of those that do).
     #[inline(always)]
     pub fn candidates(&self, p: [f64; 2]) -> &[u32] {
-        let ix = (p[0] * self.inv_cell).floor() as i64;
-        let iy = (p[1] * self.inv_cell).floor() as i64;
+        let ix = cell_of(p[0] * self.inv_cell);
+        let iy = cell_of(p[1] * self.inv_cell);
         let h = hash(ix, iy);
         let bit = h >> (64 - OCCUPANCY_BITS);
         if self.occupancy[(bit >> 6) as usize] & (1 << (bit & 63)) == 0 {
@@ -129,7 +149,8 @@ mod tests {
     fn finds_every_vertex_within_the_radius() {
         let r = 0.01;
         let mut rng = stream(1, 2, 3);
-        let points: Vec<[f64; 2]> = (0..300).map(|_| [uniform(&mut rng) * 0.5 - 0.25, uniform(&mut rng) * 0.5 - 0.25]).collect();
+        let points: Vec<[f64; 2]> =
+            (0..300).map(|_| [uniform(&mut rng) * 0.5 - 0.25, uniform(&mut rng) * 0.5 - 0.25]).collect();
         let grid = MergeGrid::new(points.iter().enumerate().map(|(j, &p)| (j as u32, p)), r);
         let mut found = 0;
         for _ in 0..200_000 {

@@ -13,8 +13,8 @@
 //! with K = 1/(πR²). Paths are never stored: each is generated, tested and dropped.
 //!
 //! Speed: the loop allocates nothing, takes no lock and dispatches nothing dynamically. The common
-//! path (no merge at all, > 99.99%) costs two disc samples by rejection, two square roots, two
-//! divisions and two bitset probes. Plane 1 needs the lobe sample, but a path whose direction
+//! path (no merge at all, > 99.99%) costs two disc samples by rejection, one square root, one
+//! division and two bitset probes, in blocks laid out as arrays (see [`trace_chunk`]). Plane 1 needs the lobe sample, but a path whose direction
 //! misses the pixel by more than the lobe can ever deflect (8.57β, see
 //! [`super::sampling::LOBE_MAX_SIGMAS`]) plus the angular radius of the merge disc cannot hit it;
 //! that exact cone test skips the logarithm and trigonometry for most paths. Merges are rare and
@@ -26,8 +26,9 @@ use nalgebra::Vector3;
 
 use super::camera::CameraSet;
 use super::config::SimConfig;
-use super::rng::stream;
-use super::sampling::{LOBE_MAX_SIGMAS, cosine_direction, sample_lobe};
+use super::illumination::fill_unit_disc;
+use super::rng::{StreamRng, stream};
+use super::sampling::{LOBE_MAX_SIGMAS, sample_lobe};
 use super::scene::{angle_between, theta_over_sin};
 use super::tally::{ChunkScratch, ChunkTally, strategy_weights};
 
@@ -72,7 +73,17 @@ impl PixelCone {
     }
 }
 
+/// Light paths per block of the chunk loop.
+const BLOCK: usize = 128;
+
 /// Traces chunk `chunk` of iteration `iteration` and returns its tally.
+///
+/// Paths go through in blocks of [`BLOCK`], stage by stage over arrays (structure of arrays):
+/// start points, directions (both by branch-free rejection), then one straight-line pass that
+/// projects to plane 2 and runs the three cheap tests (two occupancy bits and the pixel cone), and
+/// last the few flagged paths, in path order. The order of draws is therefore: a block's ring
+/// choices, its start discs, its direction discs, then the lobe draws of its flagged paths — fixed
+/// for a given (seed, iteration, chunk), so results stay deterministic.
 pub fn trace_chunk(
     config: &SimConfig,
     cameras: &CameraSet,
@@ -85,34 +96,80 @@ pub fn trace_chunk(
     let (l2, l3) = (scene.l2, scene.l3);
     let cone = PixelCone::new(scene.lobe.beta, l2, config.merge_radius);
     let mut rng = stream(seed, iteration, chunk);
-    for _ in 0..config.chunk_len(chunk) {
-        let x3 = scene.illumination.sample(&mut rng);
-        let up = cosine_direction(&mut rng);
-        // Travel is downwards, from plane 3 to plane 2.
-        let d = Vector3::new(up.x, up.y, -up.z);
-        let x2 = [x3[0] + l3 * up.x / up.z, x3[1] + l3 * up.y / up.z];
+    let mut rings = [0u8; BLOCK];
+    let mut disc = [[0.0f64; 3]; BLOCK];
+    let mut x3 = [[0.0f64; 2]; BLOCK];
+    let mut dirs = [[0.0f64; 3]; BLOCK];
+    let mut x2 = [[0.0f64; 2]; BLOCK];
+    let mut flags = [0u8; BLOCK];
+    let mut remaining = config.chunk_len(chunk) as usize;
+    while remaining > 0 {
+        let n = remaining.min(BLOCK);
+        remaining -= n;
 
-        let near3 = cameras.plane3.candidates(x3);
-        if !near3.is_empty() {
-            merge_plane3(config, cameras, near3, x3, scratch);
+        // Starts x3l on plane 3, density I/Φ.
+        scene.illumination.sample_block(&mut rng, &mut rings, &mut disc, &mut x3[..n]);
+
+        // Cosine directions by Malley's method: disc points (u, v), lifted to z = √(1 − ρ²).
+        fill_unit_disc(&mut rng, &mut dirs[..n]);
+
+        // Plane 2 and the cheap tests. Travel is downwards: d = (u, v, −z).
+        for i in 0..n {
+            let [u, v, rho2] = dirs[i];
+            let z = (1.0 - rho2).sqrt();
+            let reach = l3 / z;
+            let p2 = [x3[i][0] + reach * u, x3[i][1] + reach * v];
+            x2[i] = p2;
+            dirs[i][2] = -z;
+            let d = Vector3::new(u, v, -z);
+            flags[i] = u8::from(cameras.plane3.may_hold(x3[i]))
+                | (u8::from(cameras.plane2.may_hold(p2)) << 1)
+                | (u8::from(cone.may_reach(p2, &d, l2)) << 2);
         }
-        let near2 = cameras.plane2.candidates(x2);
-        if !near2.is_empty() {
-            merge_plane2(config, cameras, near2, x2, x3, &d, scratch);
-        }
-        if cone.may_reach(x2, &d, l2) {
-            // The lobe is sampled only here: its draws follow the path's others in the stream.
-            let (out, theta) = sample_lobe(&scene.lobe, &d, &mut rng);
-            if out.z < 0.0 {
-                let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
-                let r = config.merge_radius;
-                if x1[0] * x1[0] + x1[1] * x1[1] <= r * r {
-                    merge_plane1(config, theta, x2, x3, scratch);
-                }
+
+        // The rare paths that may merge.
+        for i in 0..n {
+            if flags[i] != 0 {
+                let d = Vector3::from(dirs[i]);
+                trace_flagged(config, cameras, flags[i], x3[i], x2[i], &d, &mut rng, scratch);
             }
         }
     }
     scratch.take()
+}
+
+/// Merges of one flagged path: candidates from the grids, exact distance tests, and, if the path
+/// may reach the pixel, its lobe deflection to plane 1.
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn trace_flagged(
+    config: &SimConfig,
+    cameras: &CameraSet,
+    flags: u8,
+    x3: [f64; 2],
+    x2: [f64; 2],
+    d: &Vector3<f64>,
+    rng: &mut StreamRng,
+    scratch: &mut ChunkScratch,
+) {
+    if flags & 1 != 0 {
+        merge_plane3(config, cameras, cameras.plane3.candidates(x3), x3, scratch);
+    }
+    if flags & 2 != 0 {
+        merge_plane2(config, cameras, cameras.plane2.candidates(x2), x2, x3, d, scratch);
+    }
+    if flags & 4 != 0 {
+        let l2 = config.scene.l2;
+        let (out, theta) = sample_lobe(&config.scene.lobe, d, rng);
+        if out.z < 0.0 {
+            let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+            let r = config.merge_radius;
+            if x1[0] * x1[0] + x1[1] * x1[1] <= r * r {
+                merge_plane1(config, theta, x2, x3, scratch);
+            }
+        }
+    }
 }
 
 /// K = 1/(πR²).
@@ -127,8 +184,6 @@ fn within(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
     dx * dx + dy * dy <= r * r
 }
 
-#[cold]
-#[inline(never)]
 fn merge_plane3(config: &SimConfig, cameras: &CameraSet, near: &[u32], x3l: [f64; 2], scratch: &mut ChunkScratch) {
     let k = config.cells.len();
     for &j in near {
@@ -143,8 +198,6 @@ fn merge_plane3(config: &SimConfig, cameras: &CameraSet, near: &[u32], x3l: [f64
     }
 }
 
-#[cold]
-#[inline(never)]
 fn merge_plane2(
     config: &SimConfig,
     cameras: &CameraSet,
@@ -169,8 +222,6 @@ fn merge_plane2(
     }
 }
 
-#[cold]
-#[inline(never)]
 fn merge_plane1(config: &SimConfig, theta: f64, x2l: [f64; 2], x3l: [f64; 2], scratch: &mut ChunkScratch) {
     // Energy after the lobe: sin ϑ/ϑ. The merge happens with all N_B camera paths at the shared
     // pixel, so the pair sum over j is N_B times one contribution.

@@ -145,7 +145,9 @@ pub struct Moments {
 pub enum MergeError {
     #[error("moments format {found} is not supported (this build reads format {expected})")]
     Format { found: u32, expected: u32 },
-    #[error("configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator")]
+    #[error(
+        "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
+    )]
     Fingerprint { found: String, expected: String },
     #[error("the iterations {} are already counted", list(.0))]
     Overlap(Vec<Overlap>),
@@ -190,7 +192,10 @@ impl Moments {
     pub fn check_mergeable(&self, other: &Moments) -> Result<(), MergeError> {
         other.check_well_formed()?;
         if other.fingerprint != self.fingerprint || other.cells != self.cells {
-            return Err(MergeError::Fingerprint { found: other.fingerprint.clone(), expected: self.fingerprint.clone() });
+            return Err(MergeError::Fingerprint {
+                found: other.fingerprint.clone(),
+                expected: self.fingerprint.clone(),
+            });
         }
         let overlaps = self.coverage.overlaps(&other.coverage);
         if !overlaps.is_empty() {

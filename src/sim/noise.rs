@@ -110,7 +110,12 @@ pub struct NoiseTable {
 }
 
 /// Hold-out sums: weights fitted on one fold, Σ C and Σ C² evaluated on the other, both ways.
-fn holdout_sums(folds: &[YStats; 2], grid: &CellGrid, solver: &SolverOptions, lambda: f64) -> Result<(f64, f64, f64), SolveError> {
+fn holdout_sums(
+    folds: &[YStats; 2],
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    lambda: f64,
+) -> Result<(f64, f64, f64), SolveError> {
     let mut total = (0.0, 0.0, 0.0);
     for (train, test) in [(0, 1), (1, 0)] {
         let w = fit(&folds[train], grid, &solver.fixed, lambda)?.vector();
@@ -128,7 +133,12 @@ fn rms_of(m: f64, s1: f64, s2: f64) -> Option<f64> {
 pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -> NoiseTable {
     let pooled_fold = moments.pooled();
     let row = |s| path_row(&pooled_fold, s);
-    let mut rows = vec![row(PathStrategy::Plane1), row(PathStrategy::Plane2), row(PathStrategy::Plane3), row(PathStrategy::Switch)];
+    let mut rows = vec![
+        row(PathStrategy::Plane1),
+        row(PathStrategy::Plane2),
+        row(PathStrategy::Plane3),
+        row(PathStrategy::Switch),
+    ];
 
     let k = grid.len();
     let pooled = YStats::from_fold(&pooled_fold, k);
@@ -147,7 +157,9 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
 
     // 2-fold cross-fitting with the requested λ.
     rows.push(match holdout_sums(&folds, grid, solver, solver.lambda) {
-        Ok((m, s1, s2)) => NoiseRow { lambda: Some(solver.lambda), ..NoiseRow::from_sums("optimal_holdout", m, s1, s2, None) },
+        Ok((m, s1, s2)) => {
+            NoiseRow { lambda: Some(solver.lambda), ..NoiseRow::from_sums("optimal_holdout", m, s1, s2, None) }
+        }
         Err(e) => NoiseRow::failed("optimal_holdout", format!("a hold-out fit failed: {e}")),
     });
 
@@ -176,7 +188,10 @@ fn cross_validated(
         }
     }
     let Some((holdout_rms, lambda)) = best else {
-        return NoiseRow::failed("optimal_cv", format!("no λ of the grid could be evaluated ({})", failures.join("; ")));
+        return NoiseRow::failed(
+            "optimal_cv",
+            format!("no λ of the grid could be evaluated ({})", failures.join("; ")),
+        );
     };
     match fit(pooled, grid, &solver.fixed, lambda) {
         Ok(f) => NoiseRow { holdout_rms_percent: Some(holdout_rms), ..fitted_row("optimal_cv", &f, pooled) },
@@ -242,7 +257,10 @@ mod tests {
         // Exponential: RMS = 100%; the replication spread estimates the true SE with a relative
         // error of about 1/√(2·reps) = 3.5%; allow 4 of those.
         assert!((mean_rms - 100.0).abs() < 4.0 * spread / (reps as f64).sqrt(), "mean RMS {mean_rms}");
-        assert!((mean_se / spread - 1.0).abs() < 4.0 / (2.0 * reps as f64).sqrt(), "delta SE {mean_se} vs spread {spread}");
+        assert!(
+            (mean_se / spread - 1.0).abs() < 4.0 / (2.0 * reps as f64).sqrt(),
+            "delta SE {mean_se} vs spread {spread}"
+        );
     }
 
     #[test]

@@ -68,7 +68,8 @@ pub fn kernel_g(scene: &Scene, r3: f64) -> f64 {
         let panels = [0.0, 0.125, 0.25, 0.5, 1.0];
         let body: f64 = panels.windows(2).map(|w| gauss_legendre(&|s| integrand(s, psi), w[0] * s_c, w[1] * s_c)).sum();
         // Tail s ∈ [s_c, ∞) with s = s_c/t.
-        let tail = gauss_legendre(&|t: f64| if t > 0.0 { integrand(s_c / t, psi) * s_c / (t * t) } else { 0.0 }, 0.0, 1.0);
+        let tail =
+            gauss_legendre(&|t: f64| if t > 0.0 { integrand(s_c / t, psi) * s_c / (t * t) } else { 0.0 }, 0.0, 1.0);
         body + tail
     };
     // Symmetric in ψ ↔ −ψ (x3 on the x axis): trapezoid on [0, π], doubling until stable.
@@ -81,8 +82,8 @@ pub fn kernel_g(scene: &Scene, r3: f64) -> f64 {
     let mut estimate = trapezoid(&values);
     while n < 4096 {
         let mut refined = Vec::with_capacity(2 * n + 1);
-        for i in 0..n {
-            refined.push(values[i]);
+        for (i, &v) in values.iter().take(n).enumerate() {
+            refined.push(v);
             refined.push(radial(PI * (2 * i + 1) as f64 / (2 * n) as f64));
         }
         refined.push(values[n]);
@@ -175,7 +176,8 @@ const WGK: [f64; 8] = [
     0.209_482_141_084_727_83,
 ];
 /// Gauss 7-point weights for XGK[1], XGK[3], XGK[5], XGK[7].
-const WG: [f64; 4] = [0.129_484_966_168_869_7, 0.279_705_391_489_276_7, 0.381_830_050_505_118_9, 0.417_959_183_673_469_4];
+const WG: [f64; 4] =
+    [0.129_484_966_168_869_7, 0.279_705_391_489_276_7, 0.381_830_050_505_118_9, 0.417_959_183_673_469_4];
 
 /// (Kronrod estimate, |Kronrod − Gauss|) on [a, b].
 fn gk15(f: &dyn Fn(f64) -> f64, a: f64, b: f64) -> (f64, f64) {

@@ -62,7 +62,16 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
                 .enumerate()
                 .map(|(alpha, c)| {
                     let b = grid.bounds(alpha);
-                    WeightRow { r2: b.r2, r3: b.r3, phi: b.phi, w0: c.w[0], w1: c.w[1], w2: c.w[2], samples: c.samples, status: c.status }
+                    WeightRow {
+                        r2: b.r2,
+                        r3: b.r3,
+                        phi: b.phi,
+                        w0: c.w[0],
+                        w1: c.w[1],
+                        w2: c.w[2],
+                        samples: c.samples,
+                        status: c.status,
+                    }
                 })
                 .collect(),
             None,

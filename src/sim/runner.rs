@@ -61,7 +61,8 @@ pub fn run_iterations(
             return Err(RunError::Cancelled);
         }
         let end = (start + per_batch).min(range.end);
-        let cameras: Vec<CameraSet> = (start..end).into_par_iter().map(|s| CameraSet::generate(config, seed, s)).collect();
+        let cameras: Vec<CameraSet> =
+            (start..end).into_par_iter().map(|s| CameraSet::generate(config, seed, s)).collect();
         let items = (end - start) * chunks;
         let tallies: Vec<Option<ChunkTally>> = (0..items)
             .into_par_iter()

@@ -31,10 +31,7 @@ pub fn orthonormal_basis(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let sign = 1f64.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    (
-        Vector3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
-        Vector3::new(b, sign + n.y * n.y * a, -n.y),
-    )
+    (Vector3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vector3::new(b, sign + n.y * n.y * a, -n.y))
 }
 
 /// Deflects the unit direction `axis` by the plane-2 lobe: ϑ = β·√(−2 ln u₁), azimuth 2πu₂.
@@ -126,15 +123,33 @@ mod tests {
         assert_close("E[ϑ]", mean_se(n, || it.next().unwrap().1), beta * (std::f64::consts::PI / 2.0).sqrt());
         // Azimuth: the deflection's components along t and b have mean zero and equal spread.
         let mut it = draws.iter();
-        assert_close("E[cos ψ]", mean_se(n, || { let (d, th) = it.next().unwrap(); d.dot(&t) / th.sin() }), 0.0);
+        assert_close(
+            "E[cos ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                d.dot(&t) / th.sin()
+            }),
+            0.0,
+        );
         let mut it = draws.iter();
-        assert_close("E[sin ψ]", mean_se(n, || { let (d, th) = it.next().unwrap(); d.dot(&b) / th.sin() }), 0.0);
+        assert_close(
+            "E[sin ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                d.dot(&b) / th.sin()
+            }),
+            0.0,
+        );
         let mut it = draws.iter();
-        assert_close("E[cos 2ψ]", mean_se(n, || {
-            let (d, th) = it.next().unwrap();
-            let (c, s) = (d.dot(&t) / th.sin(), d.dot(&b) / th.sin());
-            c * c - s * s
-        }), 0.0);
+        assert_close(
+            "E[cos 2ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                let (c, s) = (d.dot(&t) / th.sin(), d.dot(&b) / th.sin());
+                c * c - s * s
+            }),
+            0.0,
+        );
     }
 
     #[test]

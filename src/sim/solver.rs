@@ -94,6 +94,9 @@ pub enum CellStatus {
     /// No samples and λ = 0: weights copied from the nearest fitted cell; they do not change the
     /// fitted variance.
     Empty,
+    /// Samples whose contributions are negligible (they move the variance by < 10⁻¹⁴ of the most
+    /// informative weight), λ = 0: treated like an empty cell.
+    Uninformative,
     /// No samples, λ > 0: weights set by the gradient penalty alone.
     Smoothed,
 }
@@ -132,7 +135,9 @@ pub enum SolveError {
     TooFewIterations(u64),
     #[error("no merge events: every contribution is zero, there is nothing to weight")]
     NoSignal,
-    #[error("the weight system is singular (rank {rank} of {dimension}): the data do not determine the weights of cells {cells:?}; add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations")]
+    #[error(
+        "the weight system is singular (rank {rank} of {dimension}): the data do not determine the weights of cells {cells:?}; add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
+    )]
     Singular { dimension: usize, rank: usize, cells: Vec<usize> },
 }
 
@@ -159,44 +164,46 @@ pub fn fit(stats: &YStats, grid: &CellGrid, fixed: &FixedWeights, lambda: f64) -
         return Err(SolveError::TooFewIterations(stats.m as u64));
     }
     let mu = stats.scale();
-    if stats.cell_samples.iter().all(|&c| c == 0) || !(mu > 0.0) {
+    if stats.cell_samples.iter().all(|&c| c == 0) || mu.is_nan() || mu <= 0.0 {
         return Err(SolveError::NoSignal);
     }
     let (base, coefs) = cell_parameters(fixed);
-    // Cells that carry free weights: all of them under a penalty, else those with samples.
-    let active: Vec<bool> = (0..k).map(|a| !coefs.is_empty() && (lambda > 0.0 || stats.cell_samples[a] > 0)).collect();
-    let mut columns: Vec<(usize, [f64; 2])> = Vec::new(); // (cell, coefficient) per free weight
-    for a in (0..k).filter(|&a| active[a]) {
-        columns.extend(coefs.iter().map(|&c| (a, c)));
-    }
-    let nfree = columns.len();
     let w0 = DVector::from_fn(2 * k, |i, _| base[i / k]);
-    let mut p = DMatrix::zeros(2 * k, nfree);
-    for (col, &(a, c)) in columns.iter().enumerate() {
-        p[(a, col)] = c[0];
-        p[(k + a, col)] = c[1];
+    // Cells that carry free weights: all of them under a penalty, else those with samples.
+    let mut active: Vec<usize> =
+        (0..k).filter(|&a| !coefs.is_empty() && (lambda > 0.0 || stats.cell_samples[a] > 0)).collect();
+    let mut uninformative = vec![false; k];
+    let system = |cells: &[usize]| NormalSystem::new(stats, grid, &w0, &coefs, cells, mu, lambda);
+    let mut sys = system(&active);
+    if lambda == 0.0 && !active.is_empty() {
+        // A cell whose every free weight moves the variance by < 10⁻¹⁴ of the most informative one
+        // carries no information (e.g. plane-2 merges at deflections where g(ϑ) underflows): leave
+        // it out like an empty cell rather than call the system singular.
+        let max_diag = sys.h.diagonal().iter().copied().fold(0.0, f64::max);
+        let per_cell = coefs.len();
+        for (i, &a) in active.iter().enumerate() {
+            let informative = (0..per_cell).any(|c| sys.h[(i * per_cell + c, i * per_cell + c)] > 1e-14 * max_diag);
+            uninformative[a] = !informative;
+        }
+        if uninformative.iter().any(|&u| u) {
+            active.retain(|&a| !uninformative[a]);
+            if active.is_empty() {
+                return Err(SolveError::NoSignal);
+            }
+            sys = system(&active);
+        }
     }
-    let z = if nfree == 0 {
-        DVector::zeros(0)
-    } else {
-        // Covariances (1/M normalisation; the minimiser does not depend on it).
-        let m = stats.m;
-        let mean = &stats.sum_y / m;
-        let cov = &stats.sum_yy / m - &mean * mean.transpose();
-        let s_aa = cov.view((0, 0), (2 * k, 2 * k)).into_owned();
-        let s_ab = cov.view((0, 2 * k), (2 * k, 1)).column(0).into_owned();
-        let laplacian = penalty_laplacian(grid);
-        let inv_mu2 = 1.0 / (mu * mu);
-        let h = p.transpose() * (&s_aa * inv_mu2 + &laplacian * lambda) * &p;
-        let g = -(p.transpose() * ((&s_aa * &w0 + &s_ab) * inv_mu2 + &laplacian * &w0 * lambda));
-        solve_spd(h, g, &columns)?
-    };
+    let z = if sys.columns.is_empty() { DVector::zeros(0) } else { solve_spd(sys.h, sys.g, &sys.columns)? };
+    let p = sys.p;
+    let nfree = sys.columns.len();
     let w = &w0 + &p * &z;
     let mut cells: Vec<CellWeights> = (0..k)
         .map(|a| {
             let (x0, x1) = (w[a], w[k + a]);
             let status = if coefs.is_empty() {
                 CellStatus::Fixed
+            } else if uninformative[a] {
+                CellStatus::Uninformative
             } else if stats.cell_samples[a] > 0 {
                 CellStatus::Fitted
             } else if lambda > 0.0 {
@@ -209,6 +216,51 @@ pub fn fit(stats: &YStats, grid: &CellGrid, fixed: &FixedWeights, lambda: f64) -
         .collect();
     fill_empty_cells(&mut cells, grid);
     Ok(Fit { cells, lambda, free: nfree })
+}
+
+/// The normal equations H z = g of the free weights of `cells`, with W = W₀ + P z.
+struct NormalSystem {
+    p: DMatrix<f64>,
+    h: DMatrix<f64>,
+    g: DVector<f64>,
+    /// (cell, coefficient on (w0, w1)) of each free weight.
+    columns: Vec<(usize, [f64; 2])>,
+}
+
+impl NormalSystem {
+    fn new(
+        stats: &YStats,
+        grid: &CellGrid,
+        w0: &DVector<f64>,
+        coefs: &[[f64; 2]],
+        cells: &[usize],
+        mu: f64,
+        lambda: f64,
+    ) -> Self {
+        let k = grid.len();
+        let columns: Vec<(usize, [f64; 2])> = cells.iter().flat_map(|&a| coefs.iter().map(move |&c| (a, c))).collect();
+        let mut p = DMatrix::zeros(2 * k, columns.len());
+        for (col, &(a, c)) in columns.iter().enumerate() {
+            p[(a, col)] = c[0];
+            p[(k + a, col)] = c[1];
+        }
+        // Covariances (1/M normalisation; the minimiser does not depend on it).
+        let mean = &stats.sum_y / stats.m;
+        let cov = &stats.sum_yy / stats.m - &mean * mean.transpose();
+        let s_aa = cov.view((0, 0), (2 * k, 2 * k)).into_owned();
+        let s_ab = cov.view((0, 2 * k), (2 * k, 1)).column(0).into_owned();
+        let inv_mu2 = 1.0 / (mu * mu);
+        let (h, g) = if lambda > 0.0 {
+            let laplacian = penalty_laplacian(grid);
+            (
+                p.transpose() * (&s_aa * inv_mu2 + &laplacian * lambda) * &p,
+                -(p.transpose() * ((&s_aa * w0 + &s_ab) * inv_mu2 + &laplacian * w0 * lambda)),
+            )
+        } else {
+            (p.transpose() * &s_aa * &p * inv_mu2, -(p.transpose() * (&s_aa * w0 + &s_ab) * inv_mu2))
+        };
+        Self { p, h, g, columns }
+    }
 }
 
 /// The graph Laplacian of the penalty Σ_edges Σ_m (Δw_m)² on W = (w0, w1): per edge, with
@@ -243,7 +295,8 @@ fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, columns: &[(usize, [f64; 2])]) ->
         SolveError::Singular { dimension: n, rank, cells }
     };
     // A free weight no sample and no penalty touches is undetermined outright.
-    let dead: Vec<usize> = (0..n).filter(|&i| !(h[(i, i)] > max_diag * 1e-300)).map(|i| columns[i].0).collect();
+    let dead: Vec<usize> =
+        (0..n).filter(|&i| h[(i, i)].is_nan() || h[(i, i)] <= max_diag * 1e-300).map(|i| columns[i].0).collect();
     if !dead.is_empty() || max_diag <= 0.0 {
         return Err(singular(n - dead.len(), dead));
     }
@@ -281,8 +334,8 @@ fn fill_empty_cells(cells: &mut [CellWeights], grid: &CellGrid) {
         adjacency[a].push(b);
         adjacency[b].push(a);
     }
-    let mut source: Vec<Option<usize>> =
-        (0..k).map(|a| (cells[a].status != CellStatus::Empty).then_some(a)).collect();
+    let unfitted = |s: CellStatus| matches!(s, CellStatus::Empty | CellStatus::Uninformative);
+    let mut source: Vec<Option<usize>> = (0..k).map(|a| (!unfitted(cells[a].status)).then_some(a)).collect();
     let mut frontier: Vec<usize> = (0..k).filter(|&a| source[a].is_some()).collect();
     while !frontier.is_empty() {
         let mut next = Vec::new();
@@ -298,7 +351,7 @@ fn fill_empty_cells(cells: &mut [CellWeights], grid: &CellGrid) {
         frontier = next;
     }
     for a in 0..k {
-        if let (CellStatus::Empty, Some(s)) = (cells[a].status, source[a]) {
+        if let (true, Some(s)) = (unfitted(cells[a].status), source[a]) {
             cells[a].w = cells[s].w;
         }
     }
@@ -353,7 +406,9 @@ mod tests {
         let fit = fit(&stats, &grid, &FixedWeights::default(), 0.0).unwrap();
         let w = fit.vector();
         assert!((&w - &w_star).amax() < 1e-3, "fitted {w} vs {w_star}");
-        assert!(fit.cells.iter().all(|c| c.status == CellStatus::Fitted && (c.w.iter().sum::<f64>() - 1.0).abs() < 1e-12));
+        assert!(
+            fit.cells.iter().all(|c| c.status == CellStatus::Fitted && (c.w.iter().sum::<f64>() - 1.0).abs() < 1e-12)
+        );
         let best = variance(&stats, &w);
         let mut rng = stream(43, 0, 0);
         for _ in 0..500 {
@@ -387,8 +442,10 @@ mod tests {
         let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
         let w_star = DVector::from_vec(vec![0.1, -0.3, 0.7, 0.5, 0.2, 0.9]);
         let stats = synthetic(3, &w_star, 500);
-        let spread = |f: &Fit| f.cells.iter().map(|c| c.w[1]).fold(f64::NEG_INFINITY, f64::max)
-            - f.cells.iter().map(|c| c.w[1]).fold(f64::INFINITY, f64::min);
+        let spread = |f: &Fit| {
+            f.cells.iter().map(|c| c.w[1]).fold(f64::NEG_INFINITY, f64::max)
+                - f.cells.iter().map(|c| c.w[1]).fold(f64::INFINITY, f64::min)
+        };
         let free = fit(&stats, &grid, &FixedWeights::default(), 0.0).unwrap();
         let smooth = fit(&stats, &grid, &FixedWeights::default(), 1e6).unwrap();
         assert!(spread(&smooth) < 1e-3 && spread(&free) > 0.5, "{} vs {}", spread(&smooth), spread(&free));

@@ -296,9 +296,11 @@ impl JobSpec {
         })?;
         validate_illumination(&s.illumination)?;
         let max_r = s.l2.min(s.l3);
-        check(self.merge_radius.is_finite() && self.merge_radius > 0.0 && self.merge_radius < max_r, "merge_radius", || {
-            format!("must be in (0, min(l2, l3) = {max_r}), got {}", self.merge_radius)
-        })?;
+        check(
+            self.merge_radius.is_finite() && self.merge_radius > 0.0 && self.merge_radius < max_r,
+            "merge_radius",
+            || format!("must be in (0, min(l2, l3) = {max_r}), got {}", self.merge_radius),
+        )?;
         check((1..=1_000_000_000_000).contains(&self.light_paths), "light_paths", || {
             format!("must be in [1, 10^12], got {}", self.light_paths)
         })?;
@@ -330,9 +332,11 @@ fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
                 format!("must be in (0, 1e12], got {contrast}")
             })
         }
-        IlluminationSpec::Uniform { r_ls } => check(in_open_closed(r_ls, 0.0, MAX_LENGTH), &format!("{f}.r_ls"), || {
-            format!("must be a radius in (0, {MAX_LENGTH:e}], got {r_ls}")
-        }),
+        IlluminationSpec::Uniform { r_ls } => {
+            check(in_open_closed(r_ls, 0.0, MAX_LENGTH), &format!("{f}.r_ls"), || {
+                format!("must be a radius in (0, {MAX_LENGTH:e}], got {r_ls}")
+            })
+        }
         IlluminationSpec::Rings { ref rings } => {
             check((1..=64).contains(&rings.len()), &format!("{f}.rings"), || {
                 format!("must list 1 to 64 rings, got {}", rings.len())
@@ -342,7 +346,10 @@ fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
             for (i, ring) in rings.iter().enumerate() {
                 let field = format!("{f}.rings[{i}]");
                 check(in_open_closed(ring.outer_radius, inner, MAX_LENGTH), &format!("{field}.outer_radius"), || {
-                    format!("must be in ({inner}, {MAX_LENGTH:e}] (radii strictly increasing), got {}", ring.outer_radius)
+                    format!(
+                        "must be in ({inner}, {MAX_LENGTH:e}] (radii strictly increasing), got {}",
+                        ring.outer_radius
+                    )
                 })?;
                 check(ring.level.is_finite() && (0.0..=1e12).contains(&ring.level), &format!("{field}.level"), || {
                     format!("must be in [0, 1e12], got {}", ring.level)
@@ -360,9 +367,16 @@ fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
         format!("must start at 0 (the first cell begins at r = 0), got {edges:?}")
     })?;
     for (i, pair) in edges.windows(2).enumerate() {
-        check(pair[1].is_finite() && pair[1] > pair[0] && pair[1] <= MAX_LENGTH, &format!("{field}[{}]", i + 1), || {
-            format!("edges must be finite and strictly increasing (≤ {MAX_LENGTH:e}), got {} after {}", pair[1], pair[0])
-        })?;
+        check(
+            pair[1].is_finite() && pair[1] > pair[0] && pair[1] <= MAX_LENGTH,
+            &format!("{field}[{}]", i + 1),
+            || {
+                format!(
+                    "edges must be finite and strictly increasing (≤ {MAX_LENGTH:e}), got {} after {}",
+                    pair[1], pair[0]
+                )
+            },
+        )?;
     }
     Ok(())
 }
@@ -486,11 +500,16 @@ mod tests {
             (json!({ "scene": { "l2": 0 } }), "scene.l2"),
             (json!({ "scene": { "illumination": { "a": -0.1 } } }), "scene.illumination.a"),
             (json!({ "scene": { "illumination": { "r_ls": 0.01 } } }), "scene.illumination.r_ls"),
-            (json!({ "scene": { "illumination": { "kind": "rings", "rings": [
+            (
+                json!({ "scene": { "illumination": { "kind": "rings", "rings": [
                 { "outer_radius": 1, "level": 1 }, { "outer_radius": 0.5, "level": 1 } ] } } }),
-             "scene.illumination.rings[1].outer_radius"),
-            (json!({ "scene": { "illumination": { "kind": "rings", "rings": [
-                { "outer_radius": 1, "level": 0 } ] } } }), "scene.illumination.rings"),
+                "scene.illumination.rings[1].outer_radius",
+            ),
+            (
+                json!({ "scene": { "illumination": { "kind": "rings", "rings": [
+                { "outer_radius": 1, "level": 0 } ] } } }),
+                "scene.illumination.rings",
+            ),
             (json!({ "light_paths": 0 }), "light_paths"),
             (json!({ "camera_paths": 0 }), "camera_paths"),
             (json!({ "iterations": 0 }), "iterations"),

@@ -32,7 +32,8 @@ pub enum PathStrategy {
 }
 
 impl PathStrategy {
-    pub const ALL: [PathStrategy; 6] = [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power];
+    pub const ALL: [PathStrategy; 6] =
+        [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power];
     pub const COUNT: usize = Self::ALL.len();
 
     /// The name used in results.
@@ -159,7 +160,12 @@ pub struct IterationTally {
 
 impl IterationTally {
     /// Adds the chunk tallies of iteration `iteration` in chunk order and normalises.
-    pub fn from_chunks<'a>(iteration: u64, cells: usize, norm: f64, chunks: impl IntoIterator<Item = &'a ChunkTally>) -> Self {
+    pub fn from_chunks<'a>(
+        iteration: u64,
+        cells: usize,
+        norm: f64,
+        chunks: impl IntoIterator<Item = &'a ChunkTally>,
+    ) -> Self {
         let mut sums = vec![0.0; 3 * cells];
         let mut cell_counts = vec![0u64; 3 * cells];
         let mut strategies = [0.0; PathStrategy::COUNT];

@@ -1,0 +1,192 @@
+//! Statistical and determinism tests of the simulation core, end to end (no server, no database).
+//!
+//! Means are checked against the independent quadrature of `sim::quadrature` within 4 standard
+//! errors. Test scenes scale N_F, N_B and R up from the paper's so that the rare events that
+//! dominate some estimators (a camera path landing in the bright spot, a spot light path merging
+//! at plane 2 in line with the pixel) happen often enough (≥ 100 times) for the standard errors to
+//! be trustworthy, while the kernel bias of the finite R stays far below one standard error:
+//! the densities merged against vary on scales ≥ 0.05 (the lobe's footprint L2·β), and a disc
+//! kernel's relative bias is about R²/(4σ²) — ≤ 4% of the spot's 8% share of L at R = 0.02, i.e.
+//! ≤ 0.3% of L, against standard errors of 2–6%.
+//!
+//! Strategies whose weights *jump* across the join path's r3 = a (`switch`, and the fitted cell
+//! weights, which jump between cells) have a first-order kernel bias instead: a merge's join path
+//! uses the camera's vertex (x3c at plane 3, x3l at plane 2 — the paper's convention), so a bright
+//! spot light path near the edge, merged at plane 3 with a camera vertex just outside, is weighted 1
+//! at both planes. The excess is O(R/a) of the spot's share of L (+3% of L at R = a = 0.02, about
+//! +0.5% at the paper's R = 0.003), so those strategies are checked only where they coincide with an
+//! unbiased one (the uniform scene) and in the paper-scale run of docs/results.md.
+
+use std::sync::atomic::AtomicBool;
+
+use optimis::sim::config::SimConfig;
+use optimis::sim::moments::{MergeError, Moments};
+use optimis::sim::noise::noise_table;
+use optimis::sim::quadrature::reference_luminance;
+use optimis::sim::runner::{run, run_iterations};
+use optimis::sim::solver::{YStats, fit};
+use optimis::sim::spec::{ValidJob, parse_job_spec};
+use serde_json::{Value, json};
+
+fn job(doc: Value) -> ValidJob {
+    parse_job_spec(&doc).expect("valid document").validate().expect("valid spec")
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+}
+
+/// Runs the job's iterations on all cores and checks every listed strategy's mean against the
+/// quadrature value.
+fn check_means_against_quadrature(doc: Value, strategies: &[&str]) {
+    let job = job(doc);
+    let config: &SimConfig = &job.config;
+    let moments = pool(2).install(|| run(config, job.spec.seed, 0..job.spec.iterations));
+    let reference = reference_luminance(&config.scene);
+    let table = noise_table(&moments, &config.cells, &job.spec.solver);
+    for name in strategies {
+        let row = table.rows.iter().find(|r| r.strategy == *name).expect("strategy in the table");
+        let (l, se) = (row.luminance.unwrap(), row.luminance_stderr.unwrap());
+        let z = (l - reference) / se;
+        eprintln!("{name:>16}: L = {l:.6e} ± {se:.2e}  (reference {reference:.6e}, z = {z:+.2})");
+        assert!(se > 0.0 && se < 0.1 * reference, "{name}: the test must be sharp, SE = {se:e}");
+        assert!(z.abs() < 4.0, "{name}: L = {l:e} ± {se:e} is {z:.2} SE from the quadrature {reference:e}");
+    }
+}
+
+/// The paper's scene (spot illumination), scaled: N_F = 2·10⁵, N_B = 2000, R = 0.02.
+#[test]
+fn paper_scene_means_match_the_quadrature() {
+    check_means_against_quadrature(
+        json!({
+            "preset": "paper-table1", "light_paths": 200_000, "camera_paths": 2000,
+            "merge_radius": 0.02, "iterations": 2000, "seed": 11
+        }),
+        &["plane1", "plane2", "plane3", "balance", "power"],
+    );
+}
+
+/// Uniform illumination: no rare bright spot, and densities that vary only on the scene's scale
+/// (≥ 1), so a large R = 0.05 has negligible kernel bias and makes plane-1 hits plentiful.
+#[test]
+fn uniform_scene_means_match_the_quadrature() {
+    check_means_against_quadrature(
+        json!({
+            "preset": "uniform-illumination", "light_paths": 100_000, "camera_paths": 100,
+            "merge_radius": 0.05, "iterations": 1500, "seed": 12
+        }),
+        &["plane1", "plane2", "plane3", "switch", "balance", "power", "optimal_holdout"],
+    );
+}
+
+fn small_job() -> ValidJob {
+    // 3 chunks per iteration (2¹⁷ + a partial one), enough merges to fill many cells.
+    job(json!({
+        "preset": "paper-table1", "light_paths": 140_000, "camera_paths": 300,
+        "merge_radius": 0.02, "iterations": 12, "seed": 5
+    }))
+}
+
+/// Moments are bit-identical on 1, 2 and 8 threads (compared exactly and as serialised JSON).
+#[test]
+fn moments_do_not_depend_on_the_thread_count() {
+    let job = small_job();
+    let runs: Vec<Moments> = [1, 2, 8].iter().map(|&t| pool(t).install(|| run(&job.config, 5, 0..12))).collect();
+    assert!(runs[0].pooled().merges.iter().sum::<u64>() > 100, "the run must have merges to compare");
+    let json0 = serde_json::to_string(&runs[0]).unwrap();
+    for other in &runs[1..] {
+        assert_eq!(&runs[0], other);
+        assert_eq!(json0, serde_json::to_string(other).unwrap());
+    }
+}
+
+/// Running [0, k) and [k, M) and merging (in either order) equals running [0, M), bit for bit;
+/// so does resuming a run from its own partial moments.
+#[test]
+fn split_and_merge_is_bit_identical() {
+    let job = small_job();
+    let config = &job.config;
+    let whole = pool(2).install(|| run(config, 5, 0..12));
+    for k in [1, 5, 11] {
+        let (head, tail) = pool(2).install(|| (run(config, 5, 0..k), run(config, 5, k..12)));
+        let mut forward = head.clone();
+        forward.merge(&tail).unwrap();
+        let mut backward = tail;
+        backward.merge(&head).unwrap();
+        assert_eq!(forward, whole, "[0, {k}) + [{k}, 12)");
+        assert_eq!(backward, whole, "[{k}, 12) + [0, {k})");
+        assert_eq!(serde_json::to_string(&forward).unwrap(), serde_json::to_string(&whole).unwrap());
+        // Resume: continue the partial moments in place.
+        let mut resumed = head.clone();
+        let never = AtomicBool::new(false);
+        pool(1).install(|| run_iterations(config, 5, k..12, &mut resumed, &never, |_, _| {})).unwrap();
+        assert_eq!(resumed, whole, "resumed at {k}");
+    }
+    // A JSON round trip keeps the moments exactly.
+    let back: Moments = serde_json::from_str(&serde_json::to_string(&whole).unwrap()).unwrap();
+    assert_eq!(back, whole);
+}
+
+/// Merges of another configuration, or of iterations already counted, are refused and change
+/// nothing.
+#[test]
+fn incompatible_merges_are_refused() {
+    let job = small_job();
+    let config = &job.config;
+    let mut target = run(config, 5, 0..4);
+    let before = target.clone();
+
+    let other = self::job(json!({ "preset": "paper-table1", "light_paths": 140_000, "camera_paths": 300,
+        "merge_radius": 0.021, "iterations": 4, "seed": 5 }));
+    let foreign = run(&other.config, 5, 4..6);
+    assert!(matches!(target.merge(&foreign), Err(MergeError::Fingerprint { .. })));
+
+    let overlapping = run(config, 5, 3..6);
+    match target.merge(&overlapping) {
+        Err(MergeError::Overlap(o)) => assert_eq!(o.len(), 1, "{o:?}"),
+        other => panic!("expected an overlap, got {other:?}"),
+    }
+    assert!(matches!(target.merge(&target.clone()), Err(MergeError::Overlap(_))));
+    assert_eq!(target, before, "refused merges leave the target untouched");
+
+    // Another seed is an independent draw and merges; so do disjoint iterations.
+    target.merge(&run(config, 6, 0..4)).unwrap();
+    target.merge(&run(config, 5, 4..6)).unwrap();
+    assert_eq!(target.iterations(), 10);
+}
+
+/// On real moments, the fitted optimum's in-sample variance is not lowered by any perturbation
+/// of the free weights, and it is at most that of the switch strategy, which the paper's grid can
+/// represent exactly (a = 0.02 is a cell edge).
+#[test]
+fn fitted_weights_minimise_the_sample_variance() {
+    let job = job(json!({ "preset": "paper-table1", "light_paths": 100_000, "camera_paths": 1000,
+        "merge_radius": 0.02, "iterations": 400, "seed": 13 }));
+    let config = &job.config;
+    let moments = pool(2).install(|| run(config, 13, 0..400));
+    let stats = YStats::from_fold(&moments.pooled(), config.cells.len());
+    let fitted = fit(&stats, &config.cells, &job.spec.solver.fixed, 0.0).unwrap();
+    let w = fitted.vector();
+    let variance = |w: &nalgebra::DVector<f64>| {
+        let (s1, s2) = stats.evaluate(w);
+        s2 / stats.m - (s1 / stats.m).powi(2)
+    };
+    let best = variance(&w);
+    let k = config.cells.len();
+    // Perturb only fitted w1 entries (w0 = 0 is fixed; w2 follows).
+    let fitted_cells: Vec<usize> = (0..k).filter(|&a| fitted.cells[a].samples > 0).collect();
+    assert!(fitted_cells.len() > 5);
+    for (i, &a) in fitted_cells.iter().enumerate() {
+        for eps in [1e-3, -1e-3, 0.1, -0.5] {
+            let mut p = w.clone();
+            p[k + a] += eps;
+            if i % 2 == 0 {
+                p[k + fitted_cells[(i + 1) % fitted_cells.len()]] -= eps / 2.0;
+            }
+            assert!(variance(&p) >= best * (1.0 - 1e-12), "perturbing cell {a} by {eps} lowered the variance");
+        }
+    }
+    let table = noise_table(&moments, &config.cells, &job.spec.solver);
+    let rms = |name: &str| table.rows.iter().find(|r| r.strategy == name).unwrap().rms_percent.unwrap();
+    assert!(rms("optimal") <= rms("switch") * (1.0 + 1e-9), "optimal {} vs switch {}", rms("optimal"), rms("switch"));
+}
