@@ -42,6 +42,9 @@ pub struct RunArgs {
     /// Print the result as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Also write the run's moments (the additive statistics) to this JSON file.
+    #[arg(long)]
+    pub moments_out: Option<PathBuf>,
 }
 
 /// Reads a JSON file.
@@ -98,6 +101,11 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     .expect("a fresh run is neither cancelled nor overlapping");
     progress.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
+    if let Some(path) = &args.moments_out {
+        let file = std::fs::File::create(path).map_err(|source| CliError::Write { path: path.clone(), source })?;
+        serde_json::to_writer(std::io::BufWriter::new(file), &moments)
+            .map_err(|e| CliError::Write { path: path.clone(), source: e.into() })?;
+    }
     let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene));
     let mut out = std::io::stdout().lock();
     if args.json {
