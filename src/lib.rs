@@ -4,9 +4,22 @@
 //! # Layout
 //!
 //! * [`sim`] — the pure simulation core: scene, sampling, iterations, moments, solver, reference.
-//! * [`cli`] — the command line (`run`, `bench`), a thin shell around the core.
+//! * [`jobs`] — the job runner: queue, worker slots, drivers, checkpoints (feature `server`).
+//! * [`store`] — SQLite persistence of jobs and checkpoints (feature `server`).
+//! * [`api`] — the HTTP API and its OpenAPI description (feature `server`).
+//! * [`server`] — wiring and graceful shutdown of the server process (feature `server`).
+//! * [`cli`] — the command line, a thin shell around all of the above.
 //!
-//! `main.rs` only parses the command line and calls into this library.
+//! `main.rs` only parses the command line and calls into this library. Without the default
+//! `server` feature only the core and the local CLI build: the core depends on no server crate.
 
+#[cfg(feature = "server")]
+pub mod api;
 pub mod cli;
+#[cfg(feature = "server")]
+pub mod jobs;
+#[cfg(feature = "server")]
+pub mod server;
 pub mod sim;
+#[cfg(feature = "server")]
+pub mod store;

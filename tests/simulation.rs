@@ -119,7 +119,11 @@ fn split_and_merge_is_bit_identical() {
         // Resume: continue the partial moments in place.
         let mut resumed = head.clone();
         let never = AtomicBool::new(false);
-        pool(1).install(|| run_iterations(config, 5, k..12, &mut resumed, &never, |_, _| {})).unwrap();
+        pool(1)
+            .install(|| {
+                run_iterations(config, 5, k..12, &mut resumed, &never, |_, _| std::ops::ControlFlow::Continue(()))
+            })
+            .unwrap();
         assert_eq!(resumed, whole, "resumed at {k}");
     }
     // A JSON round trip keeps the moments exactly.

@@ -39,9 +39,10 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
     let mut moments = Moments::new(config);
     let iterations = args.iterations.max(1);
     let seconds = pool.install(|| {
-        run_iterations(config, 1, 0..1, &mut moments, &never, |_, _| {}).expect("warm-up");
+        let go_on = |_: &Moments, _| std::ops::ControlFlow::Continue(());
+        run_iterations(config, 1, 0..1, &mut moments, &never, go_on).expect("warm-up");
         let started = Instant::now();
-        run_iterations(config, 1, 1..1 + iterations, &mut moments, &never, |_, _| {}).expect("bench run");
+        run_iterations(config, 1, 1..1 + iterations, &mut moments, &never, go_on).expect("bench run");
         started.elapsed().as_secs_f64()
     });
     let paths = (iterations * config.light_paths) as f64;

@@ -1,7 +1,9 @@
-//! The command line: `optimis run` and `optimis bench`, thin shells around [`crate::sim`].
+//! The command line: `optimis run`, `bench`, `serve` and `openapi`, thin shells around the library.
 
 mod bench;
 mod run;
+#[cfg(feature = "server")]
+mod serve;
 mod table;
 
 use std::path::PathBuf;
@@ -25,6 +27,12 @@ pub enum Command {
     Run(run::RunArgs),
     /// Measure light paths per second at the paper's parameters.
     Bench(bench::BenchArgs),
+    /// Run the HTTP job server.
+    #[cfg(feature = "server")]
+    Serve(serve::ServeArgs),
+    /// Print the server's OpenAPI description (YAML).
+    #[cfg(feature = "server")]
+    Openapi,
 }
 
 /// Everything the command line can fail with.
@@ -42,6 +50,9 @@ pub enum CliError {
     Write { path: PathBuf, source: std::io::Error },
     #[error("cannot write the output: {0}")]
     Output(#[from] std::io::Error),
+    #[cfg(feature = "server")]
+    #[error(transparent)]
+    Server(#[from] crate::server::ServerError),
 }
 
 /// A rayon pool of `threads` workers (default: one per available core).
@@ -64,6 +75,13 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run::run(args),
         Command::Bench(args) => bench::bench(args),
+        #[cfg(feature = "server")]
+        Command::Serve(args) => serve::serve_command(args),
+        #[cfg(feature = "server")]
+        Command::Openapi => {
+            print!("{}", crate::api::openapi_yaml());
+            Ok(())
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -96,6 +96,7 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
             let rate = (done * config.light_paths) as f64 / started.elapsed().as_secs_f64();
             progress.set_message(format!("{rate:.3e} light paths/s"));
             progress.set_position(done);
+            std::ops::ControlFlow::Continue(())
         })
     })
     .expect("a fresh run is neither cancelled nor overlapping");

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 /// Half-open iteration ranges `[start, end)` per seed, sorted, disjoint and non-adjacent.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(transparent)]
 pub struct Coverage {
     seeds: Vec<SeedRanges>,
@@ -14,6 +15,7 @@ pub struct Coverage {
 
 /// The ranges covered for one seed.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct SeedRanges {
     pub seed: u64,
@@ -23,6 +25,7 @@ pub struct SeedRanges {
 
 /// An iteration range covered twice.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Overlap {
     pub seed: u64,
     pub range: [u64; 2],

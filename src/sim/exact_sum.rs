@@ -170,6 +170,26 @@ impl<'de> Deserialize<'de> for ExactSum {
     }
 }
 
+/// OpenAPI schema: a number, or the list of its canonical parts.
+#[cfg(feature = "server")]
+mod schema {
+    use utoipa::openapi::RefOr;
+    use utoipa::openapi::schema::{ArrayBuilder, ObjectBuilder, OneOfBuilder, Schema, Type};
+
+    impl utoipa::PartialSchema for super::ExactSum {
+        fn schema() -> RefOr<Schema> {
+            let number = || ObjectBuilder::new().schema_type(Type::Number);
+            OneOfBuilder::new()
+                .item(number())
+                .item(ArrayBuilder::new().items(number()).min_items(Some(2)))
+                .description(Some("An exact sum: its value, or the canonical parts c1, c2, … whose real sum it is"))
+                .into()
+        }
+    }
+
+    impl utoipa::ToSchema for super::ExactSum {}
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -23,6 +23,7 @@ use super::tally::{IterationTally, PathStrategy};
 
 /// Sums over the iterations of one parity.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct FoldMoments {
     /// Number of iterations M_f.
@@ -126,6 +127,7 @@ impl FoldMoments {
 
 /// The moments of a set of iterations of one configuration.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Moments {
     /// Layout version ([`MOMENTS_FORMAT_VERSION`]).

@@ -15,7 +15,7 @@
 //! fitted on all iterations), `balance` and `power` (Veach's heuristics).
 
 use nalgebra::DVector;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::cells::CellGrid;
 use super::moments::{FoldMoments, Moments};
@@ -25,7 +25,8 @@ use super::tally::PathStrategy;
 
 /// One row of the noise table. Keys are stable (dashboards depend on them); a value that cannot be
 /// computed is null, with the reason in `error`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct NoiseRow {
     pub strategy: String,
     pub luminance: Option<f64>,
@@ -99,6 +100,24 @@ fn path_row(fold: &FoldMoments, strategy: PathStrategy) -> NoiseRow {
     let s = fold.strategies[i].clone().map(|x| x.value());
     let m = fold.iterations as f64;
     NoiseRow::from_sums(strategy.name(), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+}
+
+/// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
+pub fn path_rows(moments: &Moments) -> Vec<NoiseRow> {
+    let [even, odd] = &moments.folds;
+    let m = (even.iterations + odd.iterations) as f64;
+    PathStrategy::ALL
+        .iter()
+        .enumerate()
+        .map(|(i, &strategy)| {
+            let s: [f64; 4] = std::array::from_fn(|k| {
+                let mut sum = even.strategies[i][k].clone();
+                sum.add_sum(&odd.strategies[i][k]);
+                sum.value()
+            });
+            NoiseRow::from_sums(strategy.name(), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+        })
+        .collect()
 }
 
 /// The noise table and the fit behind the `optimal` row.
@@ -200,7 +219,8 @@ fn cross_validated(
 }
 
 /// Mean and standard error of merge events per iteration, per plane.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct MergeRate {
     pub mean: f64,
     pub stderr: f64,

@@ -4,7 +4,7 @@
 //! `reference_luminance`, `noise_table` (rows of [`NoiseRow`]), `weights` (rows of [`WeightRow`]),
 //! `solve_error`, `merges_per_iteration`, `fingerprint`, `coverage`.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::cells::CellGrid;
 use super::coverage::Coverage;
@@ -14,7 +14,8 @@ use super::solver::CellStatus;
 use super::spec::SolverOptions;
 
 /// One cell of the weights table.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct WeightRow {
     /// [lo, hi] on r2; hi is null for the tail cell.
     pub r2: [Option<f64>; 2],
@@ -30,7 +31,8 @@ pub struct WeightRow {
 }
 
 /// Merge events per iteration at each plane.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct MergesPerIteration {
     pub plane1: MergeRate,
     pub plane2: MergeRate,
@@ -38,7 +40,8 @@ pub struct MergesPerIteration {
 }
 
 /// The result of a run (or of a re-solve of stored moments).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RunReport {
     pub iterations: u64,
     /// The quadrature value of L (R → 0).

@@ -8,10 +8,10 @@
 //! sums are what the ordering protects.)
 //!
 //! Iterations are processed in batches; between batches the caller sees the moments (for progress
-//! and checkpoints), and cancellation is checked before every chunk. A cancelled batch is dropped
-//! whole, so the moments only ever hold complete iterations.
+//! and checkpoints) and may end the run there, and cancellation is checked before every chunk. A
+//! cancelled batch is dropped whole, so the moments only ever hold complete iterations.
 
-use std::ops::Range;
+use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
@@ -42,15 +42,16 @@ fn batch_len(config: &SimConfig, threads: usize) -> u64 {
 }
 
 /// Runs iterations `range` of `seed`, adding each to `moments` in index order and calling
-/// `on_batch(&moments, next_iteration)` after every batch.
+/// `on_batch(&moments, next_iteration)` after every batch; `ControlFlow::Break` ends the run after
+/// that batch. Returns the next iteration to run (`range.end` when all ran).
 pub fn run_iterations(
     config: &SimConfig,
     seed: u64,
     range: Range<u64>,
     moments: &mut Moments,
     cancel: &AtomicBool,
-    mut on_batch: impl FnMut(&Moments, u64),
-) -> Result<(), RunError> {
+    mut on_batch: impl FnMut(&Moments, u64) -> ControlFlow<()>,
+) -> Result<u64, RunError> {
     let k = config.cells.len();
     let chunks = config.chunks();
     let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
@@ -84,17 +85,19 @@ pub fn run_iterations(
             let tally = IterationTally::from_chunks(start + i as u64, k, norm, per_iteration.iter().flatten());
             moments.add_iteration(seed, &tally)?;
         }
-        on_batch(moments, end);
         start = end;
+        if on_batch(moments, end).is_break() {
+            break;
+        }
     }
-    Ok(())
+    Ok(start)
 }
 
 /// Runs iterations `range` of `seed` into fresh moments.
 pub fn run(config: &SimConfig, seed: u64, range: Range<u64>) -> Moments {
     let mut moments = Moments::new(config);
     let never = AtomicBool::new(false);
-    run_iterations(config, seed, range, &mut moments, &never, |_, _| {})
+    run_iterations(config, seed, range, &mut moments, &never, |_, _| ControlFlow::Continue(()))
         .expect("a fresh moments value cannot overlap and the run is never cancelled");
     moments
 }

@@ -19,7 +19,7 @@
 //! given the weights of their nearest fitted cell (which matters only for evaluation on other data).
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::cells::CellGrid;
 use super::moments::{FoldMoments, packed_index};
@@ -84,7 +84,8 @@ impl YStats {
 }
 
 /// How a cell's weights were determined.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum CellStatus {
     /// Fitted to the data.

@@ -47,6 +47,7 @@ impl SpecError {
 
 /// A fully resolved job specification (preset applied). Field names are the JSON API.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct JobSpec {
     /// The preset the document started from (provenance; every field below is explicit).
@@ -72,6 +73,7 @@ pub struct JobSpec {
 
 /// The three planes and the light.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct SceneSpec {
     /// Distance from plane 1 (z = 0) to plane 2.
@@ -85,6 +87,7 @@ pub struct SceneSpec {
 
 /// The radial illumination profile I(r) of plane 3 (normalised to total flux 1 by the model).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum IlluminationSpec {
     /// The paper's profile: `contrast` for r ≤ a, 1 for a < r < r_ls, 0 beyond.
@@ -97,6 +100,7 @@ pub enum IlluminationSpec {
 
 /// One ring of a `rings` profile.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct RingSpec {
     pub outer_radius: f64,
@@ -105,6 +109,7 @@ pub struct RingSpec {
 
 /// The cell grid of the tabulated weights over the join path's (r2, r3, φ).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct CellSpec {
     /// Cell edges on r2, starting at 0; the last edge opens a tail cell to infinity.
@@ -118,6 +123,7 @@ pub struct CellSpec {
 
 /// How the optimal weights are fitted.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct SolverOptions {
     /// Weights held fixed in every cell (the paper: w0 = 0).
@@ -130,6 +136,7 @@ pub struct SolverOptions {
 
 /// Per-component fixed weights; `None` means fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct FixedWeights {
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -172,7 +179,7 @@ pub const PRESETS: &[&str] = &["paper-table1", "uniform-illumination"];
 /// A preset as a complete JSON document.
 pub fn preset(name: &str) -> Option<Value> {
     // The paper's grid: r2 ∈ [0, ½] + tail; r3: 25 cells of 0.002 on [0, 0.05] + tail; one φ bin.
-    let r3_edges: Vec<f64> = (0..=25).map(|i| f64::from(i) * 0.002).collect();
+    let r3_edges: Vec<f64> = (0..=25).map(|i| f64::from(i) / 500.0).collect();
     let (a, r_ls) = (0.02, 20.0);
     let paper = json!({
         "preset": "paper-table1",

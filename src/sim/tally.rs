@@ -15,6 +15,7 @@ use super::scene::Scene;
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum PathStrategy {
     /// w0 = 1.

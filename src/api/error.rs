@@ -1,0 +1,157 @@
+//! The one place where failures become HTTP responses: RFC 9457 problem details
+//! (`application/problem+json`), each variant documented with its status.
+//!
+//! Client errors carry a `detail` naming the offending field; infrastructure errors are logged in
+//! full and answered with a generic 500 (or 503) whose text never leaks internals.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::jobs::JobError;
+use crate::sim::spec::SpecError;
+use crate::store::StoreError;
+
+/// Media type of every error body.
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+/// An RFC 9457 problem document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Problem {
+    /// A URI identifying the kind of problem (`urn:problem-type:optimis:…`).
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Short summary of the kind of problem.
+    pub title: String,
+    /// The HTTP status code.
+    pub status: u16,
+    /// What went wrong in this request, naming the offending field where there is one.
+    pub detail: String,
+    /// JSON path of the offending field or parameter, when the problem is about one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+}
+
+/// Every error the API answers with.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// 400: the body is not JSON (or not readable).
+    #[error("{0}")]
+    MalformedJson(String),
+    /// 422: a field or parameter is invalid; `field` names it.
+    #[error("{field}: {message}")]
+    Invalid { field: String, message: String },
+    /// 404: no such job or route.
+    #[error("{0}")]
+    NotFound(String),
+    /// 405: the route exists, the method does not.
+    #[error("method not allowed on this route")]
+    MethodNotAllowed,
+    /// 409: the job's state does not allow the operation.
+    #[error("{0}")]
+    Conflict(String),
+    /// 413: the body is larger than the server accepts.
+    #[error("{0}")]
+    PayloadTooLarge(String),
+    /// 503: shutting down, or the database is busy; retry later.
+    #[error("{0}")]
+    Unavailable(String),
+    /// 500: a bug or an infrastructure failure; logged, never described to the client.
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl From<SpecError> for ApiError {
+    fn from(e: SpecError) -> Self {
+        ApiError::Invalid { field: e.field, message: e.message }
+    }
+}
+
+impl From<JobError> for ApiError {
+    fn from(e: JobError) -> Self {
+        match e {
+            JobError::Invalid(s) => s.into(),
+            JobError::NotFound(id) => ApiError::NotFound(format!("no job with id {id}")),
+            JobError::Conflict(m) => ApiError::Conflict(m),
+            JobError::ShuttingDown => {
+                ApiError::Unavailable("the server is shutting down; retry on its successor".into())
+            }
+            JobError::Store(e) if e.is_transient() => {
+                ApiError::Unavailable(format!("the database is busy; retry ({e})"))
+            }
+            // A corrupted checkpoint is reported for that job; it says nothing about internals.
+            JobError::Store(e @ StoreError::Corrupt { .. }) => ApiError::Conflict(e.to_string()),
+            JobError::Store(e) => ApiError::Internal(e.to_string()),
+            JobError::Internal(m) => ApiError::Internal(m),
+        }
+    }
+}
+
+impl ApiError {
+    fn status(&self) -> StatusCode {
+        match self {
+            ApiError::MalformedJson(_) => StatusCode::BAD_REQUEST,
+            ApiError::Invalid { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::NotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+            ApiError::Conflict(_) => StatusCode::CONFLICT,
+            ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    fn slug(&self) -> &'static str {
+        match self {
+            ApiError::MalformedJson(_) => "malformed-json",
+            ApiError::Invalid { .. } => "invalid-field",
+            ApiError::NotFound(_) => "not-found",
+            ApiError::MethodNotAllowed => "method-not-allowed",
+            ApiError::Conflict(_) => "conflict",
+            ApiError::PayloadTooLarge(_) => "payload-too-large",
+            ApiError::Unavailable(_) => "unavailable",
+            ApiError::Internal(_) => "internal",
+        }
+    }
+
+    /// The problem document of this error.
+    pub fn problem(&self) -> Problem {
+        let status = self.status();
+        let (detail, field) = match self {
+            ApiError::Invalid { field, message } => {
+                let detail = if field.is_empty() { message.clone() } else { format!("{field}: {message}") };
+                (detail, Some(field.clone()).filter(|f| !f.is_empty()))
+            }
+            ApiError::Internal(_) => {
+                ("the server failed to handle the request; the failure has been logged".into(), None)
+            }
+            other => (other.to_string(), None),
+        };
+        Problem {
+            kind: format!("urn:problem-type:optimis:{}", self.slug()),
+            title: status.canonical_reason().unwrap_or("Error").to_string(),
+            status: status.as_u16(),
+            detail,
+            field,
+        }
+    }
+}
+
+/// A problem document as a response.
+pub fn problem_response(problem: &Problem) -> Response {
+    let status = StatusCode::from_u16(problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+    let body = serde_json::to_vec(problem).unwrap_or_default();
+    let mut response = (status, body).into_response();
+    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+    response
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        if let ApiError::Internal(reason) = &self {
+            tracing::error!(%reason, "internal error");
+        }
+        problem_response(&self.problem())
+    }
+}

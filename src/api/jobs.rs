@@ -1,0 +1,325 @@
+//! Handlers of `/v1/jobs`: submit, list, inspect, results, re-solve, cancel, extend, delete, and
+//! the moments export. Each only translates between HTTP and the job manager.
+
+use axum::Json;
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Query, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use utoipa::{IntoParams, ToSchema};
+
+use super::AppState;
+use super::error::{ApiError, Problem};
+use super::extract::{JobId, JsonBody, typed};
+use crate::jobs::documents::{JobList, JobResult, MomentsDocument};
+use crate::jobs::resource::{JobResource, JobState};
+use crate::sim::spec::{FixedWeights, RingSpec};
+
+/// Longest accepted `Idempotency-Key`.
+const MAX_KEY_LEN: usize = 255;
+
+/// A job submission: a preset and any fields to override (JSON Merge Patch on the preset; an
+/// object whose `kind` differs from the preset's replaces it whole). Omitted fields keep the
+/// preset's values; unknown fields are rejected.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)] // documents the request body; the body is parsed by `sim::spec::parse_job_spec`
+pub struct JobSubmission {
+    /// `paper-table1` (default) or `uniform-illumination`.
+    #[schema(example = "paper-table1")]
+    preset: Option<String>,
+    scene: Option<ScenePatch>,
+    /// Merge radius R, in (0, min(l2, l3)).
+    merge_radius: Option<f64>,
+    /// N_F: light paths per iteration, in [1, 10^12].
+    light_paths: Option<u64>,
+    /// N_B: camera paths per iteration, in [1, 10^6].
+    camera_paths: Option<u64>,
+    /// Iterations M, in [1, 10^9].
+    iterations: Option<u64>,
+    /// Seed of every random stream.
+    seed: Option<u64>,
+    cells: Option<CellPatch>,
+    solver: Option<SolverPatch>,
+}
+
+/// Scene fields to override.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)]
+pub struct ScenePatch {
+    l2: Option<f64>,
+    l3: Option<f64>,
+    /// Lobe width β in degrees, in (0, 45].
+    beta_deg: Option<f64>,
+    illumination: Option<IlluminationPatch>,
+}
+
+/// Illumination fields to override; with another `kind`, the whole profile.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)]
+pub struct IlluminationPatch {
+    /// `spot`, `uniform` or `rings`.
+    kind: Option<String>,
+    a: Option<f64>,
+    r_ls: Option<f64>,
+    contrast: Option<f64>,
+    rings: Option<Vec<RingSpec>>,
+}
+
+/// Cell-grid fields to override.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)]
+pub struct CellPatch {
+    r2_edges: Option<Vec<f64>>,
+    r3_edges: Option<Vec<f64>>,
+    phi_bins: Option<u32>,
+}
+
+/// Solver options to override (a merge patch on the job's `solver`; `null` frees a fixed weight).
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)]
+pub struct SolverPatch {
+    fixed: Option<FixedWeights>,
+    /// Gradient penalty λ ≥ 0.
+    lambda: Option<f64>,
+    /// λ grid for `optimal_cv`.
+    cv_lambdas: Option<Vec<f64>>,
+}
+
+/// Iterations to add to a job.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExtendRequest {
+    /// At least 1; the total may not exceed 10^9.
+    pub iterations: u64,
+}
+
+/// Query of the job list.
+#[derive(Debug, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// Only jobs in this state.
+    state: Option<JobState>,
+    /// Page size, 1 to 500 (default 50).
+    limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    cursor: Option<String>,
+}
+
+fn location(id: i64) -> HeaderValue {
+    HeaderValue::from_str(&format!("/v1/jobs/{id}")).expect("an ASCII path")
+}
+
+fn accepted(resource: &JobResource) -> Response {
+    let mut response = (StatusCode::ACCEPTED, Json(resource)).into_response();
+    response.headers_mut().insert(header::LOCATION, location(resource.id));
+    response
+}
+
+/// Submit a job.
+#[utoipa::path(
+    post, path = "/v1/jobs", tag = "jobs",
+    request_body(content = JobSubmission, description = "Preset and overrides"),
+    params(("Idempotency-Key" = Option<String>, Header,
+        description = "Repeat a submission safely: the same key and body return the original job")),
+    responses(
+        (status = 202, description = "Queued", body = JobResource,
+            headers(("Location" = String, description = "URL of the job"))),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Shutting down", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn submit(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    JsonBody(doc): JsonBody,
+) -> Result<Response, ApiError> {
+    let key = match headers.get("idempotency-key") {
+        None => None,
+        Some(v) => {
+            let key = v
+                .to_str()
+                .ok()
+                .filter(|k| !k.is_empty() && k.len() <= MAX_KEY_LEN && k.bytes().all(|b| b.is_ascii_graphic()));
+            Some(
+                key.ok_or_else(|| ApiError::Invalid {
+                    field: "Idempotency-Key".into(),
+                    message: format!("must be 1 to {MAX_KEY_LEN} visible ASCII characters"),
+                })?
+                .to_string(),
+            )
+        }
+    };
+    let (resource, replayed) = state.jobs.submit(&doc, key).await?;
+    let mut response = accepted(&resource);
+    if replayed {
+        response.headers_mut().insert("idempotent-replayed", HeaderValue::from_static("true"));
+    }
+    Ok(response)
+}
+
+/// A query-string rejection as a 422 naming the parameter (axum reports `name: reason`).
+fn query_problem(rejection: QueryRejection) -> ApiError {
+    let text = rejection.body_text();
+    let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
+    match reason.split_once(": ") {
+        Some((name, message)) if ["state", "limit", "cursor"].contains(&name) => {
+            ApiError::Invalid { field: name.into(), message: message.into() }
+        }
+        _ => ApiError::Invalid { field: "query".into(), message: reason.into() },
+    }
+}
+
+/// List jobs, newest first.
+#[utoipa::path(
+    get, path = "/v1/jobs", tag = "jobs", params(ListQuery),
+    responses(
+        (status = 200, description = "A page of jobs", body = JobList),
+        (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn list(
+    State(state): State<AppState>,
+    query: Result<Query<ListQuery>, QueryRejection>,
+) -> Result<Json<JobList>, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    let limit = q.limit.unwrap_or(50);
+    if !(1..=500).contains(&limit) {
+        return Err(ApiError::Invalid { field: "limit".into(), message: format!("must be in [1, 500], got {limit}") });
+    }
+    let cursor = match q.cursor {
+        None => None,
+        Some(c) => Some(c.parse::<i64>().ok().filter(|&c| c > 0).ok_or_else(|| ApiError::Invalid {
+            field: "cursor".into(),
+            message: format!("not a cursor returned by this list: {c:?}"),
+        })?),
+    };
+    Ok(Json(state.jobs.list(q.state, cursor, limit).await?))
+}
+
+/// A job: state, spec and progress.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobResource),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobResource>, ApiError> {
+    Ok(Json(state.jobs.get(id).await?))
+}
+
+/// The job's noise and weights tables from its latest checkpoint (`partial` until it succeeded).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Results", body = JobResult),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn result(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobResult>, ApiError> {
+    Ok(Json(state.jobs.result(id).await?))
+}
+
+/// Re-solve the stored moments with other solver options; nothing is re-run or stored.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/solve", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    request_body(content = SolverPatch, description = "Solver options to change"),
+    responses(
+        (status = 200, description = "Results with these options", body = JobResult),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "An option is invalid", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn solve(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    JsonBody(patch): JsonBody,
+) -> Result<Json<JobResult>, ApiError> {
+    Ok(Json(state.jobs.solve(id, &patch).await?))
+}
+
+/// Cancel a queued job, or stop a running one within one chunk of light paths.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 202, description = "Cancelled, or stopping", body = JobResource,
+            headers(("Location" = String, description = "URL of the job"))),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Already finished", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
+    Ok(accepted(&state.jobs.cancel(id).await?))
+}
+
+/// Add iterations to a job; they continue the same deterministic sequence.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/extend", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    request_body(content = ExtendRequest),
+    responses(
+        (status = 202, description = "Extended (and queued again if it had finished)", body = JobResource,
+            headers(("Location" = String, description = "URL of the job"))),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job failed", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid iteration count", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn extend(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let request: ExtendRequest = typed(&body)?;
+    Ok(accepted(&state.jobs.extend(id, request.iterations).await?))
+}
+
+/// Delete a job that is not running, with its checkpoint.
+#[utoipa::path(
+    delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job is running", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<StatusCode, ApiError> {
+    state.jobs.delete(id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// The job's moments (additive statistics) from its latest checkpoint, as a checksummed document.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/moments", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The moments document", body = MomentsDocument),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<MomentsDocument>, ApiError> {
+    Ok(Json(state.jobs.moments(id).await?))
+}

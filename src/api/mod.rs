@@ -1,0 +1,98 @@
+//! The HTTP API (axum): routes, their OpenAPI description, and the mapping of errors to problem
+//! documents.
+//!
+//! Every route is registered through utoipa's `OpenApiRouter` from handlers annotated with their
+//! OpenAPI operation, so the served router and `openapi.yaml` come from the same code; a test
+//! checks that the committed `openapi.yaml` equals [`openapi_yaml`].
+
+pub mod error;
+mod events;
+mod extract;
+mod health;
+mod jobs;
+
+use std::sync::Arc;
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::response::Response;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::trace::TraceLayer;
+use utoipa::OpenApi;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::jobs::JobManager;
+use error::ApiError;
+
+/// What every handler can reach; cheap to clone.
+#[derive(Clone)]
+pub struct AppState {
+    pub jobs: JobManager,
+    /// The OpenAPI document, rendered once.
+    pub openapi_yaml: Arc<str>,
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "optimis",
+        description = "Optimal multiple-importance-sampling weights for bidirectional photon mapping, by direct \
+                       minimisation of the pixel variance (Ershov, Voloboy, Zhdanov et al. 2020). Submit simulation \
+                       jobs, follow their progress, and read the noise table and the optimal weights.\n\n\
+                       Errors are RFC 9457 problem documents (`application/problem+json`).",
+        license(name = "MIT OR Apache-2.0")
+    ),
+    tags(
+        (name = "jobs", description = "Simulation jobs"),
+        (name = "operations", description = "Health and API description")
+    )
+)]
+struct ApiDoc;
+
+fn api_router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(jobs::submit, jobs::list))
+        .routes(routes!(jobs::get, jobs::delete))
+        .routes(routes!(jobs::result))
+        .routes(routes!(jobs::solve))
+        .routes(routes!(jobs::cancel))
+        .routes(routes!(jobs::extend))
+        .routes(routes!(jobs::moments))
+        .routes(routes!(events::events))
+        .routes(routes!(health::healthz))
+        .routes(routes!(health::readyz))
+        .routes(routes!(health::openapi_yaml))
+}
+
+/// The OpenAPI document of this server, as YAML (what `/openapi.yaml` serves and the committed
+/// `openapi.yaml` must equal).
+pub fn openapi_yaml() -> String {
+    api_router().into_openapi().to_yaml().expect("the OpenAPI document serialises")
+}
+
+async fn not_found() -> ApiError {
+    ApiError::NotFound("no such route; see /openapi.yaml".into())
+}
+
+async fn method_not_allowed() -> ApiError {
+    ApiError::MethodNotAllowed
+}
+
+fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
+    axum::response::IntoResponse::into_response(ApiError::Internal("a request handler panicked".into()))
+}
+
+/// The application: every route, with request tracing, a body limit of `body_limit` bytes and
+/// panics answered as problem documents.
+pub fn router(jobs: JobManager, body_limit: usize) -> Router {
+    let (router, api) = api_router().split_for_parts();
+    let state = AppState { jobs, openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into() };
+    router
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(DefaultBodyLimit::max(body_limit))
+        .layer(CatchPanicLayer::custom(panic_response))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}

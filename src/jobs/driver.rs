@@ -1,0 +1,179 @@
+//! Runs one job: on a blocking thread (never a tokio worker), driving the rayon pool segment by
+//! segment, with a checkpoint after every segment.
+//!
+//! A segment ends when a checkpoint is due (every K iterations or T seconds), when the job is
+//! asked to stop (cancel or shutdown: within one chunk of light paths), or at the last iteration.
+//! A checkpoint writes the moments, their checksum and the result document computed from them in
+//! one transaction. Because iteration s draws only from the streams of (seed, s), a job resumed from
+//! a checkpoint ends with moments bit-identical to an uninterrupted run.
+
+use std::ops::ControlFlow;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use super::error::JobError;
+use super::manager::{ActiveJob, Inner, STOP_CANCEL, best_strategy};
+use super::resource::{now_ms, rfc3339};
+use crate::sim::config::sha256_hex;
+use crate::sim::coverage::Coverage;
+use crate::sim::moments::Moments;
+use crate::sim::noise::path_rows;
+use crate::sim::report::build_report;
+use crate::sim::runner::{RunError, run_iterations};
+use crate::sim::spec::ValidJob;
+use crate::store::{Checkpoint, StoreError};
+
+/// How often progress is published to the job's watchers.
+const PROGRESS_INTERVAL: Duration = Duration::from_millis(250);
+
+/// Attempts for a database write that failed transiently (busy, locked).
+const WRITE_ATTEMPTS: u32 = 5;
+
+/// Runs `job` to its end (or until stopped) and records the outcome.
+pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
+    let outcome = run(inner, job);
+    if let Err(e) = outcome {
+        tracing::error!(job = job.id, error = %e, "job failed");
+        let reason = e.to_string();
+        if let Err(e) = inner.runtime.block_on(inner.fail(job.id, &reason)) {
+            tracing::error!(job = job.id, error = %e, "could not record the failure");
+        }
+    }
+}
+
+/// The moments of a checkpoint, verified: checksum, format, configuration and coverage must all
+/// match the job, or the checkpoint is reported corrupted (never silently resumed from).
+pub(crate) fn decode_checkpoint(id: i64, checkpoint: &Checkpoint, job: &ValidJob) -> Result<Moments, JobError> {
+    let corrupt = |detail: String| JobError::Store(StoreError::Corrupt { job: id, detail });
+    let actual = sha256_hex(&checkpoint.moments);
+    if actual != checkpoint.checksum {
+        return Err(corrupt(format!(
+            "checkpoint checksum mismatch (stored {}, computed {actual})",
+            checkpoint.checksum
+        )));
+    }
+    let moments: Moments = serde_json::from_slice(&checkpoint.moments)
+        .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
+    moments.check_well_formed().map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
+    if moments.fingerprint != job.config.fingerprint() {
+        return Err(corrupt("checkpoint moments belong to another configuration".into()));
+    }
+    let expected = Coverage::range(job.spec.seed, 0, checkpoint.iterations_done);
+    if moments.coverage != expected {
+        return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
+    }
+    Ok(moments)
+}
+
+fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
+    let rt = &inner.runtime;
+    let valid = &job.job;
+    let config = &valid.config;
+    let seed = valid.spec.seed;
+    let mut moments = match rt.block_on(inner.store.load_checkpoint(job.id))? {
+        Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid)?,
+        None => Moments::new(config),
+    };
+    rt.block_on(inner.mark_running(job))?;
+    let reference = job.view.borrow().reference_luminance;
+    let mut checkpointed = moments.iterations();
+    loop {
+        let done = moments.iterations();
+        let total = job.total.load(Ordering::SeqCst);
+        if done >= total && !job.stop.load(Ordering::SeqCst) {
+            if rt.block_on(inner.finish(job, done))? {
+                return Ok(());
+            }
+            continue; // extended while finishing
+        }
+        let segment_start = Instant::now();
+        let mut last_publish = Instant::now();
+        let policy = &inner.policy;
+        let outcome = inner.pool.install(|| {
+            run_iterations(config, seed, done..total, &mut moments, &job.stop, |m, next| {
+                if last_publish.elapsed() >= PROGRESS_INTERVAL {
+                    last_publish = Instant::now();
+                    publish_progress(job, m, next, done, segment_start, config.light_paths);
+                }
+                let due = next - checkpointed >= policy.checkpoint_iterations
+                    || segment_start.elapsed() >= policy.checkpoint_interval;
+                if due { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+            })
+        });
+        if moments.iterations() > checkpointed {
+            write_checkpoint(inner, job, &moments, reference)?;
+            checkpointed = moments.iterations();
+        }
+        match outcome {
+            Ok(_) => {}
+            Err(RunError::Cancelled) => {
+                return if job.stop_reason.load(Ordering::SeqCst) == STOP_CANCEL {
+                    rt.block_on(inner.mark_cancelled(job))
+                } else {
+                    rt.block_on(inner.mark_interrupted(job))
+                };
+            }
+            Err(e @ RunError::Moments(_)) => return Err(JobError::Internal(e.to_string())),
+        }
+    }
+}
+
+/// Publishes in-memory progress: iterations, throughput, ETA and the best per-path strategy.
+fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, started: Instant, light_paths: u64) {
+    let elapsed = started.elapsed().as_secs_f64();
+    let per_second = (next - start) as f64 / elapsed.max(1e-9);
+    let total = job.total.load(Ordering::SeqCst);
+    let best = best_strategy(&path_rows(moments));
+    job.view.send_modify(|r| {
+        r.progress.iterations_done = next;
+        r.progress.iterations_total = total;
+        r.progress.light_paths_per_second = Some(per_second * light_paths as f64);
+        r.progress.eta_seconds = Some(total.saturating_sub(next) as f64 / per_second.max(1e-12));
+        if best.is_some() {
+            r.progress.best = best;
+        }
+    });
+}
+
+/// Writes a checkpoint (retrying transient database errors) and publishes it.
+fn write_checkpoint(inner: &Inner, job: &ActiveJob, moments: &Moments, reference: f64) -> Result<(), JobError> {
+    let started = Instant::now();
+    let spec = &job.job.spec;
+    let report = build_report(moments, &job.job.config.cells, &spec.solver, reference);
+    let best = best_strategy(&report.noise_table);
+    let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
+    let checkpoint = Checkpoint {
+        iterations_done: moments.iterations(),
+        checksum: sha256_hex(&bytes),
+        moments: bytes,
+        result: serde_json::to_string(&report).map_err(|e| JobError::Internal(e.to_string()))?,
+        best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
+    };
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        let now = now_ms();
+        match inner.runtime.block_on(inner.store.write_checkpoint(job.id, &checkpoint, now)) {
+            Ok(()) => {
+                job.view.send_modify(|r| {
+                    r.progress.iterations_checkpointed = checkpoint.iterations_done;
+                    r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);
+                    r.progress.best = best.clone();
+                    r.updated_at = rfc3339(now);
+                });
+                tracing::debug!(
+                    job = job.id,
+                    iterations = checkpoint.iterations_done,
+                    seconds = started.elapsed().as_secs_f64(),
+                    "checkpoint written"
+                );
+                return Ok(());
+            }
+            Err(e) if e.is_transient() && attempt < WRITE_ATTEMPTS => {
+                tracing::warn!(job = job.id, attempt, error = %e, "checkpoint write failed, retrying");
+                std::thread::sleep(Duration::from_millis(100 << attempt));
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}

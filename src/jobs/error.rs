@@ -1,0 +1,27 @@
+//! Everything a job operation can fail with. The API maps each variant to an HTTP status in one
+//! place (`api::error`).
+
+use crate::sim::spec::SpecError;
+use crate::store::StoreError;
+
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// A field of the request is invalid (HTTP 422).
+    #[error(transparent)]
+    Invalid(#[from] SpecError),
+    /// No such job (HTTP 404).
+    #[error("no job with id {0}")]
+    NotFound(String),
+    /// The job's state does not allow the operation (HTTP 409).
+    #[error("{0}")]
+    Conflict(String),
+    /// The server is shutting down and accepts no new work (HTTP 503).
+    #[error("the server is shutting down")]
+    ShuttingDown,
+    /// The database failed (HTTP 500, or 503 if it was only busy).
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// A bug or an impossible state (HTTP 500).
+    #[error("internal error: {0}")]
+    Internal(String),
+}

@@ -1,0 +1,271 @@
+//! Queries on the `jobs` and `checkpoints` tables.
+
+use sqlx::Row;
+use sqlx::sqlite::SqliteRow;
+
+use super::{Store, StoreError};
+
+/// A job as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JobRow {
+    pub id: i64,
+    pub state: String,
+    /// The resolved spec, JSON.
+    pub spec: String,
+    pub fingerprint: String,
+    pub iterations_total: u64,
+    pub iterations_done: u64,
+    pub reference_luminance: f64,
+    /// JSON of the best strategy at the latest checkpoint.
+    pub best: Option<String>,
+    pub error: Option<String>,
+    pub created_at: i64,
+    pub updated_at: i64,
+}
+
+/// A job to insert.
+#[derive(Debug, Clone)]
+pub struct NewJob {
+    pub spec: String,
+    pub fingerprint: String,
+    pub iterations_total: u64,
+    pub reference_luminance: f64,
+    pub idempotency_key: Option<String>,
+    pub request_hash: Option<String>,
+    pub now: i64,
+}
+
+/// The outcome of an insert with an idempotency key.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Inserted {
+    /// A new job.
+    Created(JobRow),
+    /// The key was used before with the same body: the original job.
+    Replayed(JobRow),
+    /// The key was used before with another body.
+    KeyReused,
+}
+
+/// A job's latest checkpoint.
+#[derive(Debug, Clone)]
+pub struct Checkpoint {
+    pub iterations_done: u64,
+    /// The moments, JSON.
+    pub moments: Vec<u8>,
+    /// SHA-256 (hex) of `moments` when written.
+    pub checksum: String,
+    /// The result document (JSON) computed from them.
+    pub result: String,
+    /// The best strategy (JSON) at this checkpoint, copied to the job row.
+    pub best: Option<String>,
+}
+
+/// The columns of a [`JobRow`], as a literal for `concat!` (queries stay static strings).
+macro_rules! job_columns {
+    () => {
+        "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, error, \
+         created_at, updated_at"
+    };
+}
+
+fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
+    Ok(JobRow {
+        id: row.try_get("id")?,
+        state: row.try_get("state")?,
+        spec: row.try_get("spec")?,
+        fingerprint: row.try_get("fingerprint")?,
+        iterations_total: row.try_get::<i64, _>("iterations_total")? as u64,
+        iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
+        reference_luminance: row.try_get("reference_luminance")?,
+        best: row.try_get("best")?,
+        error: row.try_get("error")?,
+        created_at: row.try_get("created_at")?,
+        updated_at: row.try_get("updated_at")?,
+    })
+}
+
+impl Store {
+    /// Inserts a queued job, honouring an idempotency key.
+    pub async fn insert_job(&self, job: &NewJob) -> Result<Inserted, StoreError> {
+        if let Some(key) = &job.idempotency_key
+            && let Some(found) = self.find_by_key(key, job.request_hash.as_deref()).await?
+        {
+            return Ok(found);
+        }
+        let result = sqlx::query(concat!(
+            "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
+             request_hash, created_at, updated_at) VALUES ('queued', ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
+            job_columns!()
+        ))
+        .bind(&job.spec)
+        .bind(&job.fingerprint)
+        .bind(job.iterations_total as i64)
+        .bind(job.reference_luminance)
+        .bind(&job.idempotency_key)
+        .bind(&job.request_hash)
+        .bind(job.now)
+        .bind(job.now)
+        .fetch_one(self.pool())
+        .await;
+        match result {
+            Ok(row) => Ok(Inserted::Created(job_from_row(&row)?)),
+            // A concurrent request with the same key won the race: answer as a replay.
+            Err(sqlx::Error::Database(e)) if e.is_unique_violation() && job.idempotency_key.is_some() => {
+                let key = job.idempotency_key.as_deref().unwrap_or_default();
+                Ok(self.find_by_key(key, job.request_hash.as_deref()).await?.unwrap_or(Inserted::KeyReused))
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    async fn find_by_key(&self, key: &str, hash: Option<&str>) -> Result<Option<Inserted>, StoreError> {
+        let row = sqlx::query(concat!("SELECT ", job_columns!(), ", request_hash FROM jobs WHERE idempotency_key = ?"))
+            .bind(key)
+            .fetch_optional(self.pool())
+            .await?;
+        Ok(match row {
+            None => None,
+            Some(row) => {
+                let stored: Option<String> = row.try_get("request_hash")?;
+                Some(if stored.as_deref() == hash {
+                    Inserted::Replayed(job_from_row(&row)?)
+                } else {
+                    Inserted::KeyReused
+                })
+            }
+        })
+    }
+
+    /// One job.
+    pub async fn get_job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+        let row = sqlx::query(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        Ok(row.as_ref().map(job_from_row).transpose()?)
+    }
+
+    /// Jobs newest first, optionally in one state, with ids below `before` (keyset pagination).
+    pub async fn list_jobs(
+        &self,
+        state: Option<&str>,
+        before: Option<i64>,
+        limit: u32,
+    ) -> Result<Vec<JobRow>, StoreError> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR id < ?2) ORDER BY id DESC LIMIT ?3"
+        ))
+        .bind(state)
+        .bind(before)
+        .bind(i64::from(limit))
+        .fetch_all(self.pool())
+        .await?;
+        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+    }
+
+    /// Jobs to pick up at start: those left running (in id order), then the queued ones.
+    pub async fn unfinished_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE state IN ('running', 'queued') ORDER BY CASE state WHEN 'running' THEN 0 ELSE 1 END, id"
+        ))
+        .fetch_all(self.pool())
+        .await?;
+        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+    }
+
+    /// Sets a job's state (and error), returning whether the job exists.
+    pub async fn set_state(&self, id: i64, state: &str, error: Option<&str>, now: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query("UPDATE jobs SET state = ?, error = ?, updated_at = ? WHERE id = ?")
+            .bind(state)
+            .bind(error)
+            .bind(now)
+            .bind(id)
+            .execute(self.pool())
+            .await?;
+        Ok(done.rows_affected() == 1)
+    }
+
+    /// Sets a job's total iterations with its updated spec (and state), returning whether the job
+    /// exists.
+    pub async fn set_total(&self, id: i64, total: u64, spec: &str, state: &str, now: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query(
+            "UPDATE jobs SET iterations_total = ?, spec = ?, state = ?, error = NULL, updated_at = ? WHERE id = ?",
+        )
+        .bind(total as i64)
+        .bind(spec)
+        .bind(state)
+        .bind(now)
+        .bind(id)
+        .execute(self.pool())
+        .await?;
+        Ok(done.rows_affected() == 1)
+    }
+
+    /// Deletes a job and its checkpoint, returning whether it existed.
+    pub async fn delete_job(&self, id: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.pool()).await?;
+        Ok(done.rows_affected() == 1)
+    }
+
+    /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
+    pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+        let mut tx = self.pool().begin().await?;
+        sqlx::query(
+            "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
+             VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
+             moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
+             written_at = excluded.written_at",
+        )
+        .bind(id)
+        .bind(checkpoint.iterations_done as i64)
+        .bind(&checkpoint.moments)
+        .bind(&checkpoint.checksum)
+        .bind(&checkpoint.result)
+        .bind(now)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
+            .bind(checkpoint.iterations_done as i64)
+            .bind(&checkpoint.best)
+            .bind(now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    /// A job's latest checkpoint, if any.
+    pub async fn load_checkpoint(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
+        let row = sqlx::query("SELECT iterations_done, moments, checksum, result FROM checkpoints WHERE job_id = ?")
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        row.map(|row| {
+            Ok::<_, sqlx::Error>(Checkpoint {
+                iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
+                moments: row.try_get("moments")?,
+                checksum: row.try_get("checksum")?,
+                result: row.try_get("result")?,
+                best: None,
+            })
+        })
+        .transpose()
+        .map_err(StoreError::from)
+    }
+
+    /// A job's latest result document, without the moments.
+    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String)>, StoreError> {
+        let row = sqlx::query("SELECT iterations_done, result FROM checkpoints WHERE job_id = ?")
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        row.map(|row| Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?)))
+            .transpose()
+            .map_err(|e: sqlx::Error| e.into())
+    }
+}

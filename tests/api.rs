@@ -1,0 +1,314 @@
+//! The HTTP API against a real server on 127.0.0.1 with a SQLite file in a temporary directory.
+
+mod common;
+
+use std::time::Duration;
+
+use common::{TestServer, assert_problem, small_job};
+use futures_util::StreamExt;
+use serde_json::{Value, json};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn submit_poll_and_read_the_result() {
+    let server = TestServer::start().await;
+    let response = server.post("/v1/jobs", &small_job(12, 3)).await;
+    assert_eq!(response.status(), 202);
+    let location = response.headers()["location"].to_str().unwrap().to_string();
+    let job: Value = response.json().await.unwrap();
+    assert_eq!(location, format!("/v1/jobs/{}", job["id"]));
+    assert_eq!(job["state"], "queued");
+    assert_eq!(job["spec"]["preset"], "paper-table1");
+    assert_eq!(job["spec"]["light_paths"], 20_000);
+    assert_eq!(job["progress"]["iterations_total"], 12);
+    assert!(job["reference_luminance"].as_f64().unwrap() > 2.6e-4);
+
+    let id = job["id"].as_i64().unwrap();
+    let done = server.wait_for_state(id, "succeeded").await;
+    assert_eq!(done["progress"]["iterations_done"], 12);
+    assert_eq!(done["progress"]["iterations_checkpointed"], 12);
+    assert!(done["progress"]["best"]["rms_percent"].as_f64().unwrap() > 0.0);
+
+    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    assert_eq!(result["partial"], false);
+    assert_eq!(result["iterations"], 12);
+    let names: Vec<&str> =
+        result["noise_table"].as_array().unwrap().iter().map(|r| r["strategy"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["plane1", "plane2", "plane3", "switch", "optimal", "optimal_holdout", "optimal_cv", "balance", "power"]
+    );
+    for row in result["noise_table"].as_array().unwrap() {
+        for key in [
+            "luminance",
+            "luminance_stderr",
+            "rms_percent",
+            "rms_percent_stderr",
+            "lambda",
+            "holdout_rms_percent",
+            "error",
+        ] {
+            assert!(row.get(key).is_some(), "row {row} lacks {key}");
+        }
+    }
+    let weights = result["weights"].as_array().unwrap();
+    assert_eq!(weights.len(), 52);
+    assert_eq!(weights[25]["r3"], json!([0.05, null]), "the tail cell's upper bound is null");
+    for w in weights {
+        let sum = w["w0"].as_f64().unwrap() + w["w1"].as_f64().unwrap() + w["w2"].as_f64().unwrap();
+        assert!((sum - 1.0).abs() < 1e-9);
+        assert_eq!(w["w0"], 0.0, "the paper preset fixes w0 = 0");
+    }
+    assert!(result["reference_luminance"].as_f64().unwrap() > 0.0);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_error_is_a_problem_document_with_the_right_status() {
+    let server = TestServer::start().await;
+    // 400: malformed JSON, empty body.
+    assert_problem(server.post_raw("/v1/jobs", "{\"iterations\": ").await, 400).await;
+    assert_problem(server.post_raw("/v1/jobs", "").await, 400).await;
+    // 422: invalid fields, named in the detail and in `field`.
+    for (body, field) in [
+        (json!({ "merge_radius": -0.1 }), "merge_radius"),
+        (json!({ "scene": { "beta_deg": 60 } }), "scene.beta_deg"),
+        (json!({ "light_paths": 0 }), "light_paths"),
+        (json!({ "cells": { "r3_edges": [0, 0.2, 0.1] } }), "cells.r3_edges[2]"),
+        (json!({ "bogus": 1 }), "bogus"),
+        (json!({ "preset": "unknown" }), "preset"),
+        (json!([1, 2]), ""),
+    ] {
+        let problem = assert_problem(server.post("/v1/jobs", &body).await, 422).await;
+        if !field.is_empty() {
+            assert_eq!(problem["field"], field, "{body}");
+            assert!(problem["detail"].as_str().unwrap().contains(field), "{problem}");
+        }
+    }
+    let problem = assert_problem(server.get("/v1/jobs?limit=9999").await, 422).await;
+    assert_eq!(problem["field"], "limit");
+    let problem = assert_problem(server.get("/v1/jobs?state=paused").await, 422).await;
+    assert_eq!(problem["field"], "state");
+    assert_problem(server.get("/v1/jobs?cursor=xyz").await, 422).await;
+    assert_problem(server.get("/v1/jobs?unknown=1").await, 422).await;
+    // 404: unknown jobs and routes.
+    assert_problem(server.get("/v1/jobs/424242").await, 404).await;
+    assert_problem(server.get("/v1/jobs/not-a-number").await, 404).await;
+    assert_problem(server.get("/v1/jobs/424242/result").await, 404).await;
+    assert_problem(server.post("/v1/jobs/424242/cancel", &json!({})).await, 404).await;
+    assert_problem(server.client.delete(server.url("/v1/jobs/424242")).send().await.unwrap(), 404).await;
+    assert_problem(server.get("/v2/nothing").await, 404).await;
+    // 405.
+    assert_problem(server.client.put(server.url("/v1/jobs")).send().await.unwrap(), 405).await;
+
+    // 409: results before the first checkpoint (a queued job behind a long one), cancel of a
+    // finished job, delete of a running one, extend of a failed one is covered elsewhere.
+    let long = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    server.wait_for_state(long, "running").await;
+    let waiting = server.submit(&small_job(2, 1)).await;
+    assert_problem(server.get(&format!("/v1/jobs/{waiting}/result")).await, 409).await;
+    assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({})).await, 409).await;
+    assert_problem(server.client.delete(server.url(&format!("/v1/jobs/{long}"))).send().await.unwrap(), 409).await;
+    server.post(&format!("/v1/jobs/{long}/cancel"), &json!({})).await;
+    server.wait_for_state(long, "cancelled").await;
+    server.wait_for_state(waiting, "succeeded").await;
+    assert_problem(server.post(&format!("/v1/jobs/{waiting}/cancel"), &json!({})).await, 409).await;
+
+    // 422 on the job sub-resources.
+    let problem =
+        assert_problem(server.post(&format!("/v1/jobs/{waiting}/extend"), &json!({ "iterations": 0 })).await, 422)
+            .await;
+    assert_eq!(problem["field"], "iterations");
+    let problem =
+        assert_problem(server.post(&format!("/v1/jobs/{waiting}/extend"), &json!({ "more": 2 })).await, 422).await;
+    assert_eq!(problem["field"], "more");
+    let problem =
+        assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({ "lambda": -1 })).await, 422).await;
+    assert_eq!(problem["field"], "solver.lambda");
+    assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({ "fixed": { "w3": 1 } })).await, 422)
+        .await;
+    server.stop().await;
+}
+
+/// A single iteration of 10⁹ light paths (about 15,000 chunks) is cancelled while running: the job
+/// ends cancelled with no iteration completed, so it stopped inside the iteration — between chunks —
+/// and not at the iteration's end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancel_stops_a_running_job_within_a_chunk() {
+    let server = TestServer::start().await;
+    let id = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    server.wait_for_state(id, "running").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let response = server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    assert_eq!(response.status(), 202);
+    let job = server.wait_for_state(id, "cancelled").await;
+    assert_eq!(job["progress"]["iterations_done"], 0, "the iteration was interrupted, not completed");
+    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409).await;
+
+    // A queued job is cancelled at once.
+    let blocker = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    server.wait_for_state(blocker, "running").await;
+    let queued = server.submit(&small_job(3, 2)).await;
+    let cancelled: Value = server.post(&format!("/v1/jobs/{queued}/cancel"), &json!({})).await.json().await.unwrap();
+    assert_eq!(cancelled["state"], "cancelled");
+    server.post(&format!("/v1/jobs/{blocker}/cancel"), &json!({})).await;
+    server.wait_for_state(blocker, "cancelled").await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_list_paginates_newest_first() {
+    let server = TestServer::start().await;
+    let mut ids = Vec::new();
+    for seed in 0..7 {
+        ids.push(server.submit(&small_job(1, seed)).await);
+    }
+    for &id in &ids {
+        server.wait_for_state(id, "succeeded").await;
+    }
+    let mut seen = Vec::new();
+    let mut cursor: Option<String> = None;
+    let mut pages = 0;
+    loop {
+        let path = match &cursor {
+            Some(c) => format!("/v1/jobs?limit=3&cursor={c}"),
+            None => "/v1/jobs?limit=3".to_string(),
+        };
+        let page = server.get_json(&path).await;
+        pages += 1;
+        seen.extend(page["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_i64().unwrap()));
+        match page["next_cursor"].as_str() {
+            Some(c) => cursor = Some(c.to_string()),
+            None => break,
+        }
+    }
+    assert_eq!(pages, 3);
+    let mut newest_first = ids.clone();
+    newest_first.reverse();
+    assert_eq!(seen, newest_first);
+
+    let cancelled = server.get_json("/v1/jobs?state=cancelled").await;
+    assert!(cancelled["jobs"].as_array().unwrap().is_empty());
+    let succeeded = server.get_json("/v1/jobs?state=succeeded&limit=500").await;
+    assert_eq!(succeeded["jobs"].as_array().unwrap().len(), 7);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idempotency_keys_replay_the_original_job() {
+    let server = TestServer::start().await;
+    let send = |body: Value, key: &'static str| {
+        server.client.post(server.url("/v1/jobs")).header("Idempotency-Key", key).json(&body).send()
+    };
+    let first = send(small_job(2, 9), "abc-1").await.unwrap();
+    assert_eq!(first.status(), 202);
+    let first: Value = first.json().await.unwrap();
+    let again = send(small_job(2, 9), "abc-1").await.unwrap();
+    assert_eq!(again.status(), 202);
+    assert_eq!(again.headers()["idempotent-replayed"], "true");
+    let again: Value = again.json().await.unwrap();
+    assert_eq!(first["id"], again["id"]);
+    let problem = assert_problem(send(small_job(3, 9), "abc-1").await.unwrap(), 422).await;
+    assert_eq!(problem["field"], "Idempotency-Key");
+    let other: Value = send(small_job(2, 9), "abc-2").await.unwrap().json().await.unwrap();
+    assert_ne!(other["id"], first["id"]);
+    let list = server.get_json("/v1/jobs").await;
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 2);
+    server.stop().await;
+}
+
+/// Extending a finished job continues the same deterministic sequence: its moments then equal
+/// those of a job that ran all iterations at once, bit for bit.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn extend_continues_the_sequence_and_delete_removes() {
+    let server = TestServer::start().await;
+    let id = server.submit(&small_job(6, 4)).await;
+    server.wait_for_state(id, "succeeded").await;
+    let response = server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "iterations": 5 })).await;
+    assert_eq!(response.status(), 202);
+    let extended: Value = response.json().await.unwrap();
+    assert_eq!(extended["progress"]["iterations_total"], 11);
+    let done = server.wait_for(id, |j| j["state"] == "succeeded" && j["progress"]["iterations_done"] == 11).await;
+    assert_eq!(done["spec"]["iterations"], 11);
+    let whole = server.submit(&small_job(11, 4)).await;
+    server.wait_for_state(whole, "succeeded").await;
+    let a = server.get_json(&format!("/v1/jobs/{id}/moments")).await;
+    let b = server.get_json(&format!("/v1/jobs/{whole}/moments")).await;
+    assert_eq!(a["moments"], b["moments"]);
+    assert_eq!(a["checksum"], b["checksum"]);
+
+    let response = server.client.delete(server.url(&format!("/v1/jobs/{id}"))).send().await.unwrap();
+    assert_eq!(response.status(), 204);
+    assert_problem(server.get(&format!("/v1/jobs/{id}")).await, 404).await;
+    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 404).await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn solve_recomputes_from_the_stored_moments() {
+    let server = TestServer::start().await;
+    let id = server
+        .submit(
+            &json!({ "light_paths": 100_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 40, "seed": 5 }),
+        )
+        .await;
+    server.wait_for_state(id, "succeeded").await;
+    let stored = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let same: Value = server.post(&format!("/v1/jobs/{id}/solve"), &json!({})).await.json().await.unwrap();
+    assert_eq!(same, stored, "an empty patch reproduces the stored result");
+    let smooth: Value =
+        server.post(&format!("/v1/jobs/{id}/solve"), &json!({ "lambda": 10 })).await.json().await.unwrap();
+    assert_eq!(smooth["noise_table"][0], stored["noise_table"][0], "fixed strategies do not change");
+    assert_ne!(smooth["weights"], stored["weights"]);
+    let optimal = |r: &Value| r["noise_table"][4]["lambda"].clone();
+    assert_eq!(optimal(&smooth), 10.0);
+    let free: Value = server
+        .post(&format!("/v1/jobs/{id}/solve"), &json!({ "fixed": { "w0": null }, "lambda": 1e-3 }))
+        .await
+        .json()
+        .await
+        .unwrap();
+    assert!(free["weights"].as_array().unwrap().iter().any(|w| w["w0"] != 0.0), "w0 is fitted once freed");
+    let unchanged = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    assert_eq!(unchanged, stored, "solve stores nothing");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn events_stream_progress_until_the_end() {
+    let server = TestServer::start().await;
+    let id = server.submit(&small_job(30, 6)).await;
+    let response = server.get(&format!("/v1/jobs/{id}/events")).await;
+    assert_eq!(response.status(), 200);
+    assert!(response.headers()["content-type"].to_str().unwrap().starts_with("text/event-stream"));
+    let mut body = String::new();
+    let mut stream = response.bytes_stream();
+    while let Some(chunk) = stream.next().await {
+        body.push_str(std::str::from_utf8(&chunk.unwrap()).unwrap());
+    }
+    let events: Vec<Value> =
+        body.lines().filter_map(|l| l.strip_prefix("data: ")).map(|d| serde_json::from_str(d).unwrap()).collect();
+    assert!(events.len() >= 2, "{body}");
+    assert!(body.lines().filter(|l| l.starts_with("event: ")).all(|l| l == "event: job"));
+    assert_eq!(events.last().unwrap()["state"], "succeeded", "the stream ends at the terminal state");
+    let done: Vec<u64> = events.iter().map(|e| e["progress"]["iterations_done"].as_u64().unwrap()).collect();
+    assert!(done.windows(2).all(|w| w[0] <= w[1]), "progress never goes back: {done:?}");
+    // A finished job's stream is its one current event.
+    let text = server.get(&format!("/v1/jobs/{id}/events")).await.text().await.unwrap();
+    assert_eq!(text.lines().filter(|l| l.starts_with("data: ")).count(), 1);
+    assert_problem(server.get("/v1/jobs/999/events").await, 404).await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn health_readiness_and_openapi() {
+    let server = TestServer::start().await;
+    assert_eq!(server.get_json("/healthz").await["status"], "ok");
+    assert_eq!(server.get_json("/readyz").await["status"], "ok");
+    let served = server.get("/openapi.yaml").await.text().await.unwrap();
+    let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml")).unwrap();
+    assert_eq!(
+        served, committed,
+        "openapi.yaml is stale: regenerate it with `cargo run --release -- openapi > openapi.yaml`"
+    );
+    server.stop().await;
+}

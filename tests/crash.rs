@@ -1,0 +1,127 @@
+//! Crash safety of the real `optimis serve` binary: SIGKILL while a job runs, restart on the same
+//! database, and the job ends with moments bit-identical to an uninterrupted run, while finished
+//! jobs and their results are untouched.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use optimis::sim::runner::run;
+use optimis::sim::spec::parse_job_spec;
+use serde_json::{Value, json};
+
+/// A running `optimis serve` process and its address.
+struct Process {
+    child: Child,
+    base: String,
+}
+
+impl Process {
+    /// Starts the binary on `database` with a free port, and reads the port from its JSON log.
+    fn start(database: &str) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_optimis"))
+            .args(["serve", "--bind", "127.0.0.1:0", "--database", database, "--threads", "2"])
+            .args(["--checkpoint-iterations", "3", "--checkpoint-seconds", "0.5", "--log-format", "json"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("optimis starts");
+        let stderr = child.stderr.take().unwrap();
+        let mut lines = BufReader::new(stderr).lines();
+        let address = loop {
+            let line = lines.next().expect("the server logs its address").unwrap();
+            let entry: Value = serde_json::from_str(&line).unwrap_or(Value::Null);
+            if let Some(a) = entry["fields"]["address"].as_str() {
+                break a.to_string();
+            }
+        };
+        // Keep draining the log so the server never blocks on a full pipe.
+        std::thread::spawn(move || for _ in lines {});
+        Self { child, base: format!("http://{address}") }
+    }
+
+    fn kill(mut self) {
+        self.child.kill().unwrap(); // SIGKILL
+        self.child.wait().unwrap();
+    }
+}
+
+async fn get(client: &reqwest::Client, url: String) -> Value {
+    let response = client.get(&url).send().await.unwrap();
+    assert_eq!(response.status(), 200, "GET {url}");
+    response.json().await.unwrap()
+}
+
+async fn wait_for(client: &reqwest::Client, base: &str, id: i64, done: impl Fn(&Value) -> bool) -> Value {
+    let started = Instant::now();
+    loop {
+        let job = get(client, format!("{base}/v1/jobs/{id}")).await;
+        if done(&job) {
+            return job;
+        }
+        assert!(started.elapsed() < Duration::from_secs(600), "hang guard: {job}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_killed_server_resumes_jobs_bit_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let database = format!("sqlite://{}", dir.path().join("crash.db").display());
+    let client = reqwest::Client::new();
+
+    let first = Process::start(&database);
+    let submit = |base: String, spec: Value| {
+        let client = client.clone();
+        async move {
+            let response = client.post(format!("{base}/v1/jobs")).json(&spec).send().await.unwrap();
+            assert_eq!(response.status(), 202);
+            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
+        }
+    };
+    // A job that finishes before the crash.
+    let finished_spec =
+        json!({ "light_paths": 20_000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 8, "seed": 3 });
+    let finished = submit(first.base.clone(), finished_spec).await;
+    wait_for(&client, &first.base, finished, |j| j["state"] == "succeeded").await;
+    let finished_before = get(&client, format!("{}/v1/jobs/{finished}", first.base)).await;
+    let result_before = get(&client, format!("{}/v1/jobs/{finished}/result", first.base)).await;
+    let moments_before = get(&client, format!("{}/v1/jobs/{finished}/moments", first.base)).await;
+
+    // The job that is killed: about 40 iterations of 2·10⁶ light paths.
+    let spec =
+        json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 40, "seed": 17 });
+    let id = submit(first.base.clone(), spec.clone()).await;
+    let before_kill = wait_for(&client, &first.base, id, |j| {
+        j["state"] == "running" && j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 6
+    })
+    .await;
+    let checkpointed = before_kill["progress"]["iterations_checkpointed"].as_u64().unwrap();
+    first.kill();
+
+    let second = Process::start(&database);
+    let resumed = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+    assert!(
+        resumed["progress"]["iterations_checkpointed"].as_u64().unwrap() >= checkpointed,
+        "the job resumes from its checkpoint, not from zero: {resumed}"
+    );
+    let done = wait_for(&client, &second.base, id, |j| j["state"] == "succeeded").await;
+    assert_eq!(done["progress"]["iterations_done"], 40);
+    let document = get(&client, format!("{}/v1/jobs/{id}/moments", second.base)).await;
+
+    // An uninterrupted run of the same spec, in process.
+    let job = parse_job_spec(&spec).unwrap().validate().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let reference = pool.install(|| run(&job.config, 17, 0..40));
+    assert_eq!(
+        document["moments"],
+        serde_json::to_value(&reference).unwrap(),
+        "moments differ from an uninterrupted run"
+    );
+
+    // The finished job is untouched.
+    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}", second.base)).await, finished_before);
+    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/result", second.base)).await, result_before);
+    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/moments", second.base)).await, moments_before);
+    second.kill();
+}
