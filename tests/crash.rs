@@ -19,9 +19,13 @@ struct Process {
 impl Process {
     /// Starts the binary on `database` with a free port, and reads the port from its JSON log.
     fn start(database: &str) -> Self {
+        Self::start_with(database, &["--checkpoint-iterations", "3", "--checkpoint-seconds", "0.5"])
+    }
+
+    fn start_with(database: &str, extra: &[&str]) -> Self {
         let mut child = Command::new(env!("CARGO_BIN_EXE_optimis"))
-            .args(["serve", "--bind", "127.0.0.1:0", "--database", database, "--threads", "2"])
-            .args(["--checkpoint-iterations", "3", "--checkpoint-seconds", "0.5", "--log-format", "json"])
+            .args(["serve", "--bind", "127.0.0.1:0", "--database", database, "--threads", "2", "--log-format", "json"])
+            .args(extra)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
@@ -43,6 +47,14 @@ impl Process {
     fn kill(mut self) {
         self.child.kill().unwrap(); // SIGKILL
         self.child.wait().unwrap();
+    }
+
+    /// SIGTERM, then the exit status.
+    fn terminate(mut self) -> std::process::ExitStatus {
+        let pid = self.child.id().to_string();
+        let sent = Command::new("kill").args(["-TERM", &pid]).status().expect("kill(1) runs");
+        assert!(sent.success());
+        self.child.wait().unwrap()
     }
 }
 
@@ -123,5 +135,33 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
     assert_eq!(get(&client, format!("{}/v1/jobs/{finished}", second.base)).await, finished_before);
     assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/result", second.base)).await, result_before);
     assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/moments", second.base)).await, moments_before);
+    second.kill();
+}
+
+/// SIGTERM checkpoints the running job before exiting: with periodic checkpoints made rare, the
+/// iterations computed since the last one are saved anyway, and the job resumes from there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_checkpoints_running_jobs_before_exiting() {
+    let dir = tempfile::tempdir().unwrap();
+    let database = format!("sqlite://{}", dir.path().join("term.db").display());
+    let client = reqwest::Client::new();
+    let first = Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
+    let spec =
+        json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 5 });
+    let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();
+    let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
+    let running = wait_for(&client, &first.base, id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 5).await;
+    assert_eq!(running["progress"]["iterations_checkpointed"], 0, "no periodic checkpoint yet");
+    let status = first.terminate();
+    assert!(status.success(), "a clean exit on SIGTERM: {status}");
+
+    let second =
+        Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
+    let resumed = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+    assert!(
+        resumed["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5,
+        "the shutdown checkpoint kept the work: {resumed}"
+    );
+    assert!(matches!(resumed["state"].as_str(), Some("queued" | "running")), "{resumed}");
     second.kill();
 }

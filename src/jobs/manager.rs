@@ -134,9 +134,12 @@ fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
     })
 }
 
-/// The per-path strategy with the lowest RMS in `report`.
+/// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample
+/// `optimal` and `optimal_cv` rows are evaluated on the data they were fitted to, so they are left
+/// out (`optimal_holdout` stays).
 pub(crate) fn best_strategy(rows: &[crate::sim::noise::NoiseRow]) -> Option<BestStrategy> {
     rows.iter()
+        .filter(|r| r.strategy != "optimal" && r.strategy != "optimal_cv")
         .filter_map(|r| match (r.luminance, r.rms_percent) {
             (Some(l), Some(rms)) if rms > 0.0 => {
                 Some(BestStrategy { strategy: r.strategy.clone(), luminance: l, rms_percent: rms })

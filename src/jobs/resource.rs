@@ -41,7 +41,8 @@ impl JobState {
     }
 }
 
-/// The strategy with the lowest RMS so far (per-path strategies, updated as the job runs).
+/// The strategy with the lowest RMS so far, among the per-path strategies and the hold-out
+/// optimum (in-sample fits are optimistic and left out).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BestStrategy {
     pub strategy: String,
