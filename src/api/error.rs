@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::jobs::JobError;
+use crate::sim::document::DocumentError;
+use crate::sim::moments::MergeError;
 use crate::sim::spec::SpecError;
 use crate::store::StoreError;
 
@@ -54,6 +56,9 @@ pub enum ApiError {
     /// 413: the body is larger than the server accepts.
     #[error("{0}")]
     PayloadTooLarge(String),
+    /// 502: a peer server could not be reached or answered badly.
+    #[error("{0}")]
+    BadGateway(String),
     /// 503: shutting down, or the database is busy; retry later.
     #[error("{0}")]
     Unavailable(String),
@@ -74,6 +79,11 @@ impl From<JobError> for ApiError {
             JobError::Invalid(s) => s.into(),
             JobError::NotFound(id) => ApiError::NotFound(format!("no job with id {id}")),
             JobError::Conflict(m) => ApiError::Conflict(m),
+            JobError::Document(e @ DocumentError::Merge(MergeError::Overlap(_) | MergeError::Fingerprint { .. })) => {
+                ApiError::Conflict(format!("the statistics cannot be merged: {e}"))
+            }
+            JobError::Document(e) => ApiError::Invalid { field: String::new(), message: e.to_string() },
+            JobError::Peer(m) => ApiError::BadGateway(m),
             JobError::ShuttingDown => {
                 ApiError::Unavailable("the server is shutting down; retry on its successor".into())
             }
@@ -97,6 +107,7 @@ impl ApiError {
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::BadGateway(_) => StatusCode::BAD_GATEWAY,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -110,6 +121,7 @@ impl ApiError {
             ApiError::MethodNotAllowed => "method-not-allowed",
             ApiError::Conflict(_) => "conflict",
             ApiError::PayloadTooLarge(_) => "payload-too-large",
+            ApiError::BadGateway(_) => "bad-gateway",
             ApiError::Unavailable(_) => "unavailable",
             ApiError::Internal(_) => "internal",
         }

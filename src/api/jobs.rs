@@ -12,8 +12,9 @@ use utoipa::{IntoParams, ToSchema};
 use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, typed};
-use crate::jobs::documents::{JobList, JobResult, MomentsDocument};
+use crate::jobs::documents::{JobList, JobResult};
 use crate::jobs::resource::{JobResource, JobState};
+use crate::sim::document::MomentsDocument;
 use crate::sim::spec::{FixedWeights, RingSpec};
 
 /// Longest accepted `Idempotency-Key`.

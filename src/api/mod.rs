@@ -10,6 +10,7 @@ mod events;
 mod extract;
 mod health;
 mod jobs;
+mod studies;
 
 use std::sync::Arc;
 
@@ -45,12 +46,19 @@ pub struct AppState {
     ),
     tags(
         (name = "jobs", description = "Simulation jobs"),
+        (name = "statistics", description = "Merging statistics of shards, peers and documents"),
         (name = "operations", description = "Health and API description")
     )
 )]
 struct ApiDoc;
 
-fn api_router() -> OpenApiRouter<AppState> {
+/// Body limit of the routes that take moments documents (which grow with the cell grid).
+pub const DEFAULT_DOCUMENT_LIMIT: usize = 256 << 20;
+
+fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
+    let with_limit = |(schemas, paths, method_router): utoipa_axum::router::UtoipaMethodRouter<AppState>| {
+        (schemas, paths, method_router.layer(DefaultBodyLimit::max(document_limit)))
+    };
     OpenApiRouter::with_openapi(ApiDoc::openapi())
         .routes(routes!(jobs::submit, jobs::list))
         .routes(routes!(jobs::get, jobs::delete))
@@ -59,6 +67,8 @@ fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::cancel))
         .routes(routes!(jobs::extend))
         .routes(routes!(jobs::moments))
+        .routes(with_limit(routes!(studies::merge)))
+        .routes(with_limit(routes!(studies::create)))
         .routes(routes!(events::events))
         .routes(routes!(health::healthz))
         .routes(routes!(health::readyz))
@@ -68,7 +78,7 @@ fn api_router() -> OpenApiRouter<AppState> {
 /// The OpenAPI document of this server, as YAML (what `/openapi.yaml` serves and the committed
 /// `openapi.yaml` must equal).
 pub fn openapi_yaml() -> String {
-    api_router().into_openapi().to_yaml().expect("the OpenAPI document serialises")
+    api_router(DEFAULT_DOCUMENT_LIMIT).into_openapi().to_yaml().expect("the OpenAPI document serialises")
 }
 
 async fn not_found() -> ApiError {
@@ -83,10 +93,11 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
     axum::response::IntoResponse::into_response(ApiError::Internal("a request handler panicked".into()))
 }
 
-/// The application: every route, with request tracing, a body limit of `body_limit` bytes and
-/// panics answered as problem documents.
-pub fn router(jobs: JobManager, body_limit: usize) -> Router {
-    let (router, api) = api_router().split_for_parts();
+/// The application: every route, with request tracing, a body limit of `body_limit` bytes
+/// (`document_limit` for the routes that take moments documents) and panics answered as problem
+/// documents.
+pub fn router(jobs: JobManager, body_limit: usize, document_limit: usize) -> Router {
+    let (router, api) = api_router(document_limit).split_for_parts();
     let state = AppState { jobs, openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into() };
     router
         .fallback(not_found)

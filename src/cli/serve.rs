@@ -37,6 +37,9 @@ pub struct ServeArgs {
     /// Largest accepted request body, in bytes.
     #[arg(long, default_value_t = 1 << 20, value_parser = clap::value_parser!(u64).range(1024..=(1 << 30)))]
     pub body_limit: u64,
+    /// Largest body of the routes that take moments documents (merge, studies), in bytes.
+    #[arg(long, default_value_t = crate::api::DEFAULT_DOCUMENT_LIMIT as u64, value_parser = clap::value_parser!(u64).range(1024..=(1 << 34)))]
+    pub document_limit: u64,
     /// Log format on stderr.
     #[arg(long, value_enum, default_value = "text")]
     pub log_format: LogFormat,
@@ -70,6 +73,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         checkpoint_iterations: args.checkpoint_iterations,
         checkpoint_interval: Duration::from_secs_f64(args.checkpoint_seconds),
         body_limit: args.body_limit as usize,
+        document_limit: args.document_limit as usize,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async {

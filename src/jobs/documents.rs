@@ -5,9 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::resource::{JobResource, JobState};
-use crate::sim::moments::Moments;
 use crate::sim::report::RunReport;
-use crate::sim::spec::JobSpec;
 
 /// A job's results: the noise table and weights of the core's report, from the latest checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -27,20 +25,4 @@ pub struct JobList {
     pub jobs: Vec<JobResource>,
     /// Pass as `cursor` to get the next page; null on the last page.
     pub next_cursor: Option<String>,
-}
-
-/// Kind tag of a moments document.
-pub const MOMENTS_DOCUMENT_KIND: &str = "optimis-moments";
-
-/// A job's moments, exported: portable between servers and files, checksummed.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct MomentsDocument {
-    /// Always `optimis-moments`.
-    pub kind: String,
-    /// The job specification the moments were drawn under.
-    pub spec: JobSpec,
-    /// SHA-256 (hex) of the canonical JSON of `moments`.
-    pub checksum: String,
-    pub moments: Moments,
 }

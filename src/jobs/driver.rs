@@ -41,9 +41,15 @@ pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
     }
 }
 
-/// The moments of a checkpoint, verified: checksum, format, configuration and coverage must all
-/// match the job, or the checkpoint is reported corrupted (never silently resumed from).
-pub(crate) fn decode_checkpoint(id: i64, checkpoint: &Checkpoint, job: &ValidJob) -> Result<Moments, JobError> {
+/// The moments of a checkpoint, verified: checksum, format and configuration must match the job,
+/// and for a job's own run (`own_run`) the coverage must be the start of its range — or the
+/// checkpoint is reported corrupted (never silently resumed from).
+pub(crate) fn decode_checkpoint(
+    id: i64,
+    checkpoint: &Checkpoint,
+    job: &ValidJob,
+    own_run: bool,
+) -> Result<Moments, JobError> {
     let corrupt = |detail: String| JobError::Store(StoreError::Corrupt { job: id, detail });
     let actual = sha256_hex(&checkpoint.moments);
     if actual != checkpoint.checksum {
@@ -58,9 +64,19 @@ pub(crate) fn decode_checkpoint(id: i64, checkpoint: &Checkpoint, job: &ValidJob
     if moments.fingerprint != job.config.fingerprint() {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));
     }
-    let expected = Coverage::range(job.spec.seed, 0, checkpoint.iterations_done);
-    if moments.coverage != expected {
-        return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
+    if moments.iterations() != checkpoint.iterations_done {
+        return Err(corrupt(format!(
+            "checkpoint holds {} iterations, its row says {}",
+            moments.iterations(),
+            checkpoint.iterations_done
+        )));
+    }
+    if own_run {
+        let start = job.spec.iteration_range().start;
+        let expected = Coverage::range(job.spec.seed, start, start + checkpoint.iterations_done);
+        if moments.coverage != expected {
+            return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
+        }
     }
     Ok(moments)
 }
@@ -71,12 +87,13 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     let config = &valid.config;
     let seed = valid.spec.seed;
     let mut moments = match rt.block_on(inner.store.load_checkpoint(job.id))? {
-        Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid)?,
+        Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid, true)?,
         None => Moments::new(config),
     };
     rt.block_on(inner.mark_running(job))?;
     let reference = job.view.borrow().reference_luminance;
     let mut checkpointed = moments.iterations();
+    let start = job.start;
     loop {
         let done = moments.iterations();
         let total = job.total.load(Ordering::SeqCst);
@@ -90,7 +107,8 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         let mut last_publish = Instant::now();
         let policy = &inner.policy;
         let outcome = inner.pool.install(|| {
-            run_iterations(config, seed, done..total, &mut moments, &job.stop, |m, next| {
+            run_iterations(config, seed, start + done..start + total, &mut moments, &job.stop, |m, next| {
+                let next = next - start;
                 if last_publish.elapsed() >= PROGRESS_INTERVAL {
                     last_publish = Instant::now();
                     publish_progress(job, m, next, done, segment_start, config.light_paths);
@@ -135,20 +153,26 @@ fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, s
     });
 }
 
-/// Writes a checkpoint (retrying transient database errors) and publishes it.
-fn write_checkpoint(inner: &Inner, job: &ActiveJob, moments: &Moments, reference: f64) -> Result<(), JobError> {
-    let started = Instant::now();
-    let spec = &job.job.spec;
-    let report = build_report(moments, &job.job.config.cells, &spec.solver, reference);
+/// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
+/// them with the job's solver options.
+pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: f64) -> Result<Checkpoint, JobError> {
+    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference);
     let best = best_strategy(&report.noise_table);
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
-    let checkpoint = Checkpoint {
+    Ok(Checkpoint {
         iterations_done: moments.iterations(),
         checksum: sha256_hex(&bytes),
         moments: bytes,
         result: serde_json::to_string(&report).map_err(|e| JobError::Internal(e.to_string()))?,
         best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
-    };
+    })
+}
+
+/// Writes a checkpoint (retrying transient database errors) and publishes it.
+fn write_checkpoint(inner: &Inner, job: &ActiveJob, moments: &Moments, reference: f64) -> Result<(), JobError> {
+    let started = Instant::now();
+    let checkpoint = checkpoint_of(moments, &job.job, reference)?;
+    let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<super::resource::BestStrategy>(b).ok());
     let mut attempt = 0;
     loop {
         attempt += 1;

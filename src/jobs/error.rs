@@ -1,6 +1,7 @@
 //! Everything a job operation can fail with. The API maps each variant to an HTTP status in one
 //! place (`api::error`).
 
+use crate::sim::document::DocumentError;
 use crate::sim::spec::SpecError;
 use crate::store::StoreError;
 
@@ -15,6 +16,13 @@ pub enum JobError {
     /// The job's state does not allow the operation (HTTP 409).
     #[error("{0}")]
     Conflict(String),
+    /// A moments document is unusable (HTTP 422), or conflicts with the target's statistics:
+    /// another configuration or iterations already counted (HTTP 409).
+    #[error(transparent)]
+    Document(#[from] DocumentError),
+    /// A peer could not be reached or did not answer with a moments document (HTTP 502).
+    #[error("{0}")]
+    Peer(String),
     /// The server is shutting down and accepts no new work (HTTP 503).
     #[error("the server is shutting down")]
     ShuttingDown,

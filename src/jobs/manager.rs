@@ -25,11 +25,13 @@ use serde_json::Value;
 use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
-use super::documents::{JobList, JobResult, MOMENTS_DOCUMENT_KIND, MomentsDocument};
+use super::documents::{JobList, JobResult};
 use super::driver;
 use super::error::JobError;
+use super::peers::{Source, parse_source, pull};
 use super::resource::{BestStrategy, JobResource, JobState, Progress, now_ms, rfc3339};
 use crate::sim::config::sha256_hex;
+use crate::sim::document::{MomentsDocument, merge_documents};
 use crate::sim::moments::Moments;
 use crate::sim::quadrature::reference_luminance;
 use crate::sim::report::{RunReport, build_report};
@@ -55,6 +57,8 @@ pub(crate) const STOP_SHUTDOWN: u8 = 2;
 pub(crate) struct ActiveJob {
     pub id: i64,
     pub job: ValidJob,
+    /// First iteration index of the job's range (see `JobSpec::iteration_range`).
+    pub start: u64,
     /// Checked by the simulation before every chunk.
     pub stop: AtomicBool,
     /// STOP_CANCEL or STOP_SHUTDOWN once `stop` is set.
@@ -83,6 +87,8 @@ pub(crate) struct Inner {
     /// A small pool for computations a request waits for (reference luminance, re-solves): on the
     /// simulation pool they would queue behind thousands of chunks of the running jobs.
     requests: rayon::ThreadPool,
+    /// HTTP client for pulling moments from peers.
+    http: reqwest::Client,
     pub policy: RunPolicy,
     pub runtime: Handle,
     /// std Mutex: held only for map operations, never across an `.await`.
@@ -131,6 +137,7 @@ fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
         error: row.error.clone(),
         fingerprint: row.fingerprint.clone(),
         reference_luminance: row.reference_luminance,
+        merged: row.merged,
     })
 }
 
@@ -165,6 +172,7 @@ impl JobManager {
             store,
             pool,
             requests,
+            http: super::peers::client(),
             policy,
             runtime: Handle::current(),
             active: Mutex::new(HashMap::new()),
@@ -210,6 +218,7 @@ impl JobManager {
         let total = resource.progress.iterations_total;
         let active = Arc::new(ActiveJob {
             id,
+            start: job.spec.iteration_range().start,
             job,
             stop: AtomicBool::new(false),
             stop_reason: AtomicU8::new(0),
@@ -266,7 +275,7 @@ impl JobManager {
         let new = NewJob {
             spec: spec_json,
             fingerprint: job.config.fingerprint().to_string(),
-            iterations_total: job.spec.iterations,
+            iterations_total: range_len(&job.spec),
             reference_luminance: reference,
             idempotency_key,
             request_hash,
@@ -352,6 +361,7 @@ impl JobManager {
         let _guard = self.inner.lifecycle.lock().await;
         let now = now_ms();
         if let Some(job) = self.active(id) {
+            refuse_shard_extension(id, &job.job.spec)?;
             let total = job.total.load(Ordering::SeqCst);
             let new_total = checked_total(total, iterations)?;
             let mut spec = job.view.borrow().spec.clone();
@@ -367,6 +377,11 @@ impl JobManager {
             return Ok(resource);
         }
         let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+        if row.merged {
+            return Err(JobError::Conflict(format!(
+                "job {id} holds merged statistics and cannot run more iterations; extend one of its sources instead"
+            )));
+        }
         if !matches!(row.state.as_str(), "succeeded" | "cancelled") {
             return Err(JobError::Conflict(format!(
                 "job {id} is {}; only a running, queued, succeeded or cancelled job can be extended",
@@ -375,6 +390,7 @@ impl JobManager {
         }
         let new_total = checked_total(row.iterations_total, iterations)?;
         let mut spec = parse_stored_spec(&row)?;
+        refuse_shard_extension(id, &spec)?;
         spec.iterations = new_total;
         let job = spec.validate()?;
         self.inner.store.set_total(id, new_total, &spec_json(&spec)?, "queued", now).await?;
@@ -404,25 +420,31 @@ impl JobManager {
         if self.inner.store.delete_job(id).await? { Ok(()) } else { Err(JobError::NotFound(id.to_string())) }
     }
 
-    async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec), JobError> {
+    async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
         let resource = self.get(id).await?;
-        Ok((resource.state, resource.progress.iterations_total, resource.spec))
+        Ok((resource.state, resource.progress.iterations_total, resource.spec, resource.merged))
     }
 
     /// The results of the latest checkpoint.
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
-        let (state, total, _) = self.state_and_total(id).await?;
+        let (state, total, _, _) = self.state_and_total(id).await?;
         let (done, json) = self.inner.store.load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
         let report: RunReport = serde_json::from_str(&json)
             .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
         Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })
     }
 
-    /// The latest checkpoint's moments, verified against their checksum.
-    async fn checkpoint_moments(&self, id: i64, spec: &JobSpec) -> Result<(Moments, Checkpoint), JobError> {
+    /// The latest checkpoint's moments, verified against their checksum (and, for a job's own
+    /// run, against the range it ran).
+    async fn checkpoint_moments(
+        &self,
+        id: i64,
+        spec: &JobSpec,
+        merged: bool,
+    ) -> Result<(Moments, Checkpoint), JobError> {
         let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
         let job = spec.validate()?;
-        let moments = driver::decode_checkpoint(id, &checkpoint, &job)?;
+        let moments = driver::decode_checkpoint(id, &checkpoint, &job, !merged)?;
         Ok((moments, checkpoint))
     }
 
@@ -432,8 +454,8 @@ impl JobManager {
         if !patch.is_object() {
             return Err(SpecError::new("", "the body must be a JSON object of solver options").into());
         }
-        let (state, total, spec) = self.state_and_total(id).await?;
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec).await?;
+        let (state, total, spec, merged) = self.state_and_total(id).await?;
+        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
         let mut solver = serde_json::to_value(&spec.solver).map_err(|e| JobError::Internal(e.to_string()))?;
         merge_patch(&mut solver, patch);
         let solver = serde_path_to_error::deserialize(&solver).map_err(|e| {
@@ -450,14 +472,121 @@ impl JobManager {
 
     /// The latest checkpoint's moments as a portable, checksummed document.
     pub async fn moments(&self, id: i64) -> Result<MomentsDocument, JobError> {
-        let (_, _, spec) = self.state_and_total(id).await?;
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec).await?;
-        Ok(MomentsDocument { kind: MOMENTS_DOCUMENT_KIND.into(), spec, checksum: checkpoint.checksum, moments })
+        let (_, _, spec, merged) = self.state_and_total(id).await?;
+        let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
+        Ok(MomentsDocument::new(spec, moments))
+    }
+
+    /// The verified document of a source (pulled from the peer if it names one).
+    async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
+        match source {
+            Source::Document(doc) => Ok(*doc),
+            Source::Peer(url) => {
+                let bytes = pull(&self.inner.http, &url).await?;
+                let doc = self.compute(move || MomentsDocument::from_json(&bytes)).await?;
+                doc.map_err(|e| JobError::Peer(format!("the peer {url} sent an unusable document: {e}")))
+            }
+        }
+    }
+
+    /// Merges a moments document (inline, or pulled from a peer's job) into a finished job's
+    /// statistics and recomputes its results. Refused, with nothing changed, if the job is active,
+    /// the configuration differs, or any iteration would be counted twice.
+    pub async fn merge_into(&self, id: i64, body: &Value) -> Result<JobResult, JobError> {
+        let doc = self.fetch(parse_source(body, "")?).await?;
+        {
+            let _guard = self.inner.lifecycle.lock().await;
+            if self.active(id).is_some() {
+                return Err(JobError::Conflict(format!(
+                    "job {id} is queued or running; merge into it once it has finished, or cancel it first"
+                )));
+            }
+            let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+            if !matches!(row.state.as_str(), "succeeded" | "cancelled") {
+                return Err(JobError::Conflict(format!(
+                    "job {id} is {}; only a succeeded or cancelled job takes merges",
+                    row.state
+                )));
+            }
+            let job = parse_stored_spec(&row)?.validate()?;
+            let mut moments = match self.inner.store.load_checkpoint(id).await? {
+                Some(checkpoint) => driver::decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
+                None => Moments::new(&job.config),
+            };
+            moments.merge(&doc.moments).map_err(crate::sim::document::DocumentError::from)?;
+            let reference = row.reference_luminance;
+            let checkpoint = self.compute(move || driver::checkpoint_of(&moments, &job, reference)).await??;
+            self.inner.store.write_merged(id, &checkpoint, now_ms()).await?;
+        }
+        self.result(id).await
+    }
+
+    /// Creates a finished job from several moments documents or peer jobs (a study): their
+    /// statistics merged, their results computed. `solver` optionally patches the solver options
+    /// of the first source's spec.
+    pub async fn create_study(&self, sources: &[Value], solver: Option<&Value>) -> Result<JobResource, JobError> {
+        if *self.inner.shutdown.borrow() {
+            return Err(JobError::ShuttingDown);
+        }
+        if !(1..=256).contains(&sources.len()) {
+            return Err(SpecError::new("sources", format!("must list 1 to 256 sources, got {}", sources.len())).into());
+        }
+        let parsed = sources
+            .iter()
+            .enumerate()
+            .map(|(i, s)| parse_source(s, &format!("sources[{i}]")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut documents = Vec::with_capacity(parsed.len());
+        for source in parsed {
+            documents.push(self.fetch(source).await?);
+        }
+        let mut merged = self.compute(move || merge_documents(&documents)).await??;
+        if let Some(patch) = solver {
+            let mut options =
+                serde_json::to_value(&merged.spec.solver).map_err(|e| JobError::Internal(e.to_string()))?;
+            merge_patch(&mut options, patch);
+            merged.spec.solver = serde_path_to_error::deserialize(&options).map_err(|e| {
+                SpecError::new(
+                    format!("solver.{}", e.path()).trim_end_matches('.').to_string(),
+                    e.into_inner().to_string(),
+                )
+            })?;
+        }
+        let job = merged.spec.validate()?;
+        let config = job.config.clone();
+        let fingerprint = config.fingerprint().to_string();
+        let spec = spec_json(&job.spec)?;
+        let (reference, checkpoint) = self
+            .compute(move || {
+                let reference = reference_luminance(&config.scene);
+                (reference, driver::checkpoint_of(&merged.moments, &job, reference))
+            })
+            .await?;
+        let new = NewJob {
+            spec,
+            fingerprint,
+            iterations_total: checkpoint.as_ref().map_or(0, |c| c.iterations_done),
+            reference_luminance: reference,
+            idempotency_key: None,
+            request_hash: None,
+            now: now_ms(),
+        };
+        let row = self.inner.store.insert_study(&new, &checkpoint?).await?;
+        resource_from_row(&row)
     }
 
     /// A receiver of the job's resource as it changes, for active jobs.
     pub fn subscribe(&self, id: i64) -> Option<watch::Receiver<JobResource>> {
         self.active(id).map(|job| job.view.subscribe())
+    }
+
+    /// Asks every active job to stop at its next chunk, without waiting (for use where nothing can
+    /// be awaited, such as a destructor). [`JobManager::shutdown`] is the graceful path.
+    pub fn stop_all_now(&self) {
+        self.inner.shutdown.send_replace(true);
+        for job in self.inner.active.lock().expect("active map").values() {
+            job.request_stop(STOP_SHUTDOWN);
+        }
     }
 
     /// Stops accepting work, asks every running job to checkpoint and stop, and waits for them.
@@ -475,6 +604,22 @@ impl JobManager {
             }
             let _ = tokio::time::timeout(Duration::from_millis(200), ended).await;
         }
+    }
+}
+
+/// Iterations a job runs (its range's length).
+fn range_len(spec: &JobSpec) -> u64 {
+    let r = spec.iteration_range();
+    r.end - r.start
+}
+
+/// A shard's range is fixed by its study: running past it would overlap the next shard.
+fn refuse_shard_extension(id: i64, spec: &JobSpec) -> Result<(), JobError> {
+    match spec.shard {
+        Some(_) => Err(JobError::Conflict(format!(
+            "job {id} is a shard: its range is fixed by the study; add iterations with a new job using first_iteration"
+        ))),
+        None => Ok(()),
     }
 }
 

@@ -3,6 +3,7 @@
 //!
 //! * [`manager`] — the queue, the worker slots and every change of a job's state;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
+//! * [`peers`] — moments documents pulled from other servers, for merges;
 //! * [`resource`], [`documents`] — what the API shows of a job;
 //! * [`error`] — what job operations fail with.
 
@@ -10,6 +11,7 @@ pub mod documents;
 pub mod driver;
 pub mod error;
 pub mod manager;
+pub mod peers;
 pub mod resource;
 
 pub use error::JobError;

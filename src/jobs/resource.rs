@@ -82,6 +82,9 @@ pub struct JobResource {
     pub fingerprint: String,
     /// Quadrature value of the expected luminance.
     pub reference_luminance: f64,
+    /// True when the job holds statistics merged from other runs (shards, peers, documents);
+    /// such a job is complete and cannot be extended.
+    pub merged: bool,
 }
 
 /// Unix milliseconds now.
@@ -105,7 +108,7 @@ mod tests {
     #[test]
     fn timestamps_are_rfc3339_utc() {
         assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
-        assert_eq!(rfc3339(1_795_000_000_123), "2026-11-18T09:46:40.123Z");
+        assert_eq!(rfc3339(1_795_000_000_123), "2026-11-18T11:06:40.123Z"); // checked with Python's datetime
     }
 
     #[test]

@@ -25,6 +25,8 @@ pub struct ServerConfig {
     pub checkpoint_interval: Duration,
     /// Largest request body, bytes.
     pub body_limit: usize,
+    /// Largest request body of the routes that take moments documents, bytes.
+    pub document_limit: usize,
 }
 
 /// Why the server could not start or stopped.
@@ -85,7 +87,7 @@ async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), Serv
     let requests =
         rayon::ThreadPoolBuilder::new().num_threads(2).thread_name(|i| format!("optimis-requests-{i}")).build()?;
     let jobs = JobManager::start(store, policy, pool, requests).await?;
-    let app = crate::api::router(jobs.clone(), config.body_limit);
+    let app = crate::api::router(jobs.clone(), config.body_limit, config.document_limit);
     Ok((jobs, app))
 }
 

@@ -127,27 +127,36 @@ impl Illumination {
         self.samplers[k].sample(rng)
     }
 
-    /// Fills `out` with start points, block-wise for the light-path loop: first every ring choice,
-    /// then unit-disc points for all (branch-free rejection), then the per-ring mapping; the rare
-    /// point that falls in a rejection sampler's hole is redrawn on the spot. Same law as
-    /// [`Illumination::sample`], different (but fixed) order of draws.
+    /// Fills `out[..][..n]` with start points, block-wise for the light-path loop: first every
+    /// ring choice, then unit-disc points for all (branch-free rejection, into `disc`), then the
+    /// per-ring mapping; the rare point that falls in a rejection sampler's hole is redrawn on the
+    /// spot. Same law as [`Illumination::sample`], different (but fixed) order of draws.
     #[inline(always)]
-    pub fn sample_block(&self, rng: &mut StreamRng, rings: &mut [u8], disc: &mut [[f64; 3]], out: &mut [[f64; 2]]) {
-        let n = out.len();
+    pub fn sample_block<const B: usize>(
+        &self,
+        rng: &mut StreamRng,
+        rings: &mut [u8],
+        disc: &mut [[f64; B]; 3],
+        out: &mut [[f64; B]; 2],
+        n: usize,
+    ) {
         for r in rings[..n].iter_mut() {
             *r = self.choose_ring(rng) as u8;
         }
-        fill_unit_disc(rng, &mut disc[..n]);
+        let [u, v, rho2] = disc;
+        fill_unit_disc(rng, &mut u[..n], &mut v[..n], &mut rho2[..n]);
+        let [ox, oy] = out;
         for i in 0..n {
-            let [u, v, rho2] = disc[i];
-            out[i] = match self.samplers[rings[i] as usize] {
-                RingSampler::Reject { r_out, hole2 } if rho2 >= hole2 => [u * r_out, v * r_out],
+            let p = match self.samplers[rings[i] as usize] {
+                RingSampler::Reject { r_out, hole2 } if rho2[i] >= hole2 => [u[i] * r_out, v[i] * r_out],
                 RingSampler::Map { r_in2, span2 } => {
-                    let scale = ((r_in2 + rho2 * span2) / rho2).sqrt();
-                    [u * scale, v * scale]
+                    let scale = ((r_in2 + rho2[i] * span2) / rho2[i]).sqrt();
+                    [u[i] * scale, v[i] * scale]
                 }
                 sampler => sampler.sample(rng),
             };
+            ox[i] = p[0];
+            oy[i] = p[1];
         }
     }
 }
@@ -193,17 +202,20 @@ impl RingSampler {
     }
 }
 
-/// Fills `out` with points (u, v, ρ²) uniform in the open unit disc minus its centre, by rejection
-/// from the square without a data-dependent branch: every candidate is written, and the write
-/// position advances only when it is accepted.
+/// Fills `u`, `v`, `rho2` (of equal length) with points uniform in the open unit disc minus its
+/// centre and their squared radii, by rejection from the square without a data-dependent branch:
+/// every candidate is written, and the write position advances only when it is accepted.
 #[inline(always)]
-pub fn fill_unit_disc(rng: &mut StreamRng, out: &mut [[f64; 3]]) {
+pub fn fill_unit_disc(rng: &mut StreamRng, u: &mut [f64], v: &mut [f64], rho2: &mut [f64]) {
+    let n = u.len().min(v.len()).min(rho2.len());
     let mut i = 0;
-    while i < out.len() {
-        let (u, v) = symmetric_pair(rng);
-        let rho2 = u * u + v * v;
-        out[i] = [u, v, rho2];
-        i += usize::from(rho2 < 1.0 && rho2 > 0.0);
+    while i < n {
+        let (a, b) = symmetric_pair(rng);
+        let r2 = a * a + b * b;
+        u[i] = a;
+        v[i] = b;
+        rho2[i] = r2;
+        i += usize::from((r2 < 1.0) & (r2 > 0.0));
     }
 }
 
@@ -299,14 +311,15 @@ mod tests {
     fn block_sampling_follows_the_profile() {
         let ill = paper();
         let mut rng = stream(12, 0, 0);
-        let (mut rings, mut disc, mut out) = ([0u8; 100], [[0.0; 3]; 100], [[0.0; 2]; 100]);
+        let (mut rings, mut disc, mut out) = ([0u8; 100], [[0.0; 100]; 3], [[0.0; 100]; 2]);
         let (mut n, mut in_spot) = (0u32, 0u32);
         for _ in 0..20_000 {
-            ill.sample_block(&mut rng, &mut rings, &mut disc, &mut out);
-            for p in &out {
+            ill.sample_block(&mut rng, &mut rings, &mut disc, &mut out, 100);
+            for i in 0..100 {
+                let r = out[0][i].hypot(out[1][i]);
                 n += 1;
-                in_spot += u32::from(p[0].hypot(p[1]) <= 0.02);
-                assert!(p[0].hypot(p[1]) < 20.0);
+                in_spot += u32::from(r <= 0.02);
+                assert!(r < 20.0);
             }
         }
         let p = 1e6 / 300.0 * PI * 0.0004 / ill.flux();

@@ -35,11 +35,10 @@ use super::tally::{ChunkScratch, ChunkTally, strategy_weights};
 /// Constants of the light-path loop, derived once per configuration.
 #[derive(Debug, Clone, Copy)]
 pub struct PixelCone {
-    /// cos of the widest angle between a path's incident direction at x2l and the direction to
-    /// the pixel for which the path can still land within R of the pixel.
-    cos_reach: f64,
-    /// The widest angle reaches π: every path must sample the lobe.
-    always: bool,
+    /// c·|c| for c = cos of the widest angle between a path's incident direction at x2l and the
+    /// direction to the pixel for which the path can still land within R of the pixel (c = −2,
+    /// below any cosine, when that angle reaches π and every path must sample the lobe).
+    c_abs_c: f64,
 }
 
 impl PixelCone {
@@ -53,37 +52,48 @@ impl PixelCone {
     pub fn new(beta: f64, l2: f64, radius: f64) -> Self {
         assert!(radius < l2, "the merge radius must be smaller than L2 for the pixel cone bound");
         let reach = (LOBE_MAX_SIGMAS * beta + (radius / l2).asin()) * (1.0 + 1e-6);
-        Self { cos_reach: reach.cos(), always: reach >= PI }
+        let c = if reach >= PI { -2.0 } else { reach.cos() };
+        Self { c_abs_c: c * c.abs() }
     }
 
-    /// Whether a path at `x2` on plane 2 travelling along unit `d` can reach the pixel's merge disc.
+    /// Whether a path at (`x`, `y`) on plane 2 travelling along the unit direction (`u`, `v`, −`z`)
+    /// can reach the pixel's merge disc.
+    ///
+    /// With t = pixel − x2l, the test is d·t ≥ c·|t|. Because s ↦ s·|s| is strictly increasing it
+    /// equals (d·t)·|d·t| ≥ c·|c|·|t|², which needs neither a square root nor a branch, and holds
+    /// for every path when c = −2 (as |d·t| ≤ |t|).
     #[inline(always)]
-    pub fn may_reach(&self, x2: [f64; 2], d: &Vector3<f64>, l2: f64) -> bool {
-        // t = pixel − x2l (unnormalised); compare d·t with cos_reach·|t| without a square root.
-        let dot = -d.x * x2[0] - d.y * x2[1] - d.z * l2;
-        let t2 = x2[0] * x2[0] + x2[1] * x2[1] + l2 * l2;
-        let bound2 = self.cos_reach * self.cos_reach * t2;
-        if self.always {
-            true
-        } else if self.cos_reach >= 0.0 {
-            dot >= 0.0 && dot * dot >= bound2
-        } else {
-            dot >= 0.0 || dot * dot <= bound2
-        }
+    pub fn may_reach(&self, x: f64, y: f64, u: f64, v: f64, z: f64, l2: f64) -> bool {
+        let dot = -u * x - v * y + z * l2;
+        let t2 = x * x + y * y + l2 * l2;
+        dot * dot.abs() >= self.c_abs_c * t2
     }
 }
 
 /// Light paths per block of the chunk loop.
 const BLOCK: usize = 128;
 
+/// One block of light paths, as arrays (structure of arrays), reused from block to block.
+struct Block {
+    rings: [u8; BLOCK],
+    /// Start points x3l.
+    x3: [[f64; BLOCK]; 2],
+    /// Direction disc points (u, v) and ρ², then z = √(1 − ρ²) in place of ρ².
+    dir: [[f64; BLOCK]; 3],
+    /// Hits x2l on plane 2.
+    x2: [[f64; BLOCK]; 2],
+    /// Bit 0: may merge at plane 3; bit 1: at plane 2; bit 2: may reach the pixel.
+    flags: [u8; BLOCK],
+}
+
 /// Traces chunk `chunk` of iteration `iteration` and returns its tally.
 ///
-/// Paths go through in blocks of [`BLOCK`], stage by stage over arrays (structure of arrays):
-/// start points, directions (both by branch-free rejection), then one straight-line pass that
-/// projects to plane 2 and runs the three cheap tests (two occupancy bits and the pixel cone), and
-/// last the few flagged paths, in path order. The order of draws is therefore: a block's ring
-/// choices, its start discs, its direction discs, then the lobe draws of its flagged paths — fixed
-/// for a given (seed, iteration, chunk), so results stay deterministic.
+/// Paths go through in blocks of [`BLOCK`], stage by stage over arrays: start points, directions
+/// (both by branch-free rejection), a straight-line pass that projects to plane 2 and runs the pixel
+/// cone test (free of branches and memory lookups, so the compiler can vectorise it), a pass of
+/// occupancy-bit probes, and last the few flagged paths, in path order. The order of draws is
+/// therefore: a block's ring choices, its start discs, its direction discs, then the lobe draws of
+/// its flagged paths — fixed for a given (seed, iteration, chunk), so results stay deterministic.
 pub fn trace_chunk(
     config: &SimConfig,
     cameras: &CameraSet,
@@ -96,42 +106,48 @@ pub fn trace_chunk(
     let (l2, l3) = (scene.l2, scene.l3);
     let cone = PixelCone::new(scene.lobe.beta, l2, config.merge_radius);
     let mut rng = stream(seed, iteration, chunk);
-    let mut rings = [0u8; BLOCK];
-    let mut disc = [[0.0f64; 3]; BLOCK];
-    let mut x3 = [[0.0f64; 2]; BLOCK];
-    let mut dirs = [[0.0f64; 3]; BLOCK];
-    let mut x2 = [[0.0f64; 2]; BLOCK];
-    let mut flags = [0u8; BLOCK];
+    let mut b = Block {
+        rings: [0; BLOCK],
+        x3: [[0.0; BLOCK]; 2],
+        dir: [[0.0; BLOCK]; 3],
+        x2: [[0.0; BLOCK]; 2],
+        flags: [0; BLOCK],
+    };
     let mut remaining = config.chunk_len(chunk) as usize;
     while remaining > 0 {
         let n = remaining.min(BLOCK);
         remaining -= n;
 
         // Starts x3l on plane 3, density I/Φ.
-        scene.illumination.sample_block(&mut rng, &mut rings, &mut disc, &mut x3[..n]);
+        scene.illumination.sample_block(&mut rng, &mut b.rings[..n], &mut b.dir, &mut b.x3, n);
 
         // Cosine directions by Malley's method: disc points (u, v), lifted to z = √(1 − ρ²).
-        fill_unit_disc(&mut rng, &mut dirs[..n]);
+        let [du, dv, dz] = &mut b.dir;
+        fill_unit_disc(&mut rng, &mut du[..n], &mut dv[..n], &mut dz[..n]);
 
-        // Plane 2 and the cheap tests. Travel is downwards: d = (u, v, −z).
+        // Plane 2 and the pixel cone. Travel is downwards: d = (u, v, −z).
+        let [x3x, x3y] = &b.x3;
+        let [x2x, x2y] = &mut b.x2;
         for i in 0..n {
-            let [u, v, rho2] = dirs[i];
-            let z = (1.0 - rho2).sqrt();
+            let z = (1.0 - dz[i]).sqrt();
             let reach = l3 / z;
-            let p2 = [x3[i][0] + reach * u, x3[i][1] + reach * v];
-            x2[i] = p2;
-            dirs[i][2] = -z;
-            let d = Vector3::new(u, v, -z);
-            flags[i] = u8::from(cameras.plane3.may_hold(x3[i]))
-                | (u8::from(cameras.plane2.may_hold(p2)) << 1)
-                | (u8::from(cone.may_reach(p2, &d, l2)) << 2);
+            x2x[i] = x3x[i] + reach * du[i];
+            x2y[i] = x3y[i] + reach * dv[i];
+            dz[i] = z;
+            b.flags[i] = u8::from(cone.may_reach(x2x[i], x2y[i], du[i], dv[i], z, l2)) << 2;
+        }
+
+        // Camera vertices nearby?
+        for i in 0..n {
+            b.flags[i] |= u8::from(cameras.plane3.may_hold([x3x[i], x3y[i]]))
+                | (u8::from(cameras.plane2.may_hold([x2x[i], x2y[i]])) << 1);
         }
 
         // The rare paths that may merge.
         for i in 0..n {
-            if flags[i] != 0 {
-                let d = Vector3::from(dirs[i]);
-                trace_flagged(config, cameras, flags[i], x3[i], x2[i], &d, &mut rng, scratch);
+            if b.flags[i] != 0 {
+                let d = Vector3::new(du[i], dv[i], -dz[i]);
+                trace_flagged(config, cameras, b.flags[i], [x3x[i], x3y[i]], [x2x[i], x2y[i]], &d, &mut rng, scratch);
             }
         }
     }
@@ -271,11 +287,15 @@ mod tests {
             let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
             if x1[0].hypot(x1[1]) <= r {
                 hits += 1;
-                assert!(cone.may_reach(x2, &d, l2), "cone rejected a hit at {x2:?}");
+                assert!(cone.may_reach(x2[0], x2[1], d.x, d.y, -d.z, l2), "cone rejected a hit at {x2:?}");
             }
         }
         assert!(hits > 100, "the test must exercise hits ({hits})");
         // And it does reject: a direction pointing away from the pixel.
-        assert!(!cone.may_reach([0.0, 0.0], &Vector3::new(0.9, 0.0, -0.1).normalize(), l2));
+        let away = Vector3::new(0.9, 0.0, -0.1).normalize();
+        assert!(!cone.may_reach(0.0, 0.0, away.x, away.y, -away.z, l2));
+        // A lobe so wide that every path may reach the pixel.
+        let wide = PixelCone::new(45f64.to_radians(), l2, r);
+        assert!(wide.may_reach(0.0, 0.0, away.x, away.y, -away.z, l2));
     }
 }

@@ -16,6 +16,7 @@
 //!
 //! Statistics and results:
 //! * [`exact_sum`], [`coverage`], [`moments`] — exact additive moments and what they cover;
+//! * [`document`] — the portable, checksummed moments document and merging of documents;
 //! * [`runner`] — runs iterations on the current rayon pool, in order;
 //! * [`solver`], [`noise`], [`report`] — optimal weights, the noise table, the result document;
 //! * [`quadrature`] — the analytic reference luminance.
@@ -27,6 +28,7 @@ pub mod camera;
 pub mod cells;
 pub mod config;
 pub mod coverage;
+pub mod document;
 pub mod exact_sum;
 pub mod grid;
 pub mod heuristics;

@@ -61,14 +61,51 @@ pub struct JobSpec {
     /// N_B: camera paths per iteration.
     #[serde(deserialize_with = "count")]
     pub camera_paths: u64,
-    /// M: iterations to run.
+    /// M: iterations to run (with `shard`: of the whole study).
     #[serde(deserialize_with = "count")]
     pub iterations: u64,
     /// Seed of every random stream of the job.
     #[serde(deserialize_with = "count")]
     pub seed: u64,
+    /// Run only this shard of the study's `iterations` (see [`JobSpec::iteration_range`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
+    /// Run iterations [first_iteration, first_iteration + iterations) instead of [0, iterations).
+    #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "optional_count")]
+    pub first_iteration: Option<u64>,
     pub cells: CellSpec,
     pub solver: SolverOptions,
+}
+
+/// Shard `index` of `count` equal parts of a study's iterations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct Shard {
+    /// 0-based, below `count`.
+    #[serde(deserialize_with = "count")]
+    pub index: u64,
+    /// At least 1, at most the study's `iterations`.
+    #[serde(deserialize_with = "count")]
+    pub count: u64,
+}
+
+impl JobSpec {
+    /// The iterations this job runs. Without `shard` or `first_iteration`: [0, M). With
+    /// `first_iteration` f: [f, f + M). With shard k of n: [⌊k·M/n⌋, ⌊(k+1)·M/n⌋), so that the n
+    /// shards of one study are disjoint and together exactly [0, M) of the same deterministic
+    /// sequence.
+    pub fn iteration_range(&self) -> std::ops::Range<u64> {
+        let m = self.iterations;
+        match (self.shard, self.first_iteration) {
+            (Some(Shard { index, count }), _) => {
+                let at = |k: u64| (u128::from(k) * u128::from(m) / u128::from(count)) as u64;
+                at(index)..at(index + 1)
+            }
+            (None, Some(first)) => first..first + m,
+            (None, None) => 0..m,
+        }
+    }
 }
 
 /// The three planes and the light.
@@ -165,6 +202,10 @@ fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
         Some(x) if x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0 => Ok(x as u64),
         _ => Err(D::Error::custom(format!("expected a non-negative integer, got {v}"))),
     }
+}
+
+fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    count(d).map(Some)
 }
 
 fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
@@ -317,12 +358,36 @@ impl JobSpec {
         check((1..=1_000_000_000).contains(&self.iterations), "iterations", || {
             format!("must be in [1, 10^9], got {}", self.iterations)
         })?;
+        validate_range(self)?;
         let cells = validate_cells(&self.cells)?;
         validate_solver(&self.solver)?;
         let scene = Scene::from_spec(&self.scene);
         let config = SimConfig::new(scene, self.merge_radius, self.light_paths, self.camera_paths, cells);
         Ok(ValidJob { spec: self.clone(), config: Arc::new(config) })
     }
+}
+
+/// Largest iteration index a job may reach (keeps index arithmetic far from overflow).
+pub const MAX_ITERATION_INDEX: u64 = 1 << 62;
+
+fn validate_range(spec: &JobSpec) -> Result<(), SpecError> {
+    if let Some(Shard { index, count }) = spec.shard {
+        check(spec.first_iteration.is_none(), "first_iteration", || {
+            "cannot be combined with shard: a shard's range follows from the study's iterations".to_string()
+        })?;
+        check((1..=spec.iterations).contains(&count), "shard.count", || {
+            format!("must be in [1, iterations = {}] so that every shard has iterations, got {count}", spec.iterations)
+        })?;
+        check(index < count, "shard.index", || {
+            format!("must be in [0, shard.count - 1 = {}], got {index}", count - 1)
+        })?;
+    }
+    if let Some(first) = spec.first_iteration {
+        check(first <= MAX_ITERATION_INDEX - spec.iterations, "first_iteration", || {
+            format!("must be at most 2^62 - iterations, got {first}")
+        })?;
+    }
+    Ok(())
 }
 
 fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
@@ -544,6 +609,36 @@ mod tests {
         assert!(serde_json::from_str::<Value>("{\"merge_radius\": NaN}").is_err());
         let e = invalid(json!({ "merge_radius": 1e308 }));
         assert_eq!(e.field, "merge_radius");
+    }
+
+    #[test]
+    fn shards_partition_the_study() {
+        for (m, n) in [(10, 3), (7, 7), (10_000, 2), (5, 1), (1_000_003, 64)] {
+            let mut covered = 0;
+            let mut next = 0;
+            for k in 0..n {
+                let spec = parse(json!({ "iterations": m, "shard": { "index": k, "count": n } })).unwrap();
+                spec.validate().unwrap();
+                let r = spec.iteration_range();
+                assert_eq!(r.start, next, "shards are contiguous");
+                assert!(!r.is_empty());
+                covered += r.end - r.start;
+                next = r.end;
+            }
+            assert_eq!((covered, next), (m, m));
+        }
+        let spec = parse(json!({ "iterations": 10, "first_iteration": 100 })).unwrap();
+        assert_eq!(spec.iteration_range(), 100..110);
+        assert_eq!(parse(json!({ "iterations": 10 })).unwrap().iteration_range(), 0..10);
+        for (doc, field) in [
+            (json!({ "iterations": 3, "shard": { "index": 3, "count": 3 } }), "shard.index"),
+            (json!({ "iterations": 3, "shard": { "index": 0, "count": 4 } }), "shard.count"),
+            (json!({ "iterations": 3, "shard": { "index": 0, "count": 0 } }), "shard.count"),
+            (json!({ "shard": { "index": 0, "count": 2 }, "first_iteration": 5 }), "first_iteration"),
+            (json!({ "first_iteration": 4_611_686_018_427_387_904u64 }), "first_iteration"),
+        ] {
+            assert_eq!(invalid(doc.clone()).field, field, "{doc}");
+        }
     }
 
     #[test]

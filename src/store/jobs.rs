@@ -19,6 +19,8 @@ pub struct JobRow {
     /// JSON of the best strategy at the latest checkpoint.
     pub best: Option<String>,
     pub error: Option<String>,
+    /// Holds statistics merged from other runs.
+    pub merged: bool,
     pub created_at: i64,
     pub updated_at: i64,
 }
@@ -64,7 +66,7 @@ pub struct Checkpoint {
 macro_rules! job_columns {
     () => {
         "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, error, \
-         created_at, updated_at"
+         merged, created_at, updated_at"
     };
 }
 
@@ -79,9 +81,33 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         reference_luminance: row.try_get("reference_luminance")?,
         best: row.try_get("best")?,
         error: row.try_get("error")?,
+        merged: row.try_get::<i64, _>("merged")? != 0,
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
     })
+}
+
+async fn upsert_checkpoint(
+    tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>,
+    id: i64,
+    checkpoint: &Checkpoint,
+    now: i64,
+) -> Result<(), StoreError> {
+    sqlx::query(
+        "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
+         VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
+         moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
+         written_at = excluded.written_at",
+    )
+    .bind(id)
+    .bind(checkpoint.iterations_done as i64)
+    .bind(&checkpoint.moments)
+    .bind(&checkpoint.checksum)
+    .bind(&checkpoint.result)
+    .bind(now)
+    .execute(&mut **tx)
+    .await?;
+    Ok(())
 }
 
 impl Store {
@@ -214,20 +240,7 @@ impl Store {
     /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
     pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
         let mut tx = self.pool().begin().await?;
-        sqlx::query(
-            "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
-             VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
-             moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
-             written_at = excluded.written_at",
-        )
-        .bind(id)
-        .bind(checkpoint.iterations_done as i64)
-        .bind(&checkpoint.moments)
-        .bind(&checkpoint.checksum)
-        .bind(&checkpoint.result)
-        .bind(now)
-        .execute(&mut *tx)
-        .await?;
+        upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
         sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
             .bind(checkpoint.iterations_done as i64)
             .bind(&checkpoint.best)
@@ -237,6 +250,50 @@ impl Store {
             .await?;
         tx.commit().await?;
         Ok(())
+    }
+
+    /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
+    /// with `iterations_total = iterations_done` = the iterations now covered. One transaction.
+    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+        let mut tx = self.pool().begin().await?;
+        upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
+        sqlx::query(
+            "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, updated_at = ?3 \
+             WHERE id = ?4",
+        )
+        .bind(checkpoint.iterations_done as i64)
+        .bind(&checkpoint.best)
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
+    /// transaction.
+    pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
+        let mut tx = self.pool().begin().await?;
+        let row = sqlx::query(concat!(
+            "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
+             merged, created_at, updated_at) VALUES ('succeeded', ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
+            job_columns!()
+        ))
+        .bind(&job.spec)
+        .bind(&job.fingerprint)
+        .bind(checkpoint.iterations_done as i64)
+        .bind(checkpoint.iterations_done as i64)
+        .bind(job.reference_luminance)
+        .bind(&checkpoint.best)
+        .bind(job.now)
+        .bind(job.now)
+        .fetch_one(&mut *tx)
+        .await?;
+        let id: i64 = row.try_get("id")?;
+        upsert_checkpoint(&mut tx, id, checkpoint, job.now).await?;
+        tx.commit().await?;
+        Ok(job_from_row(&row)?)
     }
 
     /// A job's latest checkpoint, if any.

@@ -25,6 +25,7 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
         checkpoint_iterations: 5,
         checkpoint_interval: Duration::from_millis(300),
         body_limit: 1 << 20,
+        document_limit: 256 << 20,
     }
 }
 
@@ -78,7 +79,7 @@ impl TestServer {
             if done(&job) {
                 return job;
             }
-            assert!(started.elapsed() < Duration::from_secs(600), "job {id} never reached the expected state: {job}");
+            assert!(started.elapsed() < Duration::from_secs(240), "job {id} never reached the expected state: {job}");
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     }
@@ -89,10 +90,23 @@ impl TestServer {
 
     /// Stops the server as on SIGTERM.
     pub async fn stop(mut self) -> tempfile::TempDir {
+        self.graceful().await;
+        std::mem::replace(&mut self.dir, tempfile::tempdir().unwrap())
+    }
+
+    async fn graceful(&mut self) {
         if let Some(server) = self.server.take() {
             server.shutdown().await.unwrap();
         }
-        self.dir
+    }
+}
+
+impl Drop for TestServer {
+    /// A test that failed before `stop` must not leave its jobs computing while the other tests run.
+    fn drop(&mut self) {
+        if let Some(server) = &self.server {
+            server.jobs.stop_all_now();
+        }
     }
 }
 
