@@ -315,8 +315,8 @@ mod tests {
         let (mut n, mut in_spot) = (0u32, 0u32);
         for _ in 0..20_000 {
             ill.sample_block(&mut rng, &mut rings, &mut disc, &mut out, 100);
-            for i in 0..100 {
-                let r = out[0][i].hypot(out[1][i]);
+            for (x, y) in out[0].iter().zip(&out[1]) {
+                let r = x.hypot(*y);
                 n += 1;
                 in_spot += u32::from(r <= 0.02);
                 assert!(r < 20.0);
