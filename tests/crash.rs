@@ -2,79 +2,13 @@
 //! database, and the job ends with moments bit-identical to an uninterrupted run, while finished
 //! jobs and their results are untouched.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+mod common;
+
+use common::process::{Process, get, wait_for};
 
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
 use serde_json::{Value, json};
-
-/// A running `optimis serve` process and its address.
-struct Process {
-    child: Child,
-    base: String,
-}
-
-impl Process {
-    /// Starts the binary on `database` with a free port, and reads the port from its JSON log.
-    fn start(database: &str) -> Self {
-        Self::start_with(database, &["--checkpoint-iterations", "3", "--checkpoint-seconds", "0.5"])
-    }
-
-    fn start_with(database: &str, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_optimis"))
-            .args(["serve", "--bind", "127.0.0.1:0", "--database", database, "--threads", "2", "--log-format", "json"])
-            .args(extra)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("optimis starts");
-        let stderr = child.stderr.take().unwrap();
-        let mut lines = BufReader::new(stderr).lines();
-        let address = loop {
-            let line = lines.next().expect("the server logs its address").unwrap();
-            let entry: Value = serde_json::from_str(&line).unwrap_or(Value::Null);
-            if let Some(a) = entry["fields"]["address"].as_str() {
-                break a.to_string();
-            }
-        };
-        // Keep draining the log so the server never blocks on a full pipe.
-        std::thread::spawn(move || for _ in lines {});
-        Self { child, base: format!("http://{address}") }
-    }
-
-    fn kill(mut self) {
-        self.child.kill().unwrap(); // SIGKILL
-        self.child.wait().unwrap();
-    }
-
-    /// SIGTERM, then the exit status.
-    fn terminate(mut self) -> std::process::ExitStatus {
-        let pid = self.child.id().to_string();
-        let sent = Command::new("kill").args(["-TERM", &pid]).status().expect("kill(1) runs");
-        assert!(sent.success());
-        self.child.wait().unwrap()
-    }
-}
-
-async fn get(client: &reqwest::Client, url: String) -> Value {
-    let response = client.get(&url).send().await.unwrap();
-    assert_eq!(response.status(), 200, "GET {url}");
-    response.json().await.unwrap()
-}
-
-async fn wait_for(client: &reqwest::Client, base: &str, id: i64, done: impl Fn(&Value) -> bool) -> Value {
-    let started = Instant::now();
-    loop {
-        let job = get(client, format!("{base}/v1/jobs/{id}")).await;
-        if done(&job) {
-            return job;
-        }
-        assert!(started.elapsed() < Duration::from_secs(600), "hang guard: {job}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_server_resumes_jobs_bit_identically() {

@@ -26,6 +26,7 @@ use optimis::sim::quadrature::reference_luminance;
 use optimis::sim::runner::{run, run_iterations};
 use optimis::sim::solver::{YStats, fit};
 use optimis::sim::spec::{ValidJob, parse_job_spec};
+use proptest::prelude::*;
 use serde_json::{Value, json};
 
 fn job(doc: Value) -> ValidJob {
@@ -193,4 +194,43 @@ fn fitted_weights_minimise_the_sample_variance() {
     let table = noise_table(&moments, &config.cells, &job.spec.solver);
     let rms = |name: &str| table.rows.iter().find(|r| r.strategy == name).unwrap().rms_percent.unwrap();
     assert!(rms("optimal") <= rms("switch") * (1.0 + 1e-9), "optimal {} vs switch {}", rms("optimal"), rms("switch"));
+}
+
+/// Moments of disjoint pieces of one configuration (three ranges of one seed, two of another),
+/// computed once for the property test.
+fn pieces() -> &'static (Vec<Moments>, Moments) {
+    static PIECES: std::sync::OnceLock<(Vec<Moments>, Moments)> = std::sync::OnceLock::new();
+    PIECES.get_or_init(|| {
+        let job = small_job();
+        let parts = [(5, 0..3), (5, 3..4), (5, 4..9), (6, 0..2), (6, 2..5)];
+        let pieces: Vec<Moments> = parts.iter().map(|(seed, r)| run(&job.config, *seed, r.clone())).collect();
+        let mut whole = pieces[0].clone();
+        for p in &pieces[1..] {
+            whole.merge(p).unwrap();
+        }
+        (pieces, whole)
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    /// Merging in any order and any grouping (any binary tree over any permutation) gives the
+    /// same moments, bit for bit.
+    #[test]
+    fn merging_in_any_order_and_grouping_gives_the_same_moments(
+        order in Just((0..5).collect::<Vec<usize>>()).prop_shuffle(),
+        joins in proptest::collection::vec(0usize..16, 4),
+    ) {
+        let (pieces, whole) = pieces();
+        let mut items: Vec<Moments> = order.iter().map(|&i| pieces[i].clone()).collect();
+        for j in joins {
+            if items.len() == 1 { break; }
+            let at = j % (items.len() - 1);
+            let right = items.remove(at + 1);
+            items[at].merge(&right).unwrap();
+        }
+        prop_assert_eq!(items.len(), 1);
+        prop_assert_eq!(&items[0], whole);
+        prop_assert_eq!(serde_json::to_string(&items[0]).unwrap(), serde_json::to_string(whole).unwrap());
+    }
 }

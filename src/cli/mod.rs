@@ -1,9 +1,12 @@
-//! The command line: `optimis run`, `bench`, `serve` and `openapi`, thin shells around the library.
+//! The command line: `optimis run`, `bench`, `merge`, `report`, `serve` and `openapi`, thin shells
+//! around the library.
 
 mod bench;
+mod documents;
 mod run;
 #[cfg(feature = "server")]
 mod serve;
+mod shard;
 mod table;
 
 use std::path::PathBuf;
@@ -27,6 +30,10 @@ pub enum Command {
     Run(run::RunArgs),
     /// Measure light paths per second at the paper's parameters.
     Bench(bench::BenchArgs),
+    /// Merge moments documents (shards, runs of other seeds) into one.
+    Merge(documents::MergeArgs),
+    /// Print the noise and weights tables of a moments document.
+    Report(documents::ReportArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
     Serve(serve::ServeArgs),
@@ -44,6 +51,8 @@ pub enum CliError {
     Json { path: PathBuf, source: serde_json::Error },
     #[error("invalid job specification: {0}")]
     Spec(#[from] SpecError),
+    #[error("{path}: {source}")]
+    Document { path: PathBuf, source: crate::sim::document::DocumentError },
     #[error("cannot start the worker threads: {0}")]
     Threads(#[from] rayon::ThreadPoolBuildError),
     #[error("cannot write {path}: {source}")]
@@ -75,6 +84,8 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run::run(args),
         Command::Bench(args) => bench::bench(args),
+        Command::Merge(args) => documents::merge(args),
+        Command::Report(args) => documents::report(args),
         #[cfg(feature = "server")]
         Command::Serve(args) => serve::serve_command(args),
         #[cfg(feature = "server")]
@@ -85,6 +96,8 @@ pub fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader went away (`optimis report … | head`): not an error of ours.
+        Err(CliError::Output(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("optimis: {e}");
             ExitCode::FAILURE

@@ -1,7 +1,8 @@
 //! `optimis run`: one job, locally, from a spec file and/or a preset with flag overrides.
 
+use std::collections::HashMap;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -9,12 +10,14 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
 
+use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
+use crate::sim::document::MomentsDocument;
 use crate::sim::moments::Moments;
 use crate::sim::quadrature::reference_luminance;
 use crate::sim::report::build_report;
 use crate::sim::runner::run_iterations;
-use crate::sim::spec::{ValidJob, merge_patch, parse_job_spec};
+use crate::sim::spec::{Shard, ValidJob, merge_patch, parse_job_spec};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -39,12 +42,20 @@ pub struct RunArgs {
     /// Worker threads (default: one per core). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Run shard K of N of the spec's iterations (K from 0). Without it, the index comes from
+    /// SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX when set.
+    #[arg(long, value_parser = parse_shard, value_name = "K/N")]
+    pub shard: Option<Shard>,
+    /// Number of shards, when the index comes from the scheduler's environment.
+    #[arg(long)]
+    pub shard_count: Option<u64>,
     /// Print the result as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
-    /// Also write the run's moments (the additive statistics) to this JSON file.
-    #[arg(long)]
-    pub moments_out: Option<PathBuf>,
+    /// Write the run's statistics as a moments document (for `optimis merge`, `optimis report`
+    /// or `POST /v1/jobs/{id}/merge`).
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
 }
 
 /// Reads a JSON file.
@@ -75,14 +86,30 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
         doc["preset"] = Value::Null;
     }
     merge_patch(&mut doc, &Value::Object(overrides));
-    Ok(parse_job_spec(&doc)?.validate()?)
+    let mut spec = parse_job_spec(&doc)?;
+    let environment: HashMap<String, String> = std::env::vars().collect();
+    spec.shard = resolve_shard(args.shard, args.shard_count, spec.shard, &environment)?;
+    if spec.shard.is_some() {
+        spec.first_iteration = None;
+    }
+    Ok(spec.validate()?)
+}
+
+/// Writes `bytes` to `path`, through a temporary file and a rename so that a reader (or a
+/// crashed run) never sees a partial file.
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+    let fail = |source| CliError::Write { path: path.to_path_buf(), source };
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, bytes).map_err(fail)?;
+    std::fs::rename(&tmp, path).map_err(fail)
 }
 
 pub fn run(args: RunArgs) -> Result<(), CliError> {
     let job = job_from_args(&args)?;
     let pool = thread_pool(args.threads)?;
     let config = &job.config;
-    let total = job.spec.iterations;
+    let range = job.spec.iteration_range();
+    let total = range.end - range.start;
     let progress = ProgressBar::new(total).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} iterations, ETA {eta} {msg}")
             .expect("a valid template")
@@ -92,7 +119,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let mut moments = Moments::new(config);
     let never = AtomicBool::new(false);
     pool.install(|| {
-        run_iterations(config, job.spec.seed, 0..total, &mut moments, &never, |_, done| {
+        run_iterations(config, job.spec.seed, range.clone(), &mut moments, &never, |_, next| {
+            let done = next - range.start;
             let rate = (done * config.light_paths) as f64 / started.elapsed().as_secs_f64();
             progress.set_message(format!("{rate:.3e} light paths/s"));
             progress.set_position(done);
@@ -102,10 +130,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     .expect("a fresh run is neither cancelled nor overlapping");
     progress.finish_and_clear();
     let seconds = started.elapsed().as_secs_f64();
-    if let Some(path) = &args.moments_out {
-        let file = std::fs::File::create(path).map_err(|source| CliError::Write { path: path.clone(), source })?;
-        serde_json::to_writer(std::io::BufWriter::new(file), &moments)
-            .map_err(|e| CliError::Write { path: path.clone(), source: e.into() })?;
+    if let Some(path) = &args.out {
+        write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
     }
     let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene));
     let mut out = std::io::stdout().lock();
@@ -113,7 +139,7 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
         writeln!(out)?;
     } else {
-        table::write_report(&mut out, &job, &report, seconds, pool.current_num_threads())?;
+        table::write_report(&mut out, &job.spec, &report, Some((seconds, pool.current_num_threads())))?;
     }
     Ok(())
 }

@@ -3,7 +3,7 @@
 use std::io::{self, Write};
 
 use crate::sim::report::RunReport;
-use crate::sim::spec::ValidJob;
+use crate::sim::spec::JobSpec;
 
 fn num(x: Option<f64>, scale: f64, width: usize, precision: usize) -> String {
     match x {
@@ -17,19 +17,29 @@ fn bound(x: Option<f64>) -> String {
 }
 
 /// Writes the noise table, merge rates and weights table.
+/// `timing` is (seconds, threads) of a run, shown in the header.
 pub fn write_report(
     out: &mut impl Write,
-    job: &ValidJob,
+    spec: &JobSpec,
     report: &RunReport,
-    seconds: f64,
-    threads: usize,
+    timing: Option<(f64, usize)>,
 ) -> io::Result<()> {
-    let spec = &job.spec;
+    let when = timing.map_or_else(String::new, |(seconds, threads)| format!(" ({seconds:.1} s on {threads} threads)"));
     writeln!(
         out,
-        "{} iterations × N_F = {} light paths × N_B = {} camera paths, seed {}, R = {} ({:.1} s on {} threads)",
-        report.iterations, spec.light_paths, spec.camera_paths, spec.seed, spec.merge_radius, seconds, threads
+        "{} iterations × N_F = {} light paths × N_B = {} camera paths, R = {}{when}",
+        report.iterations, spec.light_paths, spec.camera_paths, spec.merge_radius
     )?;
+    let covered: Vec<String> = report
+        .coverage
+        .seeds()
+        .iter()
+        .map(|s| {
+            let ranges: Vec<String> = s.ranges.iter().map(|r| format!("[{}, {})", r[0], r[1])).collect();
+            format!("seed {}: {}", s.seed, ranges.join(" "))
+        })
+        .collect();
+    writeln!(out, "iterations covered: {}", covered.join("; "))?;
     writeln!(out, "reference (quadrature) L·10⁵ = {:.4}", report.reference_luminance * 1e5)?;
     writeln!(out)?;
     writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;

@@ -151,7 +151,7 @@ pub enum MergeError {
         "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
     )]
     Fingerprint { found: String, expected: String },
-    #[error("the iterations {} are already counted", list(.0))]
+    #[error("these iterations are already counted: {}", list(.0))]
     Overlap(Vec<Overlap>),
     #[error("malformed moments: {0}")]
     Malformed(String),

@@ -2,6 +2,8 @@
 //! and a small JSON client.
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod process;
+
 use std::time::{Duration, Instant};
 
 use optimis::server::{RunningServer, ServerConfig, spawn};

@@ -1,0 +1,83 @@
+//! `optimis merge` and `optimis report`: moments documents on the command line.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args;
+use serde_json::Value;
+
+use super::run::write_atomically;
+use super::{CliError, table};
+use crate::sim::document::{MomentsDocument, merge_documents};
+use crate::sim::quadrature::reference_luminance;
+use crate::sim::report::build_report;
+use crate::sim::spec::{SolverOptions, SpecError, merge_patch, validate_solver};
+
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// Moments documents (from `optimis run --out` or `GET /v1/jobs/{id}/moments`).
+    #[arg(required = true)]
+    pub documents: Vec<PathBuf>,
+    /// Where to write the merged document.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// A moments document.
+    pub document: PathBuf,
+    /// Print the result document as JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+    /// Solver options to change, as JSON (e.g. '{"lambda": 0.1}' or '{"fixed": {"w0": null}}').
+    #[arg(long, value_name = "JSON")]
+    pub solver: Option<String>,
+}
+
+/// Reads and verifies a moments document.
+fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError> {
+    let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
+    MomentsDocument::from_json(&bytes).map_err(|source| CliError::Document { path: path.clone(), source })
+}
+
+pub fn merge(args: MergeArgs) -> Result<(), CliError> {
+    let documents = args.documents.iter().map(read_document).collect::<Result<Vec<_>, _>>()?;
+    let merged = merge_documents(&documents).map_err(|source| CliError::Document { path: args.out.clone(), source })?;
+    write_atomically(&args.out, &merged.to_json())?;
+    eprintln!(
+        "merged {} documents: {} iterations → {}",
+        documents.len(),
+        merged.moments.iterations(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Result<SolverOptions, CliError> {
+    let Some(text) = patch else { return Ok(base.clone()) };
+    let patch: Value = serde_json::from_str(text).map_err(|e| SpecError::new("--solver", format!("not JSON: {e}")))?;
+    let mut options = serde_json::to_value(base).expect("solver options serialise");
+    merge_patch(&mut options, &patch);
+    let options: SolverOptions = serde_path_to_error::deserialize(&options)
+        .map_err(|e| SpecError::new(format!("solver.{}", e.path()), e.into_inner().to_string()))?;
+    validate_solver(&options)?;
+    Ok(options)
+}
+
+pub fn report(args: ReportArgs) -> Result<(), CliError> {
+    let doc = read_document(&args.document)?;
+    let job = doc.spec.validate()?;
+    let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
+    let report = build_report(&doc.moments, &job.config.cells, &solver, reference_luminance(&job.config.scene));
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
+        writeln!(out)?;
+    } else {
+        let mut spec = doc.spec.clone();
+        spec.solver = solver;
+        table::write_report(&mut out, &spec, &report, None)?;
+    }
+    Ok(())
+}

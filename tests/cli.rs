@@ -1,0 +1,91 @@
+//! The headless path of a study on a batch cluster: shards run with `optimis run --shard`, merged
+//! with `optimis merge`, reported with `optimis report` — equal to a single run.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn optimis(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_optimis"));
+    command.current_dir(dir).args(args).env_remove("SLURM_ARRAY_TASK_ID").env_remove("JOB_COMPLETION_INDEX");
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    command.output().expect("optimis runs")
+}
+
+fn ok(output: Output) -> Vec<u8> {
+    assert!(output.status.success(), "optimis failed: {}", String::from_utf8_lossy(&output.stderr));
+    output.stdout
+}
+
+#[test]
+fn four_shards_merged_equal_a_single_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = r#"{"light_paths": 40000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 22, "seed": 8}"#;
+    std::fs::write(dir.path().join("job.json"), spec).unwrap();
+    for k in 0..4 {
+        let shard = format!("{k}/4");
+        let out = format!("shard-{k}.json");
+        ok(optimis(dir.path(), &["run", "--spec", "job.json", "--shard", &shard, "--out", &out, "--json"], &[]));
+    }
+    // The scheduler's index: Slurm arrays (here numbered from 1) and Kubernetes indexed Jobs.
+    ok(optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--out", "slurm.json", "--json"],
+        &[("SLURM_ARRAY_TASK_ID", "2"), ("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_COUNT", "4")],
+    ));
+    ok(optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--out", "k8s.json", "--shard-count", "4", "--json"],
+        &[("JOB_COMPLETION_INDEX", "3")],
+    ));
+    let read = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    assert_eq!(read("slurm.json"), read("shard-1.json"));
+    assert_eq!(read("k8s.json"), read("shard-3.json"));
+
+    ok(optimis(
+        dir.path(),
+        &["merge", "shard-2.json", "shard-0.json", "shard-3.json", "shard-1.json", "--out", "study.json"],
+        &[],
+    ));
+    let study_report: Value =
+        serde_json::from_slice(&ok(optimis(dir.path(), &["report", "study.json", "--json"], &[]))).unwrap();
+    let single_report: Value = serde_json::from_slice(&ok(optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--out", "single.json", "--json"],
+        &[],
+    )))
+    .unwrap();
+    assert_eq!(study_report, single_report, "the merged report equals the single run's");
+    let study: Value = serde_json::from_slice(&read("study.json")).unwrap();
+    let single: Value = serde_json::from_slice(&read("single.json")).unwrap();
+    assert_eq!(study["moments"], single["moments"], "merged moments are bit-identical to the single run's");
+    assert_eq!(study_report["iterations"], 22);
+
+    // Double counting, foreign configurations and corrupted files are refused.
+    let refused = optimis(dir.path(), &["merge", "shard-0.json", "study.json", "--out", "bad.json"], &[]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("already counted"));
+    let text = String::from_utf8(read("shard-0.json")).unwrap();
+    let at = text.find("\"sum_yy\":[").unwrap();
+    let pos = text[at..].find(|c: char| c.is_ascii_digit() && c != '0').unwrap() + at;
+    let mut corrupted = text.into_bytes();
+    corrupted[pos] = if corrupted[pos] == b'9' { b'1' } else { corrupted[pos] + 1 };
+    std::fs::write(dir.path().join("corrupted.json"), corrupted).unwrap();
+    let refused = optimis(dir.path(), &["report", "corrupted.json"], &[]);
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("checksum"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    assert!(!dir.path().join("bad.json").exists());
+
+    // A report with other solver options.
+    let tables =
+        String::from_utf8(ok(optimis(dir.path(), &["report", "study.json", "--solver", r#"{"lambda": 0.5}"#], &[])))
+            .unwrap();
+    assert!(tables.contains("optimal weights (λ = 0.5)"), "{tables}");
+}
