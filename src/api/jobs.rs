@@ -12,7 +12,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, typed};
-use crate::jobs::documents::{JobList, JobResult};
+use crate::jobs::documents::{JobHistory, JobList, JobResult};
 use crate::jobs::resource::{JobResource, JobState};
 use crate::sim::document::MomentsDocument;
 use crate::sim::spec::{FixedWeights, RingSpec};
@@ -323,4 +323,17 @@ pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<S
 )]
 pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<MomentsDocument>, ApiError> {
     Ok(Json(state.jobs.moments(id).await?))
+}
+
+/// Each strategy's luminance and RMS at every checkpoint (at most 1,000 points, evenly thinned).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The history, oldest checkpoint first", body = JobHistory),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn history(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobHistory>, ApiError> {
+    Ok(Json(state.jobs.history(id).await?))
 }

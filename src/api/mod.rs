@@ -5,6 +5,7 @@
 //! OpenAPI operation, so the served router and `openapi.yaml` come from the same code; a test
 //! checks that the committed `openapi.yaml` equals [`openapi_yaml`].
 
+mod dashboard;
 pub mod error;
 mod events;
 mod extract;
@@ -47,7 +48,8 @@ pub struct AppState {
     tags(
         (name = "jobs", description = "Simulation jobs"),
         (name = "statistics", description = "Merging statistics of shards, peers and documents"),
-        (name = "operations", description = "Health and API description")
+        (name = "operations", description = "Health, metrics and API description"),
+        (name = "dashboard", description = "The built-in web dashboard")
     )
 )]
 struct ApiDoc;
@@ -67,12 +69,15 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::cancel))
         .routes(routes!(jobs::extend))
         .routes(routes!(jobs::moments))
+        .routes(routes!(jobs::history))
         .routes(with_limit(routes!(studies::merge)))
         .routes(with_limit(routes!(studies::create)))
         .routes(routes!(events::events))
         .routes(routes!(health::healthz))
         .routes(routes!(health::readyz))
         .routes(routes!(health::openapi_yaml))
+        .routes(routes!(dashboard::index))
+        .routes(routes!(dashboard::asset))
 }
 
 /// The OpenAPI document of this server, as YAML (what `/openapi.yaml` serves and the committed

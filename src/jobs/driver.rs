@@ -11,6 +11,7 @@ use std::ops::ControlFlow;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use super::documents::StrategyPoint;
 use super::error::JobError;
 use super::manager::{ActiveJob, Inner, STOP_CANCEL, best_strategy};
 use super::resource::{now_ms, rfc3339};
@@ -159,12 +160,19 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: f64) -
     let report = build_report(moments, &job.config.cells, &job.spec.solver, reference);
     let best = best_strategy(&report.noise_table);
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
+    let history: Vec<StrategyPoint> = report
+        .noise_table
+        .iter()
+        .map(|r| StrategyPoint { strategy: r.strategy.clone(), luminance: r.luminance, rms_percent: r.rms_percent })
+        .collect();
+    let internal = |e: serde_json::Error| JobError::Internal(e.to_string());
     Ok(Checkpoint {
         iterations_done: moments.iterations(),
         checksum: sha256_hex(&bytes),
         moments: bytes,
-        result: serde_json::to_string(&report).map_err(|e| JobError::Internal(e.to_string()))?,
+        result: serde_json::to_string(&report).map_err(internal)?,
         best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
+        history: serde_json::to_string(&history).map_err(internal)?,
     })
 }
 

@@ -25,7 +25,7 @@ use serde_json::Value;
 use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
-use super::documents::{JobList, JobResult};
+use super::documents::{HistoryPoint, JobHistory, JobList, JobResult, MAX_HISTORY_POINTS, thin};
 use super::driver;
 use super::error::JobError;
 use super::peers::{Source, parse_source, pull};
@@ -432,6 +432,21 @@ impl JobManager {
         let report: RunReport = serde_json::from_str(&json)
             .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
         Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })
+    }
+
+    /// Each strategy's figures at every checkpoint (thinned to at most 1,000 points).
+    pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
+        self.get(id).await?;
+        let rows = self.inner.store.load_history(id).await?;
+        let points = thin(rows, MAX_HISTORY_POINTS)
+            .into_iter()
+            .map(|(iterations, json)| {
+                serde_json::from_str(&json)
+                    .map(|strategies| HistoryPoint { iterations, strategies })
+                    .map_err(|e| JobError::Internal(format!("stored history of job {id} is unreadable: {e}")))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(JobHistory { job_id: id, points })
     }
 
     /// The latest checkpoint's moments, verified against their checksum (and, for a job's own

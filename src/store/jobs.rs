@@ -60,6 +60,8 @@ pub struct Checkpoint {
     pub result: String,
     /// The best strategy (JSON) at this checkpoint, copied to the job row.
     pub best: Option<String>,
+    /// Each strategy's luminance and RMS (JSON), appended to the job's history.
+    pub history: String,
 }
 
 /// The columns of a [`JobRow`], as a literal for `concat!` (queries stay static strings).
@@ -104,6 +106,16 @@ async fn upsert_checkpoint(
     .bind(&checkpoint.moments)
     .bind(&checkpoint.checksum)
     .bind(&checkpoint.result)
+    .bind(now)
+    .execute(&mut **tx)
+    .await?;
+    sqlx::query(
+        "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
+         ON CONFLICT (job_id, iterations) DO UPDATE SET strategies = excluded.strategies, written_at = excluded.written_at",
+    )
+    .bind(id)
+    .bind(checkpoint.iterations_done as i64)
+    .bind(&checkpoint.history)
     .bind(now)
     .execute(&mut **tx)
     .await?;
@@ -309,10 +321,24 @@ impl Store {
                 checksum: row.try_get("checksum")?,
                 result: row.try_get("result")?,
                 best: None,
+                history: String::new(),
             })
         })
         .transpose()
         .map_err(StoreError::from)
+    }
+
+    /// A job's checkpoint history: (iterations, strategies JSON), oldest first.
+    pub async fn load_history(&self, id: i64) -> Result<Vec<(u64, String)>, StoreError> {
+        let rows =
+            sqlx::query("SELECT iterations, strategies FROM checkpoint_history WHERE job_id = ? ORDER BY iterations")
+                .bind(id)
+                .fetch_all(self.pool())
+                .await?;
+        rows.iter()
+            .map(|row| Ok((row.try_get::<i64, _>("iterations")? as u64, row.try_get("strategies")?)))
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(Into::into)
     }
 
     /// A job's latest result document, without the moments.

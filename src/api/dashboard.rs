@@ -1,0 +1,61 @@
+//! The built-in dashboard: one HTML page, its script and style, and the vendored plotting library
+//! (uPlot), all compiled into the binary — no CDN, nothing fetched from the internet.
+//!
+//! The page is a client of the public API (`/v1/jobs…`, Server-Sent Events); it has no routes of
+//! its own beyond its files. A Content-Security-Policy keeps it to this origin.
+
+use axum::extract::Path;
+use axum::http::{HeaderValue, header};
+use axum::response::{IntoResponse, Response};
+
+use super::error::{ApiError, Problem};
+
+/// (name, media type, bytes) of every asset under `/assets/`.
+const ASSETS: &[(&str, &str, &[u8])] = &[
+    ("app.js", "text/javascript; charset=utf-8", include_bytes!("dashboard/app.js")),
+    ("app.css", "text/css; charset=utf-8", include_bytes!("dashboard/app.css")),
+    ("uPlot.iife.min.js", "text/javascript; charset=utf-8", include_bytes!("dashboard/vendor/uPlot.iife.min.js")),
+    ("uPlot.min.css", "text/css; charset=utf-8", include_bytes!("dashboard/vendor/uPlot.min.css")),
+];
+
+const INDEX: &[u8] = include_bytes!("dashboard/index.html");
+
+/// Everything from this origin only; inline styles are allowed for uPlot's sizing.
+const CSP: &str = "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; object-src 'none'; \
+                   base-uri 'none'; frame-ancestors 'none'";
+
+fn asset_response(media_type: &'static str, body: &'static [u8]) -> Response {
+    let mut response = body.into_response();
+    let headers = response.headers_mut();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(media_type));
+    // The files change only with the binary; revalidation is cheap on loopback.
+    headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    headers.insert(header::CONTENT_SECURITY_POLICY, HeaderValue::from_static(CSP));
+    headers.insert(header::X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
+    response
+}
+
+/// The dashboard.
+#[utoipa::path(
+    get, path = "/", tag = "dashboard",
+    responses((status = 200, description = "The dashboard page", content_type = "text/html", body = String))
+)]
+pub async fn index() -> Response {
+    asset_response("text/html; charset=utf-8", INDEX)
+}
+
+/// A file of the dashboard.
+#[utoipa::path(
+    get, path = "/assets/{name}", tag = "dashboard", params(("name" = String, Path, description = "File name")),
+    responses(
+        (status = 200, description = "The file", content_type = "text/plain", body = String),
+        (status = 404, description = "No such file", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn asset(Path(name): Path<String>) -> Result<Response, ApiError> {
+    ASSETS
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|(_, media_type, body)| asset_response(media_type, body))
+        .ok_or_else(|| ApiError::NotFound(format!("no dashboard file {name:?}")))
+}
