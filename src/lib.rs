@@ -6,7 +6,8 @@
 //! * [`sim`] — the pure simulation core: scene, sampling, iterations, moments, solver, reference.
 //! * [`jobs`] — the job runner: queue, worker slots, drivers, checkpoints (feature `server`).
 //! * [`store`] — SQLite persistence of jobs and checkpoints (feature `server`).
-//! * [`api`] — the HTTP API and its OpenAPI description (feature `server`).
+//! * [`api`] — the HTTP API, its OpenAPI description and the dashboard (feature `server`).
+//! * [`metrics`] — Prometheus metrics of requests, checkpoints and jobs (feature `server`).
 //! * [`server`] — wiring and graceful shutdown of the server process (feature `server`).
 //! * [`cli`] — the command line, a thin shell around all of the above.
 //!
@@ -18,6 +19,8 @@ pub mod api;
 pub mod cli;
 #[cfg(feature = "server")]
 pub mod jobs;
+#[cfg(feature = "server")]
+pub mod metrics;
 #[cfg(feature = "server")]
 pub mod server;
 pub mod sim;

@@ -312,3 +312,50 @@ async fn health_readiness_and_openapi() {
     );
     server.stop().await;
 }
+
+/// The value of the sample `name{labels}` in an OpenMetrics exposition.
+fn sample(text: &str, series: &str) -> Option<f64> {
+    text.lines().find_map(|l| l.strip_prefix(series).and_then(|rest| rest.trim().parse().ok()))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_show_a_running_job_progressing() {
+    let server = TestServer::start().await;
+    let id = server
+        .submit(&json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 1 }))
+        .await;
+    server.wait_for_state(id, "running").await;
+    let series = format!("optimis_job_iterations_done{{job=\"{id}\"}}");
+    let mut seen = Vec::new();
+    let started = std::time::Instant::now();
+    let text = loop {
+        let response = server.get("/metrics").await;
+        assert_eq!(response.status(), 200);
+        assert!(response.headers()["content-type"].to_str().unwrap().starts_with("application/openmetrics-text"));
+        let text = response.text().await.unwrap();
+        if let Some(v) = sample(&text, &series) {
+            if seen.last() != Some(&v) {
+                seen.push(v);
+            }
+        }
+        // Two increases, and a checkpoint written (the histogram has a count).
+        if seen.len() >= 3 && sample(&text, "optimis_checkpoint_duration_seconds_count").unwrap_or(0.0) >= 1.0 {
+            break text;
+        }
+        assert!(started.elapsed() < Duration::from_secs(240), "hang guard: iterations seen {seen:?}\n{text}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    assert!(seen.windows(2).all(|w| w[0] < w[1]), "the iteration counter only grows: {seen:?}");
+    assert_eq!(sample(&text, "optimis_jobs{state=\"running\"}"), Some(1.0));
+    assert!(sample(&text, &format!("optimis_job_light_paths_per_second{{job=\"{id}\"}}")).unwrap() > 0.0);
+    assert!(
+        text.contains(r#"optimis_http_requests_total{method="GET",route="/v1/jobs/{id}",status="200"}"#),
+        "requests are counted by route template:\n{text}"
+    );
+    server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    server.wait_for_state(id, "cancelled").await;
+    let text = server.get("/metrics").await.text().await.unwrap();
+    assert_eq!(sample(&text, &series), None, "a job that stopped leaves the gauges");
+    assert_eq!(sample(&text, "optimis_jobs{state=\"cancelled\"}"), Some(1.0));
+    server.stop().await;
+}

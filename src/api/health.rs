@@ -36,6 +36,21 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
     Ok(Json(Health { status: "ok".into() }))
 }
 
+/// Prometheus metrics: requests by route template and status, request latency, checkpoint
+/// duration, jobs by state, and iterations and throughput of each running job.
+#[utoipa::path(
+    get, path = "/metrics", tag = "operations",
+    responses(
+        (status = 200, description = "OpenMetrics text exposition", content_type = "application/openmetrics-text", body = String),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
+    let states = state.jobs.store().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+    let text = state.jobs.metrics().render(&states, &state.jobs.running_samples());
+    Ok(([(header::CONTENT_TYPE, crate::metrics::CONTENT_TYPE)], text))
+}
+
 /// This API's OpenAPI description.
 #[utoipa::path(
     get, path = "/openapi.yaml", tag = "operations",

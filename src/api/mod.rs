@@ -16,7 +16,7 @@ mod studies;
 use std::sync::Arc;
 
 use axum::Router;
-use axum::extract::DefaultBodyLimit;
+use axum::extract::{DefaultBodyLimit, State};
 use axum::response::Response;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::trace::TraceLayer;
@@ -76,6 +76,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(health::healthz))
         .routes(routes!(health::readyz))
         .routes(routes!(health::openapi_yaml))
+        .routes(routes!(health::metrics))
         .routes(routes!(dashboard::index))
         .routes(routes!(dashboard::asset))
 }
@@ -84,6 +85,24 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
 /// `openapi.yaml` must equal).
 pub fn openapi_yaml() -> String {
     api_router(DEFAULT_DOCUMENT_LIMIT).into_openapi().to_yaml().expect("the OpenAPI document serialises")
+}
+
+/// Counts and times every request by its route template (`MatchedPath`: `/v1/jobs/{id}`, not the
+/// raw path, so that the label set stays bounded).
+async fn observe(
+    State(state): State<AppState>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let route = request
+        .extensions()
+        .get::<axum::extract::MatchedPath>()
+        .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
+    let method = request.method().as_str().to_string();
+    let started = std::time::Instant::now();
+    let response = next.run(request).await;
+    state.jobs.metrics().observe_request(&method, &route, response.status().as_u16(), started.elapsed());
+    response
 }
 
 async fn not_found() -> ApiError {
@@ -109,6 +128,7 @@ pub fn router(jobs: JobManager, body_limit: usize, document_limit: usize) -> Rou
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(CatchPanicLayer::custom(panic_response))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), observe))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }

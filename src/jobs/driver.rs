@@ -32,6 +32,10 @@ const WRITE_ATTEMPTS: u32 = 5;
 
 /// Runs `job` to its end (or until stopped) and records the outcome.
 pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
+    // Everything this thread logs for the job carries its id.
+    let span = tracing::info_span!("job", id = job.id);
+    let _entered = span.enter();
+    tracing::info!(first_iteration = job.start, iterations = job.total.load(Ordering::SeqCst), "job started");
     let outcome = run(inner, job);
     if let Err(e) = outcome {
         tracing::error!(job = job.id, error = %e, "job failed");
@@ -105,7 +109,8 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             continue; // extended while finishing
         }
         let segment_start = Instant::now();
-        let mut last_publish = Instant::now();
+        // Publish after the first batch already, then at most every PROGRESS_INTERVAL.
+        let mut last_publish = segment_start.checked_sub(PROGRESS_INTERVAL).unwrap_or(segment_start);
         let policy = &inner.policy;
         let outcome = inner.pool.install(|| {
             run_iterations(config, seed, start + done..start + total, &mut moments, &job.stop, |m, next| {
@@ -187,6 +192,7 @@ fn write_checkpoint(inner: &Inner, job: &ActiveJob, moments: &Moments, reference
         let now = now_ms();
         match inner.runtime.block_on(inner.store.write_checkpoint(job.id, &checkpoint, now)) {
             Ok(()) => {
+                inner.metrics.observe_checkpoint(started.elapsed());
                 job.view.send_modify(|r| {
                     r.progress.iterations_checkpointed = checkpoint.iterations_done;
                     r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);

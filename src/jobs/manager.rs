@@ -30,6 +30,7 @@ use super::driver;
 use super::error::JobError;
 use super::peers::{Source, parse_source, pull};
 use super::resource::{BestStrategy, JobResource, JobState, Progress, now_ms, rfc3339};
+use crate::metrics::{JobSample, Metrics};
 use crate::sim::config::sha256_hex;
 use crate::sim::document::{MomentsDocument, merge_documents};
 use crate::sim::moments::Moments;
@@ -89,6 +90,7 @@ pub(crate) struct Inner {
     requests: rayon::ThreadPool,
     /// HTTP client for pulling moments from peers.
     http: reqwest::Client,
+    pub metrics: Arc<Metrics>,
     pub policy: RunPolicy,
     pub runtime: Handle,
     /// std Mutex: held only for map operations, never across an `.await`.
@@ -166,6 +168,7 @@ impl JobManager {
         policy: RunPolicy,
         pool: Arc<rayon::ThreadPool>,
         requests: rayon::ThreadPool,
+        metrics: Arc<Metrics>,
     ) -> Result<Self, StoreError> {
         let (shutdown, _) = watch::channel(false);
         let inner = Arc::new(Inner {
@@ -173,6 +176,7 @@ impl JobManager {
             pool,
             requests,
             http: super::peers::client(),
+            metrics,
             policy,
             runtime: Handle::current(),
             active: Mutex::new(HashMap::new()),
@@ -255,6 +259,29 @@ impl JobManager {
     /// The store behind the manager.
     pub fn store(&self) -> &Store {
         &self.inner.store
+    }
+
+    /// The server's metrics.
+    pub fn metrics(&self) -> &Arc<Metrics> {
+        &self.inner.metrics
+    }
+
+    /// Iterations and throughput of every running job, from memory.
+    pub fn running_samples(&self) -> Vec<JobSample> {
+        let active = self.inner.active.lock().expect("active map");
+        let mut samples: Vec<JobSample> = active
+            .values()
+            .filter_map(|job| {
+                let view = job.view.borrow();
+                (view.state == JobState::Running).then(|| JobSample {
+                    id: job.id,
+                    iterations_done: view.progress.iterations_done,
+                    light_paths_per_second: view.progress.light_paths_per_second.unwrap_or(0.0),
+                })
+            })
+            .collect();
+        samples.sort_by_key(|s| s.id);
+        samples
     }
 
     /// Validates and queues a job. With an idempotency key, a repeated request with the same body

@@ -86,7 +86,8 @@ async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), Serv
     // never wait behind a running job's chunks.
     let requests =
         rayon::ThreadPoolBuilder::new().num_threads(2).thread_name(|i| format!("optimis-requests-{i}")).build()?;
-    let jobs = JobManager::start(store, policy, pool, requests).await?;
+    let metrics = Arc::new(crate::metrics::Metrics::new());
+    let jobs = JobManager::start(store, policy, pool, requests, metrics).await?;
     let app = crate::api::router(jobs.clone(), config.body_limit, config.document_limit);
     Ok((jobs, app))
 }

@@ -328,6 +328,21 @@ impl Store {
         .map_err(StoreError::from)
     }
 
+    /// Number of jobs in each state (every state listed, zero included).
+    pub async fn count_by_state(&self) -> Result<Vec<(String, i64)>, StoreError> {
+        let rows = sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state").fetch_all(self.pool()).await?;
+        let mut counts: Vec<(String, i64)> =
+            ["queued", "running", "succeeded", "failed", "cancelled"].iter().map(|s| (s.to_string(), 0)).collect();
+        for row in rows {
+            let state: String = row.try_get("state")?;
+            let n: i64 = row.try_get("n")?;
+            if let Some(slot) = counts.iter_mut().find(|(s, _)| *s == state) {
+                slot.1 = n;
+            }
+        }
+        Ok(counts)
+    }
+
     /// A job's checkpoint history: (iterations, strategies JSON), oldest first.
     pub async fn load_history(&self, id: i64) -> Result<Vec<(u64, String)>, StoreError> {
         let rows =

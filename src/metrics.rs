@@ -1,0 +1,155 @@
+//! Prometheus metrics (`GET /metrics`, OpenMetrics text format).
+//!
+//! * `optimis_http_requests_total{method, route, status}` and
+//!   `optimis_http_request_duration_seconds{method, route}`: every request, by route *template*
+//!   (`/v1/jobs/{id}`, never the raw path, so the label set stays bounded);
+//! * `optimis_checkpoint_duration_seconds`: writing a checkpoint (report, serialisation, database);
+//! * `optimis_jobs{state}`: jobs in the database by state;
+//! * `optimis_job_iterations_done{job}` and `optimis_job_light_paths_per_second{job}`: each running
+//!   job, read from memory at scrape time.
+//!
+//! Request and checkpoint metrics are recorded as they happen; the job gauges are refreshed on
+//! each scrape from the job manager, so finished jobs drop out.
+
+use std::sync::atomic::AtomicU64;
+use std::time::Duration;
+
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::Registry;
+
+/// Media type of the exposition.
+pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct RequestLabels {
+    method: String,
+    route: String,
+    status: u16,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct RouteLabels {
+    method: String,
+    route: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct StateLabels {
+    state: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct JobLabels {
+    job: String,
+}
+
+/// The server's metrics.
+pub struct Metrics {
+    registry: Registry,
+    requests: Family<RequestLabels, Counter>,
+    request_seconds: Family<RouteLabels, Histogram>,
+    checkpoint_seconds: Histogram,
+    jobs: Family<StateLabels, Gauge>,
+    job_iterations: Family<JobLabels, Gauge>,
+    job_rate: Family<JobLabels, Gauge<f64, AtomicU64>>,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A running job's figures for the gauges.
+pub struct JobSample {
+    pub id: i64,
+    pub iterations_done: u64,
+    pub light_paths_per_second: f64,
+}
+
+impl Metrics {
+    pub fn new() -> Self {
+        let mut registry = Registry::with_prefix("optimis");
+        let requests = Family::<RequestLabels, Counter>::default();
+        registry.register("http_requests", "HTTP requests by method, route template and status", requests.clone());
+        // 100 µs to ~50 s.
+        let request_seconds = Family::<RouteLabels, Histogram>::new_with_constructor(|| {
+            Histogram::new(exponential_buckets(1e-4, 2.5, 15))
+        });
+        registry.register("http_request_duration_seconds", "Time to answer a request", request_seconds.clone());
+        let checkpoint_seconds = Histogram::new(exponential_buckets(1e-3, 2.0, 14));
+        registry.register("checkpoint_duration_seconds", "Time to write one checkpoint", checkpoint_seconds.clone());
+        let jobs = Family::<StateLabels, Gauge>::default();
+        registry.register("jobs", "Jobs in the database by state", jobs.clone());
+        let job_iterations = Family::<JobLabels, Gauge>::default();
+        registry.register("job_iterations_done", "Iterations a running job has computed", job_iterations.clone());
+        let job_rate = Family::<JobLabels, Gauge<f64, AtomicU64>>::default();
+        registry.register("job_light_paths_per_second", "Recent throughput of a running job", job_rate.clone());
+        Self { registry, requests, request_seconds, checkpoint_seconds, jobs, job_iterations, job_rate }
+    }
+
+    /// Records one answered request.
+    pub fn observe_request(&self, method: &str, route: &str, status: u16, elapsed: Duration) {
+        let route = route.to_string();
+        self.requests.get_or_create(&RequestLabels { method: method.into(), route: route.clone(), status }).inc();
+        self.request_seconds
+            .get_or_create(&RouteLabels { method: method.into(), route })
+            .observe(elapsed.as_secs_f64());
+    }
+
+    /// Records one checkpoint write.
+    pub fn observe_checkpoint(&self, elapsed: Duration) {
+        self.checkpoint_seconds.observe(elapsed.as_secs_f64());
+    }
+
+    /// Renders the exposition with the given job counts by state and running jobs.
+    pub fn render(&self, states: &[(String, i64)], running: &[JobSample]) -> String {
+        self.jobs.clear();
+        for (state, count) in states {
+            self.jobs.get_or_create(&StateLabels { state: state.clone() }).set(*count);
+        }
+        self.job_iterations.clear();
+        self.job_rate.clear();
+        for job in running {
+            let labels = JobLabels { job: job.id.to_string() };
+            self.job_iterations.get_or_create(&labels).set(job.iterations_done as i64);
+            self.job_rate.get_or_create(&labels).set(job.light_paths_per_second);
+        }
+        let mut out = String::new();
+        prometheus_client::encoding::text::encode(&mut out, &self.registry).expect("writing to a String cannot fail");
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exposition_has_every_family() {
+        let m = Metrics::new();
+        m.observe_request("GET", "/v1/jobs/{id}", 200, Duration::from_millis(3));
+        m.observe_checkpoint(Duration::from_millis(20));
+        let text = m.render(
+            &[("running".into(), 1), ("succeeded".into(), 4)],
+            &[JobSample { id: 7, iterations_done: 12, light_paths_per_second: 5e7 }],
+        );
+        for needle in [
+            r#"optimis_http_requests_total{method="GET",route="/v1/jobs/{id}",status="200"} 1"#,
+            "optimis_http_request_duration_seconds_bucket",
+            "optimis_checkpoint_duration_seconds_count 1",
+            r#"optimis_jobs{state="succeeded"} 4"#,
+            r#"optimis_job_iterations_done{job="7"} 12"#,
+            r#"optimis_job_light_paths_per_second{job="7"} 50000000"#,
+            "# EOF",
+        ] {
+            assert!(text.contains(needle), "missing {needle} in\n{text}");
+        }
+        let again = m.render(&[], &[]);
+        assert!(!again.contains(r#"job="7""#), "finished jobs drop out");
+    }
+}
