@@ -56,6 +56,12 @@ pub enum ApiError {
     /// 413: the body is larger than the server accepts.
     #[error("{0}")]
     PayloadTooLarge(String),
+    /// 401: the route needs `Authorization: Bearer <token>` and none or a wrong one came.
+    #[error("{0}")]
+    Unauthorized(String),
+    /// 429: a limit is reached (queue, event streams); retry after the given seconds.
+    #[error("{detail}")]
+    TooManyRequests { detail: String, retry_after_seconds: u64 },
     /// 502: a peer server could not be reached or answered badly.
     #[error("{0}")]
     BadGateway(String),
@@ -84,6 +90,7 @@ impl From<JobError> for ApiError {
             }
             JobError::Document(e) => ApiError::Invalid { field: String::new(), message: e.to_string() },
             JobError::Peer(m) => ApiError::BadGateway(m),
+            JobError::Busy { detail, retry_after_seconds } => ApiError::TooManyRequests { detail, retry_after_seconds },
             JobError::ShuttingDown => {
                 ApiError::Unavailable("the server is shutting down; retry on its successor".into())
             }
@@ -107,6 +114,8 @@ impl ApiError {
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
+            ApiError::TooManyRequests { .. } => StatusCode::TOO_MANY_REQUESTS,
             ApiError::BadGateway(_) => StatusCode::BAD_GATEWAY,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
@@ -121,6 +130,8 @@ impl ApiError {
             ApiError::MethodNotAllowed => "method-not-allowed",
             ApiError::Conflict(_) => "conflict",
             ApiError::PayloadTooLarge(_) => "payload-too-large",
+            ApiError::Unauthorized(_) => "unauthorized",
+            ApiError::TooManyRequests { .. } => "too-many-requests",
             ApiError::BadGateway(_) => "bad-gateway",
             ApiError::Unavailable(_) => "unavailable",
             ApiError::Internal(_) => "internal",
@@ -164,6 +175,18 @@ impl IntoResponse for ApiError {
         if let ApiError::Internal(reason) = &self {
             tracing::error!(%reason, "internal error");
         }
-        problem_response(&self.problem())
+        let mut response = problem_response(&self.problem());
+        match &self {
+            ApiError::TooManyRequests { retry_after_seconds, .. } => {
+                response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after_seconds));
+            }
+            ApiError::Unauthorized(_) => {
+                response
+                    .headers_mut()
+                    .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer realm=\"optimis\""));
+            }
+            _ => {}
+        }
+        response
     }
 }

@@ -39,6 +39,7 @@ enum Phase {
         (status = 200, description = "Events named `job` with the job resource as data; a final `shutdown` event if the server stops",
             content_type = "text/event-stream", body = String),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Too many event streams are open; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -51,38 +52,42 @@ pub async fn events(
         Some(rx) => Phase::First(rx, shutdown),
         None => Phase::Last(job_event(&state.jobs.get(id).await?)),
     };
-    let events = stream::unfold(start, |phase| async move {
-        match phase {
-            Phase::First(rx, shutdown) => {
-                let current = rx.borrow().clone();
-                let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
-                Some((Ok(job_event(&current)), next))
-            }
-            Phase::Follow(mut rx, mut shutdown) => {
-                if *shutdown.borrow() {
-                    return Some((
-                        Ok(Event::default().event("shutdown").data("the server is shutting down")),
-                        Phase::Done,
-                    ));
-                }
-                tokio::select! {
-                    changed = rx.changed() => match changed {
-                        Ok(()) => {
-                            let current = rx.borrow_and_update().clone();
-                            let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
-                            Some((Ok(job_event(&current)), next))
-                        }
-                        // The job left memory (finished and dropped): its last state was sent.
-                        Err(_) => None,
-                    },
-                    _ = shutdown.changed() => {
-                        Some((Ok(Event::default().event("shutdown").data("the server is shutting down")), Phase::Done))
-                    }
-                }
-            }
-            Phase::Last(event) => Some((Ok(event), Phase::Done)),
-            Phase::Done => None,
-        }
+    // Held by the stream: the slot frees when the stream ends or the client goes away.
+    let slot = state.streams.acquire()?;
+    let events = stream::unfold((start, slot), |(phase, slot)| async move {
+        step(phase).await.map(|(event, next)| (event, (next, slot)))
     });
     Ok(Sse::new(events).keep_alive(KeepAlive::new().interval(Duration::from_secs(15))))
+}
+
+/// The next event of a stream and the phase after it.
+async fn step(phase: Phase) -> Option<(Result<Event, Infallible>, Phase)> {
+    match phase {
+        Phase::First(rx, shutdown) => {
+            let current = rx.borrow().clone();
+            let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
+            Some((Ok(job_event(&current)), next))
+        }
+        Phase::Follow(mut rx, mut shutdown) => {
+            if *shutdown.borrow() {
+                return Some((Ok(Event::default().event("shutdown").data("the server is shutting down")), Phase::Done));
+            }
+            tokio::select! {
+                changed = rx.changed() => match changed {
+                    Ok(()) => {
+                        let current = rx.borrow_and_update().clone();
+                        let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
+                        Some((Ok(job_event(&current)), next))
+                    }
+                    // The job left memory (finished and dropped): its last state was sent.
+                    Err(_) => None,
+                },
+                _ = shutdown.changed() => {
+                    Some((Ok(Event::default().event("shutdown").data("the server is shutting down")), Phase::Done))
+                }
+            }
+        }
+        Phase::Last(event) => Some((Ok(event), Phase::Done)),
+        Phase::Done => None,
+    }
 }

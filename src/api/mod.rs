@@ -5,12 +5,14 @@
 //! OpenAPI operation, so the served router and `openapi.yaml` come from the same code; a test
 //! checks that the committed `openapi.yaml` equals [`openapi_yaml`].
 
+mod auth;
 mod dashboard;
 pub mod error;
 mod events;
 mod extract;
 mod health;
 mod jobs;
+mod openapi;
 mod studies;
 
 use std::sync::Arc;
@@ -25,6 +27,7 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::jobs::JobManager;
+use crate::server::{BearerToken, Limits};
 use error::ApiError;
 
 /// What every handler can reach; cheap to clone.
@@ -33,6 +36,10 @@ pub struct AppState {
     pub jobs: JobManager,
     /// The OpenAPI document, rendered once.
     pub openapi_yaml: Arc<str>,
+    /// SHA-256 of the bearer token, when the server requires one.
+    pub token_digest: Option<[u8; 32]>,
+    /// Open event streams, bounded.
+    pub streams: Arc<auth::StreamSlots>,
 }
 
 #[derive(OpenApi)]
@@ -81,10 +88,17 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(dashboard::asset))
 }
 
+/// The routes and their finished OpenAPI document (security scheme and common responses added).
+fn routes_and_document(document_limit: usize) -> (axum::Router<AppState>, utoipa::openapi::OpenApi) {
+    let (router, mut api) = api_router(document_limit).split_for_parts();
+    utoipa::Modify::modify(&openapi::Security, &mut api);
+    (router, api)
+}
+
 /// The OpenAPI document of this server, as YAML (what `/openapi.yaml` serves and the committed
 /// `openapi.yaml` must equal).
 pub fn openapi_yaml() -> String {
-    api_router(DEFAULT_DOCUMENT_LIMIT).into_openapi().to_yaml().expect("the OpenAPI document serialises")
+    routes_and_document(DEFAULT_DOCUMENT_LIMIT).1.to_yaml().expect("the OpenAPI document serialises")
 }
 
 /// Counts and times every request by its route template (`MatchedPath`: `/v1/jobs/{id}`, not the
@@ -117,17 +131,23 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
     axum::response::IntoResponse::into_response(ApiError::Internal("a request handler panicked".into()))
 }
 
-/// The application: every route, with request tracing, a body limit of `body_limit` bytes
-/// (`document_limit` for the routes that take moments documents) and panics answered as problem
-/// documents.
-pub fn router(jobs: JobManager, body_limit: usize, document_limit: usize) -> Router {
-    let (router, api) = api_router(document_limit).split_for_parts();
-    let state = AppState { jobs, openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into() };
+/// The application: every route, with request tracing, metrics, authentication (when `token` is
+/// set), the body limits of `limits` and panics answered as problem documents.
+pub fn router(jobs: JobManager, limits: &Limits, token: Option<BearerToken>) -> Router {
+    let (router, api) = routes_and_document(limits.document_bytes);
+    let state = AppState {
+        jobs,
+        openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into(),
+        token_digest: token.map(|t| auth::digest(&t.0)),
+        streams: auth::StreamSlots::new(limits.max_event_streams),
+    };
+    let body_limit = limits.body_bytes;
     router
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(CatchPanicLayer::custom(panic_response))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), auth::authenticate))
         .layer(axum::middleware::from_fn_with_state(state.clone(), observe))
         .layer(TraceLayer::new_for_http())
         .with_state(state)

@@ -6,7 +6,8 @@ use std::time::Duration;
 use clap::{Args, ValueEnum};
 
 use super::{CliError, cores};
-use crate::server::{ServerConfig, serve, termination_signal};
+use crate::server::{BearerToken, Limits, ServerConfig, serve, termination_signal};
+use crate::sim::spec::SpecError;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum LogFormat {
@@ -40,9 +41,57 @@ pub struct ServeArgs {
     /// Largest body of the routes that take moments documents (merge, studies), in bytes.
     #[arg(long, default_value_t = crate::api::DEFAULT_DOCUMENT_LIMIT as u64, value_parser = clap::value_parser!(u64).range(1024..=(1 << 34)))]
     pub document_limit: u64,
+    /// Largest light_paths × camera_paths × iterations of one job.
+    #[arg(long, default_value_t = 1e16, value_parser = positive_number)]
+    pub max_job_budget: f64,
+    /// Most cells of a job's weight grid.
+    #[arg(long, default_value_t = crate::sim::spec::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::spec::MAX_CELLS as u64))]
+    pub max_cells: u64,
+    /// Most jobs waiting in the queue (beyond: 429 with Retry-After).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub max_queued_jobs: u64,
+    /// Most event streams open at once (beyond: 429 with Retry-After).
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub max_event_streams: u64,
+    /// A file holding the bearer token every request must carry (see also OPTIMIS_TOKEN).
+    #[arg(long, value_name = "FILE", conflicts_with = "token")]
+    pub token_file: Option<std::path::PathBuf>,
+    /// The bearer token every request must carry. Prefer the environment variable or a file:
+    /// command lines are visible to other users of the machine.
+    #[arg(long, env = "OPTIMIS_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
     /// Log format on stderr.
     #[arg(long, value_enum, default_value = "text")]
     pub log_format: LogFormat,
+}
+
+fn positive_number(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("expected a positive number, got {s:?}")),
+    }
+}
+
+/// The configured token: from the file or the flag/environment; empty or short tokens are refused.
+fn token(args: &ServeArgs) -> Result<Option<BearerToken>, CliError> {
+    let raw = match (&args.token_file, &args.token) {
+        (Some(path), _) => Some(
+            std::fs::read_to_string(path)
+                .map_err(|source| CliError::Read { path: path.clone(), source })?
+                .trim()
+                .to_string(),
+        ),
+        (None, Some(t)) => Some(t.trim().to_string()),
+        (None, None) => None,
+    };
+    match raw {
+        None => Ok(None),
+        Some(t) if t.len() >= 16 && t.chars().all(|c| c.is_ascii_graphic()) => Ok(Some(BearerToken(t.into()))),
+        Some(_) => {
+            Err(SpecError::new("token", "must be at least 16 visible ASCII characters (e.g. `openssl rand -hex 32`)")
+                .into())
+        }
+    }
 }
 
 fn positive_seconds(s: &str) -> Result<f64, String> {
@@ -65,6 +114,7 @@ fn init_logging(format: LogFormat) {
 
 pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
     init_logging(args.log_format);
+    let token = token(&args)?;
     let config = ServerConfig {
         bind: args.bind,
         database: args.database,
@@ -72,8 +122,15 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         threads: args.threads.map_or_else(cores, |t| t as usize),
         checkpoint_iterations: args.checkpoint_iterations,
         checkpoint_interval: Duration::from_secs_f64(args.checkpoint_seconds),
-        body_limit: args.body_limit as usize,
-        document_limit: args.document_limit as usize,
+        limits: Limits {
+            body_bytes: args.body_limit as usize,
+            document_bytes: args.document_limit as usize,
+            job_budget: args.max_job_budget,
+            max_cells: args.max_cells as usize,
+            max_queued_jobs: args.max_queued_jobs as usize,
+            max_event_streams: args.max_event_streams as usize,
+        },
+        token,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async {
@@ -81,7 +138,10 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
             .await
             .map_err(|source| crate::server::ServerError::Bind { addr: config.bind, source })?;
         tracing::info!(address = %listener.local_addr()?, database = %config.database, workers = config.workers,
-            threads = config.threads, "optimis listening");
+            threads = config.threads, authentication = config.token.is_some(), "optimis listening");
+        if config.token.is_none() && !config.bind.ip().is_loopback() {
+            tracing::warn!("listening beyond loopback without a token: anyone who can reach this port can submit jobs");
+        }
         serve(listener, &config, termination_signal()).await
     })?;
     Ok(())

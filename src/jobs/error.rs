@@ -23,6 +23,9 @@ pub enum JobError {
     /// A peer could not be reached or did not answer with a moments document (HTTP 502).
     #[error("{0}")]
     Peer(String),
+    /// The server is at a limit; retry later (HTTP 429 with Retry-After).
+    #[error("{detail}")]
+    Busy { detail: String, retry_after_seconds: u64 },
     /// The server is shutting down and accepts no new work (HTTP 503).
     #[error("the server is shutting down")]
     ShuttingDown,

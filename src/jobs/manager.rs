@@ -48,6 +48,12 @@ pub struct RunPolicy {
     pub checkpoint_iterations: u64,
     /// …and at least this often.
     pub checkpoint_interval: Duration,
+    /// Largest N_F · N_B · iterations of one job.
+    pub job_budget: f64,
+    /// Most cells of a job's grid.
+    pub max_cells: usize,
+    /// Most jobs waiting in the queue.
+    pub max_queued_jobs: usize,
 }
 
 /// Why a running job was asked to stop.
@@ -295,6 +301,8 @@ impl JobManager {
             return Err(JobError::ShuttingDown);
         }
         let job = parse_job_spec(document)?.validate()?;
+        self.check_budget(&job.spec, range_len(&job.spec))?;
+        self.check_queue()?;
         let config = job.config.clone();
         let reference = self.compute(move || reference_luminance(&config.scene)).await?;
         let spec_json = spec_json(&job.spec)?;
@@ -324,6 +332,44 @@ impl JobManager {
                 "this key was already used with a different request body; use a new key for a new job",
             ))),
         }
+    }
+
+    /// Refuses jobs beyond this server's budget: N_F · N_B · `iterations` and the cell count.
+    fn check_budget(&self, spec: &JobSpec, iterations: u64) -> Result<(), JobError> {
+        let policy = &self.inner.policy;
+        let pairs = spec.light_paths as f64 * spec.camera_paths as f64 * iterations as f64;
+        if pairs > policy.job_budget {
+            return Err(SpecError::new(
+                "iterations",
+                format!(
+                    "light_paths × camera_paths × iterations = {pairs:.3e} exceeds this server's per-job budget of {:.3e} \
+                     (--max-job-budget); run fewer iterations, or split the study into shards",
+                    policy.job_budget
+                ),
+            )
+            .into());
+        }
+        let cells = spec.cells.r2_edges.len() * spec.cells.r3_edges.len() * spec.cells.phi_bins as usize;
+        if cells > policy.max_cells {
+            return Err(SpecError::new(
+                "cells",
+                format!("the grid has {cells} cells; this server accepts at most {} (--max-cells)", policy.max_cells),
+            )
+            .into());
+        }
+        Ok(())
+    }
+
+    /// Refuses a new job when the queue is full.
+    fn check_queue(&self) -> Result<(), JobError> {
+        let queued = self.inner.queue.lock().expect("queue").len();
+        if queued >= self.inner.policy.max_queued_jobs {
+            return Err(JobError::Busy {
+                detail: format!("{queued} jobs are already waiting, the most this server queues (--max-queued-jobs)"),
+                retry_after_seconds: 30,
+            });
+        }
+        Ok(())
     }
 
     /// The current resource of a job.
@@ -391,6 +437,7 @@ impl JobManager {
             refuse_shard_extension(id, &job.job.spec)?;
             let total = job.total.load(Ordering::SeqCst);
             let new_total = checked_total(total, iterations)?;
+            self.check_budget(&job.job.spec, new_total)?;
             let mut spec = job.view.borrow().spec.clone();
             spec.iterations = new_total;
             self.inner.store.set_total(id, new_total, &spec_json(&spec)?, job.state().as_str(), now).await?;
@@ -418,6 +465,8 @@ impl JobManager {
         let new_total = checked_total(row.iterations_total, iterations)?;
         let mut spec = parse_stored_spec(&row)?;
         refuse_shard_extension(id, &spec)?;
+        self.check_budget(&spec, new_total)?;
+        self.check_queue()?;
         spec.iterations = new_total;
         let job = spec.validate()?;
         self.inner.store.set_total(id, new_total, &spec_json(&spec)?, "queued", now).await?;

@@ -23,10 +23,50 @@ pub struct ServerConfig {
     pub threads: usize,
     pub checkpoint_iterations: u64,
     pub checkpoint_interval: Duration,
+    pub limits: Limits,
+    /// When set, every route but `/healthz`, `/readyz` and the dashboard's static files requires
+    /// `Authorization: Bearer <token>`.
+    pub token: Option<BearerToken>,
+}
+
+/// What one client may ask of the server; every limit is configurable, the defaults are safe.
+#[derive(Debug, Clone)]
+pub struct Limits {
     /// Largest request body, bytes.
-    pub body_limit: usize,
-    /// Largest request body of the routes that take moments documents, bytes.
-    pub document_limit: usize,
+    pub body_bytes: usize,
+    /// Largest body of the routes that take moments documents, bytes.
+    pub document_bytes: usize,
+    /// Largest N_F · N_B · iterations of one job (the number of light–camera path pairs).
+    pub job_budget: f64,
+    /// Most cells of a job's grid.
+    pub max_cells: usize,
+    /// Most jobs waiting in the queue; beyond it submissions get 429 with Retry-After.
+    pub max_queued_jobs: usize,
+    /// Most event streams open at once; beyond it 429 with Retry-After.
+    pub max_event_streams: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            body_bytes: 1 << 20,
+            document_bytes: crate::api::DEFAULT_DOCUMENT_LIMIT,
+            job_budget: 1e16,
+            max_cells: crate::sim::spec::MAX_CELLS,
+            max_queued_jobs: 1000,
+            max_event_streams: 256,
+        }
+    }
+}
+
+/// A shared secret for bearer authentication; never printed.
+#[derive(Clone)]
+pub struct BearerToken(pub std::sync::Arc<str>);
+
+impl std::fmt::Debug for BearerToken {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("BearerToken(…)")
+    }
 }
 
 /// Why the server could not start or stopped.
@@ -81,6 +121,9 @@ async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), Serv
         workers: config.workers,
         checkpoint_iterations: config.checkpoint_iterations,
         checkpoint_interval: config.checkpoint_interval,
+        job_budget: config.limits.job_budget,
+        max_cells: config.limits.max_cells,
+        max_queued_jobs: config.limits.max_queued_jobs,
     };
     // Requests that compute (reference luminance, re-solves) get their own two threads, so they
     // never wait behind a running job's chunks.
@@ -88,7 +131,7 @@ async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), Serv
         rayon::ThreadPoolBuilder::new().num_threads(2).thread_name(|i| format!("optimis-requests-{i}")).build()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
     let jobs = JobManager::start(store, policy, pool, requests, metrics).await?;
-    let app = crate::api::router(jobs.clone(), config.body_limit, config.document_limit);
+    let app = crate::api::router(jobs.clone(), &config.limits, config.token.clone());
     Ok((jobs, app))
 }
 

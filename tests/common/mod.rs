@@ -26,8 +26,8 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
         threads: 2,
         checkpoint_iterations: 5,
         checkpoint_interval: Duration::from_millis(300),
-        body_limit: 1 << 20,
-        document_limit: 256 << 20,
+        limits: optimis::server::Limits::default(),
+        token: None,
     }
 }
 

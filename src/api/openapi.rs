@@ -1,0 +1,74 @@
+//! Post-processing of the generated OpenAPI document: the bearer security scheme, and the 401 and
+//! 429 responses, added to every operation they apply to so that no route can forget them.
+
+use utoipa::Modify;
+use utoipa::openapi::content::ContentBuilder;
+use utoipa::openapi::path::Operation;
+use utoipa::openapi::response::ResponseBuilder;
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
+use utoipa::openapi::{OpenApi, Ref, RefOr, Response};
+
+use super::auth::is_public;
+use super::error::PROBLEM_JSON;
+
+/// Operations that can answer 429 (queue full, too many event streams).
+const LIMITED: &[(&str, &str)] =
+    &[("/v1/jobs", "post"), ("/v1/jobs/{id}/extend", "post"), ("/v1/jobs/{id}/events", "get")];
+
+pub struct Security;
+
+fn problem(description: &str) -> RefOr<Response> {
+    ResponseBuilder::new()
+        .description(description)
+        .content(PROBLEM_JSON, ContentBuilder::new().schema(Some(Ref::from_schema_name("Problem"))).build())
+        .build()
+        .into()
+}
+
+fn operations(item: &mut utoipa::openapi::path::PathItem) -> Vec<(&'static str, &mut Operation)> {
+    [
+        ("get", item.get.as_mut()),
+        ("post", item.post.as_mut()),
+        ("put", item.put.as_mut()),
+        ("delete", item.delete.as_mut()),
+        ("patch", item.patch.as_mut()),
+    ]
+    .into_iter()
+    .filter_map(|(method, op)| op.map(|op| (method, op)))
+    .collect()
+}
+
+impl Modify for Security {
+    fn modify(&self, openapi: &mut OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some("Required on every route but /healthz, /readyz and the dashboard's static files when the server is started with a token (OPTIMIS_TOKEN or --token-file)."))
+                    .build(),
+            ),
+        );
+        for (path, item) in openapi.paths.paths.iter_mut() {
+            let public = is_public(path) || path == "/assets/{name}";
+            for (method, operation) in operations(item) {
+                if public {
+                    operation.security = None;
+                } else {
+                    operation.security = Some(vec![SecurityRequirement::new("bearer", Vec::<String>::new())]);
+                    operation
+                        .responses
+                        .responses
+                        .insert("401".into(), problem("Missing or wrong bearer token (when the server requires one)"));
+                }
+                if LIMITED.contains(&(path.as_str(), method)) {
+                    operation
+                        .responses
+                        .responses
+                        .insert("429".into(), problem("A limit is reached; retry after Retry-After seconds"));
+                }
+            }
+        }
+    }
+}
