@@ -333,10 +333,10 @@ async fn metrics_show_a_running_job_progressing() {
         assert_eq!(response.status(), 200);
         assert!(response.headers()["content-type"].to_str().unwrap().starts_with("application/openmetrics-text"));
         let text = response.text().await.unwrap();
-        if let Some(v) = sample(&text, &series) {
-            if seen.last() != Some(&v) {
-                seen.push(v);
-            }
+        if let Some(v) = sample(&text, &series)
+            && seen.last() != Some(&v)
+        {
+            seen.push(v);
         }
         // Two increases, and a checkpoint written (the histogram has a count).
         if seen.len() >= 3 && sample(&text, "optimis_checkpoint_duration_seconds_count").unwrap_or(0.0) >= 1.0 {
