@@ -1,7 +1,7 @@
 //! A study split across two real `optimis serve` processes (separate SQLite files), merged on a
 //! third job by pulling from the peers — bit-identical to one job running all iterations — and the
 //! merges that must be refused (same shard twice, another configuration, a corrupted or truncated
-//! document), each leaving the target's statistics unchanged.
+//! document, an unreachable peer), each leaving the target's statistics unchanged.
 
 mod common;
 
@@ -115,9 +115,11 @@ async fn shards_on_two_servers_merge_into_the_whole_study() {
     assert_eq!(response.status(), 400);
     assert_eq!(unchanged().await, before);
 
-    // A peer that is not there: 502.
-    let (status, _) = post(&client, merge_url.clone(), &json!({ "from": "http://127.0.0.1:9/v1/jobs/1" })).await;
-    assert_eq!(status, 502);
+    // A peer that is not there: 422 naming the source.
+    let (status, problem) = post(&client, merge_url.clone(), &json!({ "from": "http://127.0.0.1:9/v1/jobs/1" })).await;
+    assert_eq!(status, 422);
+    assert_eq!(problem["field"], "from");
+    assert!(problem["detail"].as_str().unwrap().contains("cannot reach the peer"), "{problem}");
     assert_eq!(unchanged().await, before);
 
     // The intact document of another seed merges: 30 more iterations, results recomputed.

@@ -62,9 +62,6 @@ pub enum ApiError {
     /// 429: a limit is reached (queue, event streams); retry after the given seconds.
     #[error("{detail}")]
     TooManyRequests { detail: String, retry_after_seconds: u64 },
-    /// 502: a peer server could not be reached or answered badly.
-    #[error("{0}")]
-    BadGateway(String),
     /// 503: shutting down, or the database is busy; retry later.
     #[error("{0}")]
     Unavailable(String),
@@ -89,7 +86,7 @@ impl From<JobError> for ApiError {
                 ApiError::Conflict(format!("the statistics cannot be merged: {e}"))
             }
             JobError::Document(e) => ApiError::Invalid { field: String::new(), message: e.to_string() },
-            JobError::Peer(m) => ApiError::BadGateway(m),
+            JobError::Peer(m) => ApiError::Invalid { field: "from".into(), message: m },
             JobError::Busy { detail, retry_after_seconds } => ApiError::TooManyRequests { detail, retry_after_seconds },
             JobError::ShuttingDown => {
                 ApiError::Unavailable("the server is shutting down; retry on its successor".into())
@@ -116,7 +113,6 @@ impl ApiError {
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
             ApiError::TooManyRequests { .. } => StatusCode::TOO_MANY_REQUESTS,
-            ApiError::BadGateway(_) => StatusCode::BAD_GATEWAY,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -132,7 +128,6 @@ impl ApiError {
             ApiError::PayloadTooLarge(_) => "payload-too-large",
             ApiError::Unauthorized(_) => "unauthorized",
             ApiError::TooManyRequests { .. } => "too-many-requests",
-            ApiError::BadGateway(_) => "bad-gateway",
             ApiError::Unavailable(_) => "unavailable",
             ApiError::Internal(_) => "internal",
         }

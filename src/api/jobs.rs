@@ -28,20 +28,34 @@ const MAX_KEY_LEN: usize = 255;
 #[allow(dead_code)] // documents the request body; the body is parsed by `sim::spec::parse_job_spec`
 pub struct JobSubmission {
     /// `paper-table1` (default) or `uniform-illumination`.
-    #[schema(example = "paper-table1")]
+    #[schema(example = "paper-table1", pattern = "^(paper-table1|uniform-illumination)$", nullable = false)]
     preset: Option<String>,
+    #[schema(nullable = false)]
     scene: Option<ScenePatch>,
     /// Merge radius R, in (0, min(l2, l3)).
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
     merge_radius: Option<f64>,
     /// N_F: light paths per iteration, in [1, 10^12].
+    #[schema(minimum = 1, maximum = 1_000_000_000_000u64, nullable = false)]
     light_paths: Option<u64>,
     /// N_B: camera paths per iteration, in [1, 10^6].
+    #[schema(minimum = 1, maximum = 1_000_000, nullable = false)]
     camera_paths: Option<u64>,
     /// Iterations M, in [1, 10^9].
+    #[schema(minimum = 1, maximum = 1_000_000_000, nullable = false)]
     iterations: Option<u64>,
     /// Seed of every random stream.
+    #[schema(nullable = false)]
     seed: Option<u64>,
+    /// Run only shard `index` of `count` of the iterations.
+    #[schema(nullable = false)]
+    shard: Option<crate::sim::spec::Shard>,
+    /// Run iterations [first_iteration, first_iteration + iterations).
+    #[schema(nullable = false)]
+    first_iteration: Option<u64>,
+    #[schema(nullable = false)]
     cells: Option<CellPatch>,
+    #[schema(nullable = false)]
     solver: Option<SolverPatch>,
 }
 
@@ -50,10 +64,14 @@ pub struct JobSubmission {
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct ScenePatch {
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
     l2: Option<f64>,
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
     l3: Option<f64>,
     /// Lobe width β in degrees, in (0, 45].
+    #[schema(exclusive_minimum = 0.0, maximum = 45.0, nullable = false)]
     beta_deg: Option<f64>,
+    #[schema(nullable = false)]
     illumination: Option<IlluminationPatch>,
 }
 
@@ -63,10 +81,15 @@ pub struct ScenePatch {
 #[allow(dead_code)]
 pub struct IlluminationPatch {
     /// `spot`, `uniform` or `rings`.
+    #[schema(pattern = "^(spot|uniform|rings)$", nullable = false)]
     kind: Option<String>,
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
     a: Option<f64>,
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
     r_ls: Option<f64>,
+    #[schema(exclusive_minimum = 0.0, maximum = 1e12, nullable = false)]
     contrast: Option<f64>,
+    #[schema(min_items = 1, max_items = 64, nullable = false)]
     rings: Option<Vec<RingSpec>>,
 }
 
@@ -75,8 +98,13 @@ pub struct IlluminationPatch {
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct CellPatch {
+    /// Edges from 0, strictly increasing.
+    #[schema(min_items = 1, nullable = false)]
     r2_edges: Option<Vec<f64>>,
+    /// Edges from 0, strictly increasing.
+    #[schema(min_items = 1, nullable = false)]
     r3_edges: Option<Vec<f64>>,
+    #[schema(minimum = 1, maximum = 360, nullable = false)]
     phi_bins: Option<u32>,
 }
 
@@ -85,10 +113,13 @@ pub struct CellPatch {
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct SolverPatch {
+    #[schema(nullable = false)]
     fixed: Option<FixedWeights>,
     /// Gradient penalty λ ≥ 0.
+    #[schema(minimum = 0.0, maximum = 1e12, nullable = false)]
     lambda: Option<f64>,
     /// λ grid for `optimal_cv`.
+    #[schema(min_items = 1, max_items = 32, nullable = false)]
     cv_lambdas: Option<Vec<f64>>,
 }
 
@@ -97,6 +128,8 @@ pub struct SolverPatch {
 #[serde(deny_unknown_fields)]
 pub struct ExtendRequest {
     /// At least 1; the total may not exceed 10^9.
+    #[schema(minimum = 1, maximum = 1_000_000_000)]
+    #[serde(deserialize_with = "crate::sim::spec::count")]
     pub iterations: u64,
 }
 
@@ -108,8 +141,10 @@ pub struct ListQuery {
     /// Only jobs in this state.
     state: Option<JobState>,
     /// Page size, 1 to 500 (default 50).
+    #[param(minimum = 1, maximum = 500)]
     limit: Option<u32>,
     /// `next_cursor` of the previous page.
+    #[param(pattern = "^[1-9][0-9]{0,18}$")]
     cursor: Option<String>,
 }
 

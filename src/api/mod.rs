@@ -92,6 +92,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
 fn routes_and_document(document_limit: usize) -> (axum::Router<AppState>, utoipa::openapi::OpenApi) {
     let (router, mut api) = api_router(document_limit).split_for_parts();
     utoipa::Modify::modify(&openapi::Security, &mut api);
+    utoipa::Modify::modify(&openapi::Links, &mut api);
     (router, api)
 }
 

@@ -1,8 +1,11 @@
-//! Post-processing of the generated OpenAPI document: the bearer security scheme, and the 401 and
-//! 429 responses, added to every operation they apply to so that no route can forget them.
+//! Post-processing of the generated OpenAPI document: the bearer security scheme, the 401 and 429
+//! responses, added to every operation they apply to so that no route can forget them, and links
+//! from the responses that create a job to the operations on it (so that clients and API fuzzers
+//! know where a job's `id` comes from).
 
 use utoipa::Modify;
 use utoipa::openapi::content::ContentBuilder;
+use utoipa::openapi::link::LinkBuilder;
 use utoipa::openapi::path::Operation;
 use utoipa::openapi::response::ResponseBuilder;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
@@ -68,6 +71,34 @@ impl Modify for Security {
                         .responses
                         .insert("429".into(), problem("A limit is reached; retry after Retry-After seconds"));
                 }
+            }
+        }
+    }
+}
+
+/// Links from the responses that create a job to every operation on `/v1/jobs/{id}…`.
+pub struct Links;
+
+impl Modify for Links {
+    fn modify(&self, openapi: &mut OpenApi) {
+        let mut targets: Vec<String> = Vec::new();
+        for (path, item) in openapi.paths.paths.iter_mut() {
+            if path.starts_with("/v1/jobs/{id}") {
+                targets.extend(operations(item).into_iter().filter_map(|(_, op)| op.operation_id.clone()));
+            }
+        }
+        targets.sort();
+        for (path, method, status) in [("/v1/jobs", "post", "202"), ("/v1/studies", "post", "201")] {
+            let Some(item) = openapi.paths.paths.get_mut(path) else { continue };
+            let Some((_, operation)) = operations(item).into_iter().find(|(m, _)| *m == method) else { continue };
+            let Some(RefOr::T(response)) = operation.responses.responses.get_mut(status) else { continue };
+            for target in &targets {
+                let link = LinkBuilder::new()
+                    .operation_id(target.clone())
+                    .parameter("id", "$response.body#/id")
+                    .description(format!("`{target}` on the created job"))
+                    .build();
+                response.links.insert(target.clone(), RefOr::T(link));
             }
         }
     }

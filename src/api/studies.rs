@@ -23,7 +23,10 @@ use crate::sim::document::MomentsDocument;
 #[allow(dead_code)] // documents the body; sources are parsed by `jobs::peers::parse_source`
 pub struct PeerSource {
     /// URL of the job: `http://host:port/v1/jobs/ID` (plain HTTP).
-    #[schema(example = "http://10.0.0.2:8080/v1/jobs/7")]
+    #[schema(
+        example = "http://10.0.0.2:8080/v1/jobs/7",
+        pattern = r"^http://[^/?#\s]+/v1/jobs/[1-9][0-9]{0,18}(/moments)?/?$"
+    )]
     pub from: String,
 }
 
@@ -57,8 +60,7 @@ pub struct StudyRequest {
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "Another configuration, iterations already counted, or the job is active", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Not a valid moments document (corrupted, truncated, foreign)", body = Problem, content_type = "application/problem+json"),
-        (status = 502, description = "The peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Not a valid moments document (corrupted, truncated, foreign), or a peer that could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -80,8 +82,7 @@ pub async fn merge(
         (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The sources have different configurations or overlapping iterations", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A source is invalid", body = Problem, content_type = "application/problem+json"),
-        (status = 502, description = "A peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A source is invalid, or a peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )

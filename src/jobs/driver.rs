@@ -102,7 +102,14 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     loop {
         let done = moments.iterations();
         let total = job.total.load(Ordering::SeqCst);
-        if done >= total && !job.stop.load(Ordering::SeqCst) {
+        // A stop request is honoured first, even when the last iteration is already done: an
+        // empty segment would not look at the flag, and the loop would spin (a shutdown racing
+        // the final iteration once hung the tests). The checkpoint holds every iteration, so a
+        // job interrupted here finishes at once on the next start.
+        if job.stop.load(Ordering::SeqCst) {
+            return stopped(inner, job);
+        }
+        if done >= total {
             if rt.block_on(inner.finish(job, done))? {
                 return Ok(());
             }
@@ -130,15 +137,18 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         }
         match outcome {
             Ok(_) => {}
-            Err(RunError::Cancelled) => {
-                return if job.stop_reason.load(Ordering::SeqCst) == STOP_CANCEL {
-                    rt.block_on(inner.mark_cancelled(job))
-                } else {
-                    rt.block_on(inner.mark_interrupted(job))
-                };
-            }
+            Err(RunError::Cancelled) => return stopped(inner, job),
             Err(e @ RunError::Moments(_)) => return Err(JobError::Internal(e.to_string())),
         }
+    }
+}
+
+/// Records a stopped job: cancelled on request, interrupted (to resume later) on shutdown.
+fn stopped(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
+    if job.stop_reason.load(Ordering::SeqCst) == STOP_CANCEL {
+        inner.runtime.block_on(inner.mark_cancelled(job))
+    } else {
+        inner.runtime.block_on(inner.mark_interrupted(job))
     }
 }
 

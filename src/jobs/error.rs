@@ -20,7 +20,8 @@ pub enum JobError {
     /// another configuration or iterations already counted (HTTP 409).
     #[error(transparent)]
     Document(#[from] DocumentError),
-    /// A peer could not be reached or did not answer with a moments document (HTTP 502).
+    /// A peer could not be reached or did not answer with a moments document (HTTP 422: the
+    /// request names a source that yields no statistics).
     #[error("{0}")]
     Peer(String),
     /// The server is at a limit; retry later (HTTP 429 with Retry-After).

@@ -9,9 +9,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(transparent)]
-pub struct Coverage {
-    seeds: Vec<SeedRanges>,
-}
+pub struct Coverage(Vec<SeedRanges>);
 
 /// The ranges covered for one seed.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -52,24 +50,24 @@ impl Coverage {
 
     /// The per-seed ranges.
     pub fn seeds(&self) -> &[SeedRanges] {
-        &self.seeds
+        &self.0
     }
 
     /// Total number of iterations covered.
     pub fn iterations(&self) -> u64 {
-        self.seeds.iter().flat_map(|s| &s.ranges).map(|r| r[1] - r[0]).sum()
+        self.0.iter().flat_map(|s| &s.ranges).map(|r| r[1] - r[0]).sum()
     }
 
     /// Whether iteration `s` of `seed` is covered.
     pub fn contains(&self, seed: u64, s: u64) -> bool {
-        self.seeds.iter().find(|x| x.seed == seed).is_some_and(|x| x.ranges.iter().any(|r| r[0] <= s && s < r[1]))
+        self.0.iter().find(|x| x.seed == seed).is_some_and(|x| x.ranges.iter().any(|r| r[0] <= s && s < r[1]))
     }
 
     /// The ranges covered by both `self` and `other`.
     pub fn overlaps(&self, other: &Coverage) -> Vec<Overlap> {
         let mut out = Vec::new();
-        for a in &self.seeds {
-            let Some(b) = other.seeds.iter().find(|b| b.seed == a.seed) else { continue };
+        for a in &self.0 {
+            let Some(b) = other.0.iter().find(|b| b.seed == a.seed) else { continue };
             for ra in &a.ranges {
                 for rb in &b.ranges {
                     let (lo, hi) = (ra[0].max(rb[0]), ra[1].min(rb[1]));
@@ -88,14 +86,14 @@ impl Coverage {
         if start >= end {
             return;
         }
-        let pos = match self.seeds.binary_search_by_key(&seed, |s| s.seed) {
+        let pos = match self.0.binary_search_by_key(&seed, |s| s.seed) {
             Ok(p) => p,
             Err(p) => {
-                self.seeds.insert(p, SeedRanges { seed, ranges: Vec::new() });
+                self.0.insert(p, SeedRanges { seed, ranges: Vec::new() });
                 p
             }
         };
-        let ranges = &mut self.seeds[pos].ranges;
+        let ranges = &mut self.0[pos].ranges;
         // Fast path for the runner, which appends iteration after iteration.
         if let Some(last) = ranges.last_mut()
             && last[1] == start
@@ -117,7 +115,7 @@ impl Coverage {
 
     /// Adds everything `other` covers.
     pub fn union(&mut self, other: &Coverage) {
-        for s in &other.seeds {
+        for s in &other.0 {
             for r in &s.ranges {
                 self.insert(s.seed, r[0], r[1]);
             }
@@ -126,9 +124,9 @@ impl Coverage {
 
     /// Checks the invariants (for documents read from outside).
     pub fn is_well_formed(&self) -> bool {
-        self.seeds.windows(2).all(|w| w[0].seed < w[1].seed)
+        self.0.windows(2).all(|w| w[0].seed < w[1].seed)
             && self
-                .seeds
+                .0
                 .iter()
                 .all(|s| s.ranges.iter().all(|r| r[0] < r[1]) && s.ranges.windows(2).all(|w| w[0][1] < w[1][0]))
     }

@@ -1,7 +1,7 @@
 //! The noise table (the paper's Table 1, and more) computed from the moments alone.
 //!
 //! For a strategy with per-iteration values C_s: L = mean C_s, its standard error std/√M, and
-//! RMS% = 100·std(C_s)/mean(C_s) with the sample standard deviation (M − 1). The standard error
+//! RMS% = 100·std(C_s)/|mean(C_s)| with the sample standard deviation (M − 1). The standard error
 //! of RMS% is the delta method on (mean, variance): with central moments m2, m3, m4,
 //! Var(R̂) ≈ R²/M · [m2/μ² − m3/(μ·m2) + (m4 − m2²)/(4·m2²)]; it needs Σ C_s³ and Σ C_s⁴, which the
 //! moments carry for every per-path strategy. For the fitted strategies, whose C_s are linear in
@@ -63,7 +63,9 @@ impl NoiseRow {
         let m2 = (s2 / m - mean * mean).max(0.0);
         let var = m2 * m / (m - 1.0);
         let std = var.sqrt();
-        let rms = (mean != 0.0).then(|| 100.0 * std / mean);
+        // Relative to |mean|: a wildly overfitted hold-out estimate can have a negative mean, and
+        // its noise is still a size, not a sign.
+        let rms = (mean != 0.0).then(|| 100.0 * std / mean.abs());
         let rms_se = match (rms, higher) {
             (Some(r), Some((m3, m4))) if m2 > 0.0 => {
                 let r = r / 100.0;

@@ -140,7 +140,9 @@ pub enum IlluminationSpec {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct RingSpec {
+    #[cfg_attr(feature = "server", schema(exclusive_minimum = 0.0, maximum = 1e6))]
     pub outer_radius: f64,
+    #[cfg_attr(feature = "server", schema(minimum = 0.0, maximum = 1e12))]
     pub level: f64,
 }
 
@@ -191,8 +193,9 @@ impl FixedWeights {
     }
 }
 
-/// Accepts integers and integral floats (`1e7`) for counts: users write both.
-fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+/// Accepts integers and integral floats (`1e7`) for counts: users write both, and JSON Schema
+/// counts `1.0` as an integer.
+pub fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
     use serde::de::Error;
     let v = Value::deserialize(d)?;
     if let Some(n) = v.as_u64() {

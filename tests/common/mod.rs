@@ -37,7 +37,11 @@ impl TestServer {
     }
 
     pub async fn start_with(tweak: impl FnOnce(&mut ServerConfig)) -> Self {
-        let dir = tempfile::tempdir().unwrap();
+        Self::start_in(tempfile::tempdir().unwrap(), tweak).await
+    }
+
+    /// Starts on the database of `dir` (to restart after `stop`).
+    pub async fn start_in(dir: tempfile::TempDir, tweak: impl FnOnce(&mut ServerConfig)) -> Self {
         let mut cfg = config(&dir);
         tweak(&mut cfg);
         let server = spawn(cfg).await.expect("server starts");

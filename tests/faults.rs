@@ -1,0 +1,151 @@
+//! Faults: a corrupted checkpoint fails only its job; a failed solve still reports the fixed
+//! strategies; and twenty SIGKILLs at random moments (many during checkpoint writes) never lose or
+//! corrupt work.
+
+mod common;
+
+use common::process::{Process, get, wait_for};
+use common::{TestServer, small_job};
+use optimis::sim::runner::run;
+use optimis::sim::spec::parse_job_spec;
+use serde_json::{Value, json};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_corrupted_checkpoint_fails_only_its_job() {
+    let server = TestServer::start().await;
+    let finished = server.submit(&small_job(4, 1)).await;
+    server.wait_for_state(finished, "succeeded").await;
+    let finished_result = server.get_json(&format!("/v1/jobs/{finished}/result")).await;
+    let victim = server.submit(&json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 2 })).await;
+    server.wait_for(victim, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
+    let dir = server.stop().await; // the victim checkpoints and waits, queued
+
+    // Change one digit of the victim's stored moments (its checksum no longer matches).
+    let url = format!("sqlite://{}", dir.path().join("optimis.db").display());
+    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
+    let mut moments: Vec<u8> = sqlx::query_scalar("SELECT moments FROM checkpoints WHERE job_id = ?")
+        .bind(victim)
+        .fetch_one(&db)
+        .await
+        .unwrap();
+    let at = moments.windows(9).position(|w| w == b"\"sum_yy\":").unwrap() + 40;
+    let pos = at + moments[at..].iter().position(|b| (b'1'..=b'8').contains(b)).unwrap();
+    moments[pos] += 1;
+    sqlx::query("UPDATE checkpoints SET moments = ? WHERE job_id = ?")
+        .bind(&moments)
+        .bind(victim)
+        .execute(&db)
+        .await
+        .unwrap();
+    db.close().await;
+
+    let server = TestServer::start_in(dir, |_| {}).await;
+    let failed = server.wait_for_state(victim, "failed").await;
+    let error = failed["error"].as_str().unwrap();
+    assert!(error.contains("checksum mismatch"), "a clear error: {error}");
+    // The other jobs are untouched and the server keeps working.
+    assert_eq!(server.get_json(&format!("/v1/jobs/{finished}/result")).await, finished_result);
+    let fresh = server.submit(&small_job(3, 9)).await;
+    server.wait_for_state(fresh, "succeeded").await;
+    let problem = common::assert_problem(server.get(&format!("/v1/jobs/{victim}/moments")).await, 409).await;
+    assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_solve_still_reports_the_fixed_strategies() {
+    let server = TestServer::start().await;
+    // Both w0 and w1 free in 52 cells, λ = 0 and 10 iterations: more unknowns than iterations.
+    let id = server
+        .submit(&json!({ "light_paths": 1_000_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 10,
+            "solver": { "fixed": { "w0": null } } }))
+        .await;
+    server.wait_for_state(id, "succeeded").await;
+    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let reason = result["solve_error"].as_str().expect("the reason is reported");
+    assert!(reason.contains("singular"), "{reason}");
+    assert!(result["weights"].as_array().unwrap().is_empty());
+    let rows = result["noise_table"].as_array().unwrap();
+    for name in ["plane1", "plane2", "plane3", "switch", "balance", "power"] {
+        let row = rows.iter().find(|r| r["strategy"] == name).unwrap();
+        assert!(row["luminance"].as_f64().is_some() && row["rms_percent"].as_f64().is_some(), "{row}");
+    }
+    let optimal = rows.iter().find(|r| r["strategy"] == "optimal").unwrap();
+    assert!(optimal["luminance"].is_null() && optimal["error"].as_str().unwrap().contains("singular"), "{optimal}");
+    server.stop().await;
+}
+
+/// Deterministic pseudo-random delays (a fixed LCG, so the test is reproducible).
+fn delays(count: usize, seed: u64) -> Vec<u64> {
+    let mut state = seed;
+    (0..count)
+        .map(|_| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            150 + (state >> 33) % 450 // 150–600 ms after the server is up
+        })
+        .collect()
+}
+
+/// Twenty SIGKILLs at random moments while a job runs, with a checkpoint after every iteration so
+/// that many kills land inside a checkpoint write. The job always finishes, with moments equal to
+/// an uninterrupted run's; a finished job's data never changes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn twenty_kills_never_lose_or_corrupt_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let database = format!("sqlite://{}", dir.path().join("faults.db").display());
+    let client = reqwest::Client::new();
+    let flags = ["--checkpoint-iterations", "1", "--checkpoint-seconds", "0.05"];
+    let server = Process::start_with(&database, &flags);
+    let submit = |base: String, spec: Value| {
+        let client = client.clone();
+        async move {
+            let response = client.post(format!("{base}/v1/jobs")).json(&spec).send().await.unwrap();
+            assert_eq!(response.status(), 202);
+            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
+        }
+    };
+    let bystander = submit(server.base.clone(), small_job(6, 3)).await;
+    wait_for(&client, &server.base, bystander, |j| j["state"] == "succeeded").await;
+    let snapshot = |base: String| {
+        let client = client.clone();
+        async move {
+            (
+                get(&client, format!("{base}/v1/jobs/{bystander}")).await,
+                get(&client, format!("{base}/v1/jobs/{bystander}/result")).await,
+                get(&client, format!("{base}/v1/jobs/{bystander}/moments")).await,
+            )
+        }
+    };
+    let before = snapshot(server.base.clone()).await;
+
+    // A 128-cell grid makes every checkpoint a few hundred kilobytes: writes take a real share
+    // of the time, so kills land in them.
+    let r3_edges: Vec<f64> = (0..=63).map(|i| f64::from(i) / 1000.0).collect();
+    let spec = json!({ "light_paths": 1_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 300, "seed": 31,
+        "cells": { "r3_edges": r3_edges } });
+    let id = submit(server.base.clone(), spec.clone()).await;
+    let mut server = Some(server);
+    let mut progress = Vec::new();
+    for delay in delays(20, 7) {
+        let process = server.take().unwrap_or_else(|| Process::start_with(&database, &flags));
+        tokio::time::sleep(std::time::Duration::from_millis(delay)).await;
+        let job = get(&client, format!("{}/v1/jobs/{id}", process.base)).await;
+        progress.push(job["progress"]["iterations_checkpointed"].as_u64().unwrap());
+        process.kill();
+    }
+    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "checkpointed work is never lost: {progress:?}");
+    assert!(*progress.last().unwrap() < 300, "the kills interrupted a running job: {progress:?}");
+
+    let last = Process::start_with(&database, &flags);
+    let done = wait_for(&client, &last.base, id, |j| j["state"] == "succeeded").await;
+    assert_eq!(done["progress"]["iterations_done"], 300);
+    let document = get(&client, format!("{}/v1/jobs/{id}/moments", last.base)).await;
+    let job = parse_job_spec(&spec).unwrap().validate().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let reference = pool.install(|| run(&job.config, 31, 0..300));
+    assert_eq!(document["moments"], serde_json::to_value(&reference).unwrap(), "moments equal an uninterrupted run's");
+    let history = get(&client, format!("{}/v1/jobs/{id}/history", last.base)).await;
+    assert!(history["points"].as_array().unwrap().len() >= 20);
+    assert_eq!(snapshot(last.base.clone()).await, before, "the finished job's data did not change");
+    last.kill();
+}
