@@ -3,14 +3,8 @@
 //! Each light path (model.md) starts at x3l with density I/Φ, leaves plane 3 in a cosine-distributed
 //! direction to x2l, is deflected by the plane-2 lobe and reaches plane 1 at x1l. Its energy is 1
 //! up to x2l, and sin ϑ/ϑ after the lobe (the exact-pdf throughput, see [`super::scene::Lobe`]).
-//! It merges with every camera vertex within R:
-//!
-//! * plane 3: C2 = E_c(x3c)·E_l·K/π, join path (x2c, x3c);
-//! * plane 2: C1 = E_l·K·f2(x3l→x2l, x2c→x1c), join path (x2c, x3l);
-//! * plane 1: C0 = E_l(x1l)·K/π with each of the N_B camera paths (they share x1c = 0), join path
-//!   (x2l, x3l);
-//!
-//! with K = 1/(πR²). Paths are never stored: each is generated, tested and dropped.
+//! It merges with every camera vertex within R (the contributions are in [`super::merge`]). Paths
+//! are never stored: each is generated, tested and dropped.
 //!
 //! Speed: the loop allocates nothing, takes no lock and dispatches nothing dynamically. The common
 //! path (no merge at all, > 99.99%) costs two disc samples by rejection, one square root, one
@@ -27,10 +21,10 @@ use nalgebra::Vector3;
 use super::camera::CameraSet;
 use super::config::SimConfig;
 use super::illumination::fill_unit_disc;
+use super::merge::{merge_plane1, merge_plane2, merge_plane3};
 use super::rng::{StreamRng, stream};
 use super::sampling::{LOBE_MAX_SIGMAS, sample_lobe};
-use super::scene::{angle_between, theta_over_sin};
-use super::tally::{ChunkScratch, ChunkTally, strategy_weights};
+use super::tally::{ChunkScratch, ChunkTally};
 
 /// Constants of the light-path loop, derived once per configuration.
 #[derive(Debug, Clone, Copy)]
@@ -186,66 +180,6 @@ fn trace_flagged(
             }
         }
     }
-}
-
-/// K = 1/(πR²).
-#[inline]
-fn kernel(config: &SimConfig) -> f64 {
-    1.0 / (PI * config.merge_radius * config.merge_radius)
-}
-
-#[inline]
-fn within(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
-    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
-    dx * dx + dy * dy <= r * r
-}
-
-fn merge_plane3(config: &SimConfig, cameras: &CameraSet, near: &[u32], x3l: [f64; 2], scratch: &mut ChunkScratch) {
-    let k = config.cells.len();
-    for &j in near {
-        let cam = &cameras.paths[j as usize];
-        let Some(x3c) = cam.x3 else { continue };
-        if within(x3l, x3c, config.merge_radius) {
-            let c = cam.energy3 * kernel(config) / PI;
-            let weights = strategy_weights(&config.scene, 2, cam.x2, x3c);
-            scratch.record(2, config.cells.index(cam.x2, x3c), k, c, &weights);
-            scratch.count_merge(2);
-        }
-    }
-}
-
-fn merge_plane2(
-    config: &SimConfig,
-    cameras: &CameraSet,
-    near: &[u32],
-    x2l: [f64; 2],
-    x3l: [f64; 2],
-    d: &Vector3<f64>,
-    scratch: &mut ChunkScratch,
-) {
-    let k = config.cells.len();
-    for &j in near {
-        let cam = &cameras.paths[j as usize];
-        if within(x2l, cam.x2, config.merge_radius) {
-            // f2(dir x3l→x2l, dir x2c→x1c): deflection between the light's incident direction and
-            // the direction to the pixel; γ is that direction's angle to the normal.
-            let theta = angle_between(d, &cam.to_pixel);
-            let c = kernel(config) * config.scene.lobe.bdf(theta, cam.cos1);
-            let weights = strategy_weights(&config.scene, 1, cam.x2, x3l);
-            scratch.record(1, config.cells.index(cam.x2, x3l), k, c, &weights);
-            scratch.count_merge(1);
-        }
-    }
-}
-
-fn merge_plane1(config: &SimConfig, theta: f64, x2l: [f64; 2], x3l: [f64; 2], scratch: &mut ChunkScratch) {
-    // Energy after the lobe: sin ϑ/ϑ. The merge happens with all N_B camera paths at the shared
-    // pixel, so the pair sum over j is N_B times one contribution.
-    let energy = 1.0 / theta_over_sin(theta);
-    let c = energy * kernel(config) / PI * config.camera_paths as f64;
-    let weights = strategy_weights(&config.scene, 0, x2l, x3l);
-    scratch.record(0, config.cells.index(x2l, x3l), config.cells.len(), c, &weights);
-    scratch.count_merge(0);
 }
 
 #[cfg(test)]

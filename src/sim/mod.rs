@@ -12,6 +12,7 @@
 //! * [`sampling`] — Lambert and lobe directions;
 //! * [`camera`], [`grid`] — the N_B camera paths and the hash grid of their vertices;
 //! * [`light`] — the streamed light-path loop (the hot path);
+//! * [`merge`] — what one light path contributes: its merges at the three planes;
 //! * [`heuristics`], [`tally`] — per-path MIS weights and per-chunk/per-iteration tallies.
 //!
 //! Statistics and results:
@@ -34,6 +35,7 @@ pub mod grid;
 pub mod heuristics;
 pub mod illumination;
 pub mod light;
+pub mod merge;
 pub mod moments;
 pub mod noise;
 pub mod quadrature;
