@@ -62,6 +62,24 @@ async fn submit_poll_and_read_the_result() {
     server.stop().await;
 }
 
+/// A submission that names no engine runs the restricted one (the presets' default): the paper's
+/// full N_F = 10⁷ per iteration, 300 iterations, in well under a second of simulation.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_default_engine_is_the_restricted_one() {
+    let server = TestServer::start().await;
+    let id = server.submit(&json!({ "iterations": 300, "seed": 4 })).await;
+    let done = server.wait_for_state(id, "succeeded").await;
+    assert_eq!(done["spec"]["engine"], "restricted");
+    assert_eq!(done["spec"]["light_paths"], 10_000_000);
+    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    // The statistics are checked against the brute force in tests/engines.rs; here: it merged.
+    let plane2 = &result["merges_per_iteration"]["plane2"];
+    assert!(plane2["mean"].as_f64().unwrap() > 10.0 * plane2["stderr"].as_f64().unwrap(), "{plane2}");
+    let brute = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1000 })).await;
+    assert_eq!(server.get_json(&format!("/v1/jobs/{brute}")).await["spec"]["engine"], "brute");
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_error_is_a_problem_document_with_the_right_status() {
     let server = TestServer::start().await;
@@ -102,7 +120,7 @@ async fn every_error_is_a_problem_document_with_the_right_status() {
 
     // 409: results before the first checkpoint (a queued job behind a long one), cancel of a
     // finished job, delete of a running one, extend of a failed one is covered elsewhere.
-    let long = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    let long = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(long, "running").await;
     let waiting = server.submit(&small_job(2, 1)).await;
     assert_problem(server.get(&format!("/v1/jobs/{waiting}/result")).await, 409).await;
@@ -135,7 +153,7 @@ async fn every_error_is_a_problem_document_with_the_right_status() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cancel_stops_a_running_job_within_a_chunk() {
     let server = TestServer::start().await;
-    let id = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    let id = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(id, "running").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     let response = server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
@@ -145,7 +163,7 @@ async fn cancel_stops_a_running_job_within_a_chunk() {
     assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409).await;
 
     // A queued job is cancelled at once.
-    let blocker = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    let blocker = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(blocker, "running").await;
     let queued = server.submit(&small_job(3, 2)).await;
     let cancelled: Value = server.post(&format!("/v1/jobs/{queued}/cancel"), &json!({})).await.json().await.unwrap();
@@ -248,7 +266,7 @@ async fn solve_recomputes_from_the_stored_moments() {
     let server = TestServer::start().await;
     let id = server
         .submit(
-            &json!({ "light_paths": 100_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 40, "seed": 5 }),
+            &json!({ "engine": "brute", "light_paths": 100_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 40, "seed": 5 }),
         )
         .await;
     server.wait_for_state(id, "succeeded").await;
@@ -322,7 +340,7 @@ fn sample(text: &str, series: &str) -> Option<f64> {
 async fn metrics_show_a_running_job_progressing() {
     let server = TestServer::start().await;
     let id = server
-        .submit(&json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 1 }))
+        .submit(&json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 1 }))
         .await;
     server.wait_for_state(id, "running").await;
     let series = format!("optimis_job_iterations_done{{job=\"{id}\"}}");

@@ -26,8 +26,7 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
         }
     };
     // A job that finishes before the crash.
-    let finished_spec =
-        json!({ "light_paths": 20_000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 8, "seed": 3 });
+    let finished_spec = json!({ "engine": "brute", "light_paths": 20_000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 8, "seed": 3 });
     let finished = submit(first.base.clone(), finished_spec).await;
     wait_for(&client, &first.base, finished, |j| j["state"] == "succeeded").await;
     let finished_before = get(&client, format!("{}/v1/jobs/{finished}", first.base)).await;
@@ -35,8 +34,7 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
     let moments_before = get(&client, format!("{}/v1/jobs/{finished}/moments", first.base)).await;
 
     // The job that is killed: about 40 iterations of 2·10⁶ light paths.
-    let spec =
-        json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 40, "seed": 17 });
+    let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 40, "seed": 17 });
     let id = submit(first.base.clone(), spec.clone()).await;
     let before_kill = wait_for(&client, &first.base, id, |j| {
         j["state"] == "running" && j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 6
@@ -80,8 +78,7 @@ async fn sigterm_checkpoints_running_jobs_before_exiting() {
     let database = format!("sqlite://{}", dir.path().join("term.db").display());
     let client = reqwest::Client::new();
     let first = Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
-    let spec =
-        json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 5 });
+    let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 5 });
     let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();
     let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
     let running = wait_for(&client, &first.base, id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 5).await;

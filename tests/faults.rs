@@ -16,7 +16,7 @@ async fn a_corrupted_checkpoint_fails_only_its_job() {
     let finished = server.submit(&small_job(4, 1)).await;
     server.wait_for_state(finished, "succeeded").await;
     let finished_result = server.get_json(&format!("/v1/jobs/{finished}/result")).await;
-    let victim = server.submit(&json!({ "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 2 })).await;
+    let victim = server.submit(&json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 2 })).await;
     server.wait_for(victim, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
     let dir = server.stop().await; // the victim checkpoints and waits, queued
 
@@ -57,7 +57,7 @@ async fn a_failed_solve_still_reports_the_fixed_strategies() {
     let server = TestServer::start().await;
     // Both w0 and w1 free in 52 cells, λ = 0 and 10 iterations: more unknowns than iterations.
     let id = server
-        .submit(&json!({ "light_paths": 1_000_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 10,
+        .submit(&json!({ "engine": "brute", "light_paths": 1_000_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 10,
             "solver": { "fixed": { "w0": null } } }))
         .await;
     server.wait_for_state(id, "succeeded").await;
@@ -121,7 +121,7 @@ async fn twenty_kills_never_lose_or_corrupt_work() {
     // A 128-cell grid makes every checkpoint a few hundred kilobytes: writes take a real share
     // of the time, so kills land in them.
     let r3_edges: Vec<f64> = (0..=63).map(|i| f64::from(i) / 1000.0).collect();
-    let spec = json!({ "light_paths": 1_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 300, "seed": 31,
+    let spec = json!({ "engine": "brute", "light_paths": 1_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 300, "seed": 31,
         "cells": { "r3_edges": r3_edges } });
     let id = submit(server.base.clone(), spec.clone()).await;
     let mut server = Some(server);

@@ -30,7 +30,7 @@ async fn job_budgets_and_cell_counts_are_limited() {
         server
             .post(
                 "/v1/jobs",
-                &json!({ "light_paths": 20_000, "camera_paths": 200, "iterations": 300,
+                &json!({ "engine": "brute", "light_paths": 20_000, "camera_paths": 200, "iterations": 300,
         "cells": { "r3_edges": [0, 0.01, 0.02] } }),
             )
             .await,
@@ -44,7 +44,7 @@ async fn job_budgets_and_cell_counts_are_limited() {
     assert_eq!(problem["field"], "cells");
     assert!(problem["detail"].as_str().unwrap().contains("at most 30"), "{problem}");
     // Within both limits: accepted; extending past the budget is refused.
-    let ok = json!({ "light_paths": 20_000, "camera_paths": 200, "iterations": 200, "cells": { "r3_edges": [0, 0.01, 0.02] } });
+    let ok = json!({ "engine": "brute", "light_paths": 20_000, "camera_paths": 200, "iterations": 200, "cells": { "r3_edges": [0, 0.01, 0.02] } });
     let id = server.submit(&ok).await;
     server.wait_for_state(id, "succeeded").await;
     let problem =
@@ -56,7 +56,7 @@ async fn job_budgets_and_cell_counts_are_limited() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_queue_is_limited_with_retry_after() {
     let server = TestServer::start_with(|c| c.limits.max_queued_jobs = 2).await;
-    let running = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    let running = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(running, "running").await;
     let queued = [server.submit(&small_job(1, 1)).await, server.submit(&small_job(1, 2)).await];
     let response = server.post("/v1/jobs", &small_job(1, 3)).await;
@@ -74,7 +74,7 @@ async fn the_queue_is_limited_with_retry_after() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn event_streams_are_limited_with_retry_after() {
     let server = TestServer::start_with(|c| c.limits.max_event_streams = 1).await;
-    let id = server.submit(&json!({ "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
+    let id = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(id, "running").await;
     let first = server.get(&format!("/v1/jobs/{id}/events")).await;
     assert_eq!(first.status(), 200);

@@ -57,6 +57,10 @@ pub struct JobSubmission {
     cells: Option<CellPatch>,
     #[schema(nullable = false)]
     solver: Option<SolverPatch>,
+    /// `restricted` (the presets' default: only the light paths that can merge, drawn exactly as a
+    /// Poisson process) or `brute` (all N_F light paths; the reference).
+    #[schema(nullable = false)]
+    engine: Option<crate::sim::spec::EngineName>,
 }
 
 /// Scene fields to override.

@@ -1,19 +1,32 @@
-//! `optimis bench`: light paths per second of the simulation core at the paper's parameters.
+//! `optimis bench`: iterations and light paths per second of the simulation core at the paper's
+//! parameters, for each engine asked for, and the restricted engine's speed-up over the brute force.
 
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use clap::Args;
-use serde_json::json;
+use clap::{Args, ValueEnum};
+use serde_json::{Value, json};
 
 use super::{CliError, cores, thread_pool};
+use crate::sim::config::{Engine, SimConfig};
 use crate::sim::moments::Moments;
+use crate::sim::restricted::Proposals;
 use crate::sim::runner::run_iterations;
 use crate::sim::spec::parse_job_spec;
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BenchEngine {
+    Brute,
+    Restricted,
+}
+
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Iterations to time (after one untimed warm-up iteration).
+    /// Engines to time (repeat the flag for several; default: both, and their ratio).
+    #[arg(long = "engine", value_enum)]
+    pub engines: Vec<BenchEngine>,
+    /// Brute-force iterations to time (after one untimed warm-up iteration); the restricted engine
+    /// times 1000 times as many.
     #[arg(long, default_value_t = 10)]
     pub iterations: u64,
     /// Light paths per iteration (default: the paper's 10⁷).
@@ -22,9 +35,20 @@ pub struct BenchArgs {
     /// Worker threads (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Print the measurement as JSON.
+    /// Print the measurements as JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Seconds to run `iterations` iterations (after one warm-up iteration).
+fn time_iterations(config: &SimConfig, iterations: u64) -> f64 {
+    let never = AtomicBool::new(false);
+    let mut moments = Moments::new(config);
+    let go_on = |_: &Moments, _| std::ops::ControlFlow::Continue(());
+    run_iterations(config, 1, 0..1, &mut moments, &never, go_on).expect("warm-up");
+    let started = Instant::now();
+    run_iterations(config, 1, 1..1 + iterations, &mut moments, &never, go_on).expect("bench run");
+    started.elapsed().as_secs_f64()
 }
 
 pub fn bench(args: BenchArgs) -> Result<(), CliError> {
@@ -33,36 +57,65 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
         doc["light_paths"] = json!(n);
     }
     let job = parse_job_spec(&doc)?.validate()?;
-    let config = &job.config;
     let pool = thread_pool(args.threads)?;
-    let never = AtomicBool::new(false);
-    let mut moments = Moments::new(config);
-    let iterations = args.iterations.max(1);
-    let seconds = pool.install(|| {
-        let go_on = |_: &Moments, _| std::ops::ControlFlow::Continue(());
-        run_iterations(config, 1, 0..1, &mut moments, &never, go_on).expect("warm-up");
-        let started = Instant::now();
-        run_iterations(config, 1, 1..1 + iterations, &mut moments, &never, go_on).expect("bench run");
-        started.elapsed().as_secs_f64()
-    });
-    let paths = (iterations * config.light_paths) as f64;
-    let rate = paths / seconds;
     let threads = pool.current_num_threads();
+    let engines =
+        if args.engines.is_empty() { vec![BenchEngine::Restricted, BenchEngine::Brute] } else { args.engines.clone() };
+    let base = args.iterations.max(1);
+    let mut results: Vec<(BenchEngine, Value)> = Vec::new();
+    for engine in engines {
+        let (config, iterations) = match engine {
+            BenchEngine::Brute => (job.config.with_engine(Engine::Brute), base),
+            BenchEngine::Restricted => (job.config.with_engine(Engine::Restricted(Proposals::Auto)), base * 1000),
+        };
+        let seconds = pool.install(|| time_iterations(&config, iterations));
+        let per_second = iterations as f64 / seconds;
+        let name = match engine {
+            BenchEngine::Brute => "brute",
+            BenchEngine::Restricted => "restricted",
+        };
+        results.push((
+            engine,
+            json!({
+                "engine": name,
+                "iterations": iterations,
+                "seconds": seconds,
+                "iterations_per_second": per_second,
+                // For the restricted engine: light paths of the brute force it stands in for.
+                "light_paths_per_second": per_second * config.light_paths as f64,
+            }),
+        ));
+    }
+    let rate =
+        |e: BenchEngine| results.iter().find(|(x, _)| *x == e).and_then(|(_, v)| v["iterations_per_second"].as_f64());
+    let speedup = rate(BenchEngine::Restricted).zip(rate(BenchEngine::Brute)).map(|(r, b)| r / b);
+    let config = &job.config;
     if args.json {
         let out = json!({
-            "light_paths_per_second": rate,
-            "iterations_per_second": iterations as f64 / seconds,
+            "engines": results.iter().map(|(_, v)| v.clone()).collect::<Vec<_>>(),
+            "restricted_over_brute": speedup,
             "light_paths_per_iteration": config.light_paths,
             "camera_paths_per_iteration": config.camera_paths,
-            "iterations": iterations,
-            "seconds": seconds,
             "threads": threads,
             "cores": cores(),
         });
         println!("{out}");
     } else {
+        for (_, v) in &results {
+            println!(
+                "{:<10} {:>12.4e} iterations/s  {:>12.4e} light paths/s  ({} iterations in {:.2} s)",
+                v["engine"].as_str().unwrap_or("?"),
+                v["iterations_per_second"].as_f64().unwrap_or(0.0),
+                v["light_paths_per_second"].as_f64().unwrap_or(0.0),
+                v["iterations"],
+                v["seconds"].as_f64().unwrap_or(0.0),
+            );
+        }
+        if let Some(s) = speedup {
+            println!("restricted / brute: {s:.0}× per iteration");
+        }
         println!(
-            "{rate:.4e} light paths/s ({iterations} iterations of N_F = {} and N_B = {} in {seconds:.2} s; {threads} threads on {} cores)",
+            "(N_F = {}, N_B = {}; {threads} threads on {} cores)",
             config.light_paths,
             config.camera_paths,
             cores()

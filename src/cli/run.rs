@@ -39,6 +39,9 @@ pub struct RunArgs {
     /// Seed of the random streams.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Engine: `restricted` (the presets' default) or `brute` (all N_F light paths, the reference).
+    #[arg(long, value_parser = ["restricted", "brute"])]
+    pub engine: Option<String>,
     /// Worker threads (default: one per core). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -81,6 +84,7 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
     set("light_paths", args.light_paths.map(Value::from));
     set("camera_paths", args.camera_paths.map(Value::from));
     set("seed", args.seed.map(Value::from));
+    set("engine", args.engine.clone().map(Value::from));
     if args.preset.is_some() && doc.is_object() {
         // A preset flag starts over from that preset; the file's other fields still override it.
         doc["preset"] = Value::Null;

@@ -2,14 +2,15 @@
 //! its fingerprint.
 //!
 //! Two moments values may be merged only if they were drawn under the same configuration, so the
-//! fingerprint hashes exactly that: the scene, R, N_F, N_B, the cell grid, the generator scheme and
-//! the moments format. Not the seed (different seeds are independent draws of the same law), not
+//! fingerprint hashes exactly that: the scene, R, N_F, N_B, the cell grid, the engine, the
+//! generator scheme and the moments format. Not the seed (different seeds are independent draws of the same law), not
 //! the iteration count, not the solver options.
 
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use super::cells::CellGrid;
+use super::restricted::Proposals;
 use super::rng::GENERATOR_ID;
 use super::scene::Scene;
 use super::spec::{CellSpec, SceneSpec};
@@ -20,6 +21,27 @@ pub const MOMENTS_FORMAT_VERSION: u32 = 1;
 /// Light paths per chunk: the unit of parallel work and of random streams (stream c of an
 /// iteration draws light paths [c·CHUNK, (c+1)·CHUNK)). Part of [`GENERATOR_ID`].
 pub const LIGHT_CHUNK: u64 = 1 << 16;
+
+/// How an iteration's light paths are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Engine {
+    /// All N_F light paths, streamed ([`super::light`]): the reference.
+    Brute,
+    /// Only the paths that can merge, as a Poisson process ([`super::restricted`]).
+    Restricted(Proposals),
+}
+
+impl Engine {
+    /// The engine's name in the fingerprint. Two engines never merge: the restricted engine's law
+    /// differs from the brute force's (by ≤ p_S in total variation), and so do their streams.
+    pub fn id(self) -> &'static str {
+        match self {
+            Engine::Brute => "brute",
+            Engine::Restricted(Proposals::Auto) => "restricted/auto/v1",
+            Engine::Restricted(Proposals::Reverse) => "restricted/reverse/v1",
+        }
+    }
+}
 
 /// A validated configuration, shared read-only by every iteration.
 #[derive(Debug, Clone)]
@@ -32,6 +54,7 @@ pub struct SimConfig {
     /// N_B.
     pub camera_paths: u64,
     pub cells: CellGrid,
+    pub engine: Engine,
     fingerprint: String,
 }
 
@@ -40,6 +63,10 @@ pub struct SimConfig {
 struct FingerprintInput<'a> {
     format: u32,
     generator: &'a str,
+    /// Absent for the brute force, so its fingerprints are those of the jobs run before engines
+    /// existed (their checkpoints stay valid).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    engine: Option<&'a str>,
     scene: &'a SceneSpec,
     merge_radius: f64,
     light_paths: u64,
@@ -54,10 +81,18 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 
 impl SimConfig {
     /// Builds the configuration from validated parts.
-    pub fn new(scene: Scene, merge_radius: f64, light_paths: u64, camera_paths: u64, cells: CellGrid) -> Self {
+    pub fn new(
+        scene: Scene,
+        merge_radius: f64,
+        light_paths: u64,
+        camera_paths: u64,
+        cells: CellGrid,
+        engine: Engine,
+    ) -> Self {
         let input = FingerprintInput {
             format: MOMENTS_FORMAT_VERSION,
             generator: GENERATOR_ID,
+            engine: (engine != Engine::Brute).then(|| engine.id()),
             scene: &scene.spec,
             merge_radius,
             light_paths,
@@ -70,7 +105,19 @@ impl SimConfig {
         };
         let canonical = serde_json::to_vec(&input).expect("a fingerprint input always serialises");
         let fingerprint = sha256_hex(&canonical);
-        Self { scene, merge_radius, light_paths, camera_paths, cells, fingerprint }
+        Self { scene, merge_radius, light_paths, camera_paths, cells, engine, fingerprint }
+    }
+
+    /// The same configuration drawn by another engine (its own fingerprint).
+    pub fn with_engine(&self, engine: Engine) -> Self {
+        Self::new(
+            self.scene.clone(),
+            self.merge_radius,
+            self.light_paths,
+            self.camera_paths,
+            self.cells.clone(),
+            engine,
+        )
     }
 
     /// The configuration fingerprint (hex SHA-256).
@@ -78,9 +125,13 @@ impl SimConfig {
         &self.fingerprint
     }
 
-    /// Number of light-path chunks (random streams) per iteration.
+    /// Number of light-path chunks (random streams, units of parallel work) per iteration: one for
+    /// the restricted engine, whose iterations are small.
     pub fn chunks(&self) -> u64 {
-        self.light_paths.div_ceil(LIGHT_CHUNK)
+        match self.engine {
+            Engine::Brute => self.light_paths.div_ceil(LIGHT_CHUNK),
+            Engine::Restricted(_) => 1,
+        }
     }
 
     /// Light paths in chunk `c`.
@@ -113,5 +164,6 @@ mod tests {
         assert_ne!(base, fp(json!({ "camera_paths": 10 })));
         assert_ne!(base, fp(json!({ "scene": { "beta_deg": 4 } })));
         assert_ne!(base, fp(json!({ "cells": { "phi_bins": 2 } })));
+        assert_ne!(fp(json!({ "engine": "brute" })), fp(json!({ "engine": "restricted" })));
     }
 }

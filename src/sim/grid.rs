@@ -65,39 +65,54 @@ impl MergeGrid {
                 }
             }
         }
-        entries.sort_unstable();
-        let distinct = entries.windows(2).filter(|w| (w[0].0, w[0].1) != (w[1].0, w[1].1)).count() + 1;
-        let slot_bits = (4 * distinct).next_power_of_two().max(16).trailing_zeros();
+        // Counting placement instead of a sort (linear time; this runs once per iteration, which
+        // matters for the restricted engine): count the entries of each cell in the open-addressing
+        // table, turn the counts into ranges, then place the members back to front.
+        let slot_bits = (4 * entries.len().max(1)).next_power_of_two().max(16).trailing_zeros();
         let mut grid = Self {
             inv_cell,
             occupancy: vec![0; 1 << (OCCUPANCY_BITS - 6)],
             slots: vec![EMPTY; 1 << slot_bits],
             slot_shift: 64 - slot_bits,
-            members: Vec::with_capacity(entries.len()),
+            members: vec![0; entries.len()],
         };
-        let mut i = 0;
-        while i < entries.len() {
-            let (ix, iy, _) = entries[i];
-            let start = grid.members.len() as u32;
-            while i < entries.len() && (entries[i].0, entries[i].1) == (ix, iy) {
-                grid.members.push(entries[i].2);
-                i += 1;
-            }
-            grid.insert(Slot { ix, iy, start, len: grid.members.len() as u32 - start });
+        for &(ix, iy, _) in &entries {
+            let k = grid.find_or_insert(ix, iy);
+            grid.slots[k].len += 1;
+        }
+        let mut end = 0;
+        for slot in grid.slots.iter_mut().filter(|s| s.len != 0) {
+            end += slot.len;
+            slot.start = end;
+        }
+        // Back to front, so that each cell lists its vertices in insertion (index) order.
+        for &(ix, iy, j) in entries.iter().rev() {
+            let k = grid.find_or_insert(ix, iy);
+            grid.slots[k].start -= 1;
+            grid.members[grid.slots[k].start as usize] = j;
         }
         grid
     }
 
-    fn insert(&mut self, slot: Slot) {
-        let h = hash(slot.ix, slot.iy);
-        let bit = h >> (64 - OCCUPANCY_BITS);
-        self.occupancy[(bit >> 6) as usize] |= 1 << (bit & 63);
+    /// The slot of cell (ix, iy); a new cell claims an empty slot (the caller then counts into its
+    /// `len`, which marks it taken) and sets its occupancy bit.
+    fn find_or_insert(&mut self, ix: i64, iy: i64) -> usize {
+        let h = hash(ix, iy);
         let mask = self.slots.len() - 1;
         let mut k = (h >> self.slot_shift) as usize;
-        while self.slots[k].len != 0 {
+        loop {
+            let s = self.slots[k];
+            if s.len == 0 {
+                let bit = h >> (64 - OCCUPANCY_BITS);
+                self.occupancy[(bit >> 6) as usize] |= 1 << (bit & 63);
+                self.slots[k] = Slot { ix, iy, start: 0, len: 0 };
+                return k;
+            }
+            if s.ix == ix && s.iy == iy {
+                return k;
+            }
             k = (k + 1) & mask;
         }
-        self.slots[k] = slot;
     }
 
     /// Whether any vertex may lie within R of `p`: the occupancy bit of p's cell (false means

@@ -13,6 +13,7 @@
 //! * [`camera`], [`grid`] — the N_B camera paths and the hash grid of their vertices;
 //! * [`light`] — the streamed light-path loop (the hot path);
 //! * [`merge`] — what one light path contributes: its merges at the three planes;
+//! * [`restricted`] — the restricted engine: only the light paths that can merge, drawn exactly;
 //! * [`heuristics`], [`tally`] — per-path MIS weights and per-chunk/per-iteration tallies.
 //!
 //! Statistics and results:
@@ -40,6 +41,7 @@ pub mod moments;
 pub mod noise;
 pub mod quadrature;
 pub mod report;
+pub mod restricted;
 pub mod rng;
 pub mod runner;
 pub mod sampling;

@@ -17,9 +17,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use rayon::prelude::*;
 
 use super::camera::CameraSet;
-use super::config::SimConfig;
+use super::config::{Engine, SimConfig};
 use super::light::trace_chunk;
 use super::moments::{MergeError, Moments};
+use super::restricted::{RestrictedPlan, RestrictedScratch, trace_restricted};
 use super::tally::{ChunkScratch, ChunkTally, IterationTally};
 
 /// Why a run stopped early.
@@ -34,6 +35,10 @@ pub enum RunError {
 /// Iterations per batch: enough (iteration, chunk) items to balance `threads` workers, few enough
 /// to report progress and honour cancellation promptly.
 fn batch_len(config: &SimConfig, threads: usize) -> u64 {
+    if let Engine::Restricted(_) = config.engine {
+        // Tens of microseconds per iteration: batches of 256 still report many times a second.
+        return 256;
+    }
     let chunks = config.chunks().max(1);
     let wanted = (4 * threads as u64).div_ceil(chunks);
     // Small iterations: batch more of them so per-batch overhead stays negligible.
@@ -56,6 +61,10 @@ pub fn run_iterations(
     let chunks = config.chunks();
     let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
     let per_batch = batch_len(config, rayon::current_num_threads());
+    let plan = match config.engine {
+        Engine::Brute => None,
+        Engine::Restricted(proposals) => Some(RestrictedPlan::new(config, proposals)),
+    };
     let mut start = range.start;
     while start < range.end {
         if cancel.load(Ordering::Relaxed) {
@@ -68,13 +77,17 @@ pub fn run_iterations(
         let tallies: Vec<Option<ChunkTally>> = (0..items)
             .into_par_iter()
             .map_init(
-                || ChunkScratch::new(k),
-                |scratch, item| {
+                || (ChunkScratch::new(k), RestrictedScratch::default()),
+                |(scratch, buffers), item| {
                     if cancel.load(Ordering::Relaxed) {
                         return None;
                     }
                     let (i, c) = (item / chunks, item % chunks);
-                    Some(trace_chunk(config, &cameras[i as usize], seed, start + i, c, scratch))
+                    let cameras = &cameras[i as usize];
+                    Some(match &plan {
+                        None => trace_chunk(config, cameras, seed, start + i, c, scratch),
+                        Some(plan) => trace_restricted(config, plan, cameras, seed, start + i, scratch, buffers),
+                    })
                 },
             )
             .collect();

@@ -19,7 +19,8 @@ const PER_PATH = new Set(['plane1', 'plane2', 'plane3', 'switch', 'balance', 'po
 // Weights fitted on one half and evaluated on the other: far off on little data (even negative).
 const NOISY = new Set(['optimal_holdout']);
 // Big enough to be seen running for a few seconds on two cores, small enough to finish quickly.
-const JOB = { preset: 'paper-table1', light_paths: '200000', camera_paths: '500', merge_radius: '0.02', iterations: '300' };
+// The brute force, so that the job runs long enough to be watched while it runs.
+const JOB = { preset: 'paper-table1', engine: 'brute', light_paths: '200000', camera_paths: '500', merge_radius: '0.02', iterations: '300' };
 const SMALL_JOBS = 30; // more than one page of 25
 const OVERALL_TIMEOUT_MS = 240_000;
 
@@ -92,6 +93,7 @@ function parseWithError(text) {
 async function fillForm(page, values) {
   const form = page.locator('form[data-ref="form"]');
   await form.locator('select[name="preset"]').selectOption(values.preset);
+  if (values.engine) await form.locator('select[name="engine"]').selectOption(values.engine);
   for (const name of ['iterations', 'light_paths', 'camera_paths', 'merge_radius']) {
     await form.locator(`input[name="${name}"]`).fill(values[name]);
   }

@@ -131,7 +131,7 @@ pub async fn assert_problem(response: reqwest::Response, status: u16) -> Value {
 
 /// A small, fast job (a few ms per iteration).
 pub fn small_job(iterations: u64, seed: u64) -> Value {
-    serde_json::json!({
+    serde_json::json!({ "engine": "brute",
         "light_paths": 20_000, "camera_paths": 200, "merge_radius": 0.02,
         "iterations": iterations, "seed": seed
     })

@@ -452,7 +452,7 @@ function setupSubmitForm(refs) {
 /** The submitted document: the preset, the filled-in fields, and the extra overrides. */
 function buildSubmission(form) {
   const extra = parseExtra(form.elements.extra.value);
-  const fields = { preset: form.elements.preset.value };
+  const fields = { preset: form.elements.preset.value, engine: form.elements.engine.value };
   for (const input of form.querySelectorAll('input[data-kind]')) {
     const text = input.value.trim();
     if (text) setPath(fields, input.name.split('.'), parseField(input.name, text, input.dataset.kind));
@@ -658,6 +658,7 @@ function renderSpec(dl, job) {
   const spec = job.spec;
   const rows = [
     ['Preset', spec.preset],
+    ['Engine', spec.engine || 'brute'],
     [['Light paths ', symbol('N', 'F')], formatCount(spec.light_paths)],
     [['Camera paths ', symbol('N', 'B')], formatCount(spec.camera_paths)],
     [['Merge radius ', symbol('R')], formatParameter(spec.merge_radius)],
