@@ -10,9 +10,8 @@
 //! independent blocks of equal length measures their error honestly where a bootstrap would
 //! understate it.
 
-use optimis::sim::config::{Engine, SimConfig};
-use optimis::sim::moments::Moments;
-use optimis::sim::noise::{merge_rates, path_rows};
+use optimis::sim::config::Engine;
+use optimis::sim::equivalence::{Figures, compare, measure};
 use optimis::sim::restricted::Proposals;
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
@@ -22,78 +21,38 @@ const BLOCKS: u64 = 40;
 const BLOCK_LEN: u64 = 50;
 const SEED: u64 = 2026;
 
-/// Mean and standard error of a sample.
-fn mean_se(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let m = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
-}
-
-/// What one engine measured.
-struct Measured {
-    name: &'static str,
-    /// (mean, SE) of the merge events per iteration at planes 1, 2, 3.
-    merges: Vec<(f64, f64)>,
-    /// Per strategy: (name, L as (mean, SE) over blocks, RMS% as (mean, SE) over blocks).
-    rows: Vec<(String, (f64, f64), (f64, f64))>,
-}
-
-fn measure(name: &'static str, config: &SimConfig) -> Measured {
-    let mut total = Moments::new(config);
-    let mut per_block: Vec<Vec<(String, f64, f64)>> = Vec::new();
-    for b in 0..BLOCKS {
-        let block = run(config, SEED, b * BLOCK_LEN..(b + 1) * BLOCK_LEN);
-        per_block.push(
-            path_rows(&block).into_iter().map(|r| (r.strategy, r.luminance.unwrap(), r.rms_percent.unwrap())).collect(),
-        );
-        total.merge(&block).unwrap();
-    }
-    let merges = merge_rates(&total).iter().map(|r| (r.mean, r.stderr)).collect();
-    let rows = (0..per_block[0].len())
-        .map(|s| {
-            let l: Vec<f64> = per_block.iter().map(|rows| rows[s].1).collect();
-            let rms: Vec<f64> = per_block.iter().map(|rows| rows[s].2).collect();
-            (per_block[0][s].0.clone(), mean_se(&l), mean_se(&rms))
-        })
-        .collect();
-    Measured { name, merges, rows }
-}
-
 /// Asserts that every figure of `a` and `b` agrees within 3 combined standard errors, and that the
-/// comparison has power (standard errors small against the values).
-fn assert_equivalent(scene: &str, a: &Measured, b: &Measured) {
-    let agree = |what: String, (ma, sa): (f64, f64), (mb, sb): (f64, f64)| {
-        let combined = (sa * sa + sb * sb).sqrt();
-        let z = (ma - mb) / combined;
-        println!("{scene}: {what}: {} {ma:.6e} ± {sa:.2e} vs {} {mb:.6e} ± {sb:.2e} (z = {z:+.2})", a.name, b.name);
-        assert!(z.abs() <= 3.0, "{scene}: {what} differs between {} and {} by {z:.2} standard errors", a.name, b.name);
-    };
-    for plane in 0..3 {
-        agree(format!("merges/iteration at plane {}", plane + 1), a.merges[plane], b.merges[plane]);
+/// comparison has power (the luminances' standard errors are small against their values).
+fn assert_equivalent(scene: &str, (name_a, a): (&str, &Figures), (name_b, b): (&str, &Figures)) {
+    for c in compare(a, b) {
+        println!(
+            "{scene}: {}: {name_a} {:.6e} ± {:.2e} vs {name_b} {:.6e} ± {:.2e} (z = {:+.2})",
+            c.what, c.a.mean, c.a.stderr, c.b.mean, c.b.stderr, c.z
+        );
+        assert!(
+            c.z.abs() <= 3.0,
+            "{scene}: {} differs between {name_a} and {name_b} by {:.2} standard errors",
+            c.what,
+            c.z
+        );
     }
-    for ((name, la, ra), (name_b, lb, rb)) in a.rows.iter().zip(&b.rows) {
-        assert_eq!(name, name_b);
-        agree(format!("L of {name}"), *la, *lb);
-        agree(format!("RMS% of {name}"), *ra, *rb);
-        assert!(la.1 < 0.2 * la.0.abs(), "{scene}: L of {name} is too noisy to compare: {la:?}");
+    for (name, l, _) in &a.strategies {
+        assert!(l.stderr < 0.2 * l.mean.abs(), "{scene}: L of {name} is too noisy to compare: {l:?}");
     }
 }
 
 fn check_scene(scene: &str, doc: serde_json::Value) {
     let job = parse_job_spec(&doc).unwrap().validate().unwrap();
-    let brute = job.config.with_engine(Engine::Brute);
-    let auto = job.config.with_engine(Engine::Restricted(Proposals::Auto));
-    let reverse = job.config.with_engine(Engine::Restricted(Proposals::Reverse));
-    let brute = measure("brute", &brute);
-    let auto = measure("restricted", &auto);
-    let reverse = measure("restricted-reverse", &reverse);
-    for merges in [&brute.merges, &auto.merges] {
-        assert!(merges.iter().all(|&(m, _)| m > 0.1), "{scene}: every plane must see merges: {merges:?}");
+    let figures = |engine| measure(&job.config.with_engine(engine), SEED, 0, BLOCKS, BLOCK_LEN);
+    let brute = figures(Engine::Brute);
+    let auto = figures(Engine::Restricted(Proposals::Auto));
+    let reverse = figures(Engine::Restricted(Proposals::Reverse));
+    for f in [&brute, &auto] {
+        assert!(f.merges.iter().all(|m| m.mean > 0.1), "{scene}: every plane must see merges: {:?}", f.merges);
     }
-    assert_equivalent(scene, &brute, &auto);
-    assert_equivalent(scene, &brute, &reverse);
-    assert_equivalent(scene, &auto, &reverse);
+    assert_equivalent(scene, ("brute", &brute), ("restricted", &auto));
+    assert_equivalent(scene, ("brute", &brute), ("restricted-reverse", &reverse));
+    assert_equivalent(scene, ("restricted", &auto), ("restricted-reverse", &reverse));
 }
 
 fn small(preset: &str) -> serde_json::Value {

@@ -21,7 +21,8 @@
 //! * [`document`] — the portable, checksummed moments document and merging of documents;
 //! * [`runner`] — runs iterations on the current rayon pool, in order;
 //! * [`solver`], [`noise`], [`report`] — optimal weights, the noise table, the result document;
-//! * [`quadrature`] — the analytic reference luminance.
+//! * [`quadrature`] — the analytic reference luminance;
+//! * [`equivalence`] — block-wise comparison of two engines' figures (the equivalence suite).
 //!
 //! Nothing here touches a file, a socket, a clock or a database, so all of it is testable and
 //! benchmarkable alone; the CLI and the server wrap it.
@@ -31,6 +32,7 @@ pub mod cells;
 pub mod config;
 pub mod coverage;
 pub mod document;
+pub mod equivalence;
 pub mod exact_sum;
 pub mod grid;
 pub mod heuristics;

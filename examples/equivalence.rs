@@ -1,0 +1,42 @@
+//! The engines' equivalence at full scale: brute force against the restricted engine, block-wise.
+//!
+//! cargo run --release --example equivalence -- paper-table1 100 100
+//!
+//! Arguments: preset (default paper-table1), blocks (default 100), iterations per block (default
+//! 100); seed 1 for both engines (their streams differ, so the runs are independent). Prints every
+//! compared figure with its z-score (the difference in combined standard errors) and the largest
+//! |z|. The small-scale version of this comparison is the test suite's tests/engines.rs; this is the
+//! documented long run (docs/results.md).
+
+use optimis::sim::config::Engine;
+use optimis::sim::equivalence::{compare, measure};
+use optimis::sim::restricted::Proposals;
+use optimis::sim::spec::parse_job_spec;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let preset = args.get(1).cloned().unwrap_or_else(|| "paper-table1".into());
+    let blocks: u64 = args.get(2).and_then(|n| n.parse().ok()).unwrap_or(100);
+    let block_len: u64 = args.get(3).and_then(|n| n.parse().ok()).unwrap_or(100);
+    let doc = serde_json::json!({ "preset": preset });
+    let job = parse_job_spec(&doc).and_then(|s| s.validate()).expect("a valid preset");
+    let started = std::time::Instant::now();
+    let brute = measure(&job.config.with_engine(Engine::Brute), 1, 0, blocks, block_len);
+    let brute_seconds = started.elapsed().as_secs_f64();
+    let started = std::time::Instant::now();
+    let restricted = measure(&job.config.with_engine(Engine::Restricted(Proposals::Auto)), 1, 0, blocks, block_len);
+    let restricted_seconds = started.elapsed().as_secs_f64();
+    println!(
+        "{preset}: {blocks} blocks of {block_len} iterations; brute {brute_seconds:.0} s, restricted {restricted_seconds:.1} s"
+    );
+    println!("| figure | brute | restricted | z |\n|---|---|---|---|");
+    let mut worst: f64 = 0.0;
+    for c in compare(&brute, &restricted) {
+        println!(
+            "| {} | {:.5e} ± {:.2e} | {:.5e} ± {:.2e} | {:+.2} |",
+            c.what, c.a.mean, c.a.stderr, c.b.mean, c.b.stderr, c.z
+        );
+        worst = worst.max(c.z.abs());
+    }
+    println!("largest |z|: {worst:.2}");
+}
