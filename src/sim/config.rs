@@ -63,8 +63,7 @@ pub struct SimConfig {
 struct FingerprintInput<'a> {
     format: u32,
     generator: &'a str,
-    /// Absent for the brute force, so its fingerprints are those of the jobs run before engines
-    /// existed (their checkpoints stay valid).
+    /// Absent for the brute force: its fingerprint changes only with the generator scheme.
     #[serde(skip_serializing_if = "Option::is_none")]
     engine: Option<&'a str>,
     scene: &'a SceneSpec,

@@ -12,6 +12,7 @@
 //! * [`sampling`] — Lambert and lobe directions;
 //! * [`camera`], [`grid`] — the N_B camera paths and the hash grid of their vertices;
 //! * [`light`] — the streamed light-path loop (the hot path);
+//! * [`fastmath`] — branch-free sine and cosine that the hot loop can vectorise, with tested bounds;
 //! * [`merge`] — what one light path contributes: its merges at the three planes;
 //! * [`restricted`] — the restricted engine: only the light paths that can merge, drawn exactly;
 //! * [`heuristics`], [`tally`] — per-path MIS weights and per-chunk/per-iteration tallies.
@@ -34,6 +35,7 @@ pub mod coverage;
 pub mod document;
 pub mod equivalence;
 pub mod exact_sum;
+pub mod fastmath;
 pub mod grid;
 pub mod heuristics;
 pub mod illumination;
