@@ -126,6 +126,9 @@ fn tail_probability() -> f64 {
 pub struct RestrictedPlan {
     proposals: Proposals,
     layers: Vec<Layer>,
+    /// The plane-1 bundle, (mass, layer, kind) per part: it does not depend on the cameras, so it
+    /// is worked out once per run.
+    plane1: Vec<(f64, usize, Kind)>,
     cone: PixelCone,
     /// (δ, sin δ, cos δ) for δ = asin(R/L2) (with a relative margin of 10⁻⁶): a direction from x2
     /// that hits D(0, R) is within δ of the direction to the pixel (see [`PixelCone::new`]).
@@ -137,6 +140,14 @@ pub struct RestrictedPlan {
 pub struct RestrictedScratch {
     /// (cumulative mass, layer, camera, kind) of the current bundle.
     bundle: Vec<(f64, u32, u32, Kind)>,
+}
+
+impl RestrictedScratch {
+    /// Adds a (layer, camera) pair of mass `mass` to the current bundle.
+    fn push(&mut self, mass: f64, layer: usize, camera: usize, kind: Kind) {
+        let total = self.bundle.last().map_or(0.0, |&(c, ..)| c) + mass;
+        self.bundle.push((total, layer as u32, camera as u32, kind));
+    }
 }
 
 /// The largest |x2| from which a light path that started at |x3| < `r_out` and is deflected by at
@@ -199,11 +210,15 @@ impl RestrictedPlan {
             .collect();
         let cone = PixelCone::new(scene.lobe.beta, scene.l2, config.merge_radius);
         let delta = (config.merge_radius / scene.l2).asin() * (1.0 + 1e-6);
-        Self { proposals, layers, cone, delta: (delta, delta.sin(), delta.cos()) }
+        let mut plan = Self { proposals, layers, plane1: Vec::new(), cone, delta: (delta, delta.sin(), delta.cos()) };
+        plan.plane1 = (0..plan.layers.len())
+            .flat_map(|l| plan.plane1_parts(&plan.layers[l], config).into_iter().map(move |(m, k)| (m, l, k)))
+            .collect();
+        plan
     }
 
     /// The plane-1 proposals for `layer`: (mass, kind) of each part.
-    fn plane1(&self, layer: &Layer, config: &SimConfig) -> Vec<(f64, Kind)> {
+    fn plane1_parts(&self, layer: &Layer, config: &SimConfig) -> Vec<(f64, Kind)> {
         let r = config.merge_radius;
         let reverse = 2.0 * layer.nu * PI * r * r;
         match (self.proposals, layer.reach) {
@@ -291,12 +306,8 @@ fn plane1_bundle(
     buffers: &mut RestrictedScratch,
 ) {
     buffers.bundle.clear();
-    let mut total = 0.0;
-    for (l, layer) in plan.layers.iter().enumerate() {
-        for (mass, kind) in plan.plane1(layer, config) {
-            total += mass;
-            buffers.bundle.push((total, l as u32, 0, kind));
-        }
+    for &(mass, l, kind) in &plan.plane1 {
+        buffers.push(mass, l, 0, kind);
     }
     let r = config.merge_radius;
     let (l2, l3) = (config.scene.l2, config.scene.l3);
@@ -326,12 +337,7 @@ fn plane1_bundle(
                 let (bulk, tail) = layer.reach.expect("forward plane-1 proposals exist only with a bound");
                 let x3 = ring_point(rng, &layer.ring);
                 let x2 = disc_point(rng, [0.0, 0.0], if kind == Kind::ForwardBulk { bulk } else { tail });
-                let (dx, dy) = (x2[0] - x3[0], x2[1] - x3[1]);
-                let d2 = l3 * l3 + dx * dx + dy * dy;
-                let ratio = l3 * l3 / d2;
-                if uniform(rng) >= ratio * ratio {
-                    return;
-                }
+                let Some(d) = thin_by_distance(rng, x3, x2, l3, l3 * l3) else { return };
                 // ϑ = β√(−2 ln u) with u restricted to the part: u ≥ P(tail) for the bulk, u < it
                 // for the tail (u = P(tail)·u' with u' in (0, 1], as the sampler's u).
                 let p_tail = tail_probability();
@@ -341,7 +347,6 @@ fn plane1_bundle(
                     p_tail * uniform_open0(rng)
                 };
                 let theta = config.scene.lobe.beta * (-2.0 * libm::log(u)).sqrt();
-                let d = Vector3::new(dx, dy, -l3) / d2.sqrt();
                 let x1 = land_on_pixel(config, plan, &d, x2, theta, rng);
                 if x1.is_none() {
                     return;
@@ -364,12 +369,10 @@ fn plane2_bundle(
     buffers: &mut RestrictedScratch,
 ) {
     buffers.bundle.clear();
-    let mut total = 0.0;
     for (l, layer) in plan.layers.iter().enumerate() {
         for (j, cam) in cameras.paths.iter().enumerate() {
             let (mass, kind) = plan.plane2(layer, config, cam.x2);
-            total += mass;
-            buffers.bundle.push((total, l as u32, j as u32, kind));
+            buffers.push(mass, l, j, kind);
         }
     }
     let r = config.merge_radius;
@@ -389,13 +392,8 @@ fn plane2_bundle(
             }
             Kind::Forward | Kind::ForwardBulk | Kind::ForwardTail => {
                 let x3 = ring_point(rng, &layer.ring);
-                let (dx, dy) = (x2[0] - x3[0], x2[1] - x3[1]);
-                let d2 = l3 * l3 + dx * dx + dy * dy;
-                let ratio = d_min_squared(config, layer, x2c) / d2;
-                if uniform(rng) >= ratio * ratio {
-                    return;
-                }
-                (x3, Vector3::new(dx, dy, -l3) / d2.sqrt())
+                let Some(d) = thin_by_distance(rng, x3, x2, l3, d_min_squared(config, layer, x2c)) else { return };
+                (x3, d)
             }
         };
         let candidate = Candidate { x3, x2, d, x1: pixel_hit(config, plan, &d, x2, rng) };
@@ -418,7 +416,6 @@ fn plane3_bundle(
 ) {
     let r = config.merge_radius;
     buffers.bundle.clear();
-    let mut total = 0.0;
     for (l, layer) in plan.layers.iter().enumerate() {
         for (j, cam) in cameras.paths.iter().enumerate() {
             let Some(x3c) = cam.x3 else { continue };
@@ -427,8 +424,7 @@ fn plane3_bundle(
             if dist + r < layer.ring.r_in || dist - r >= layer.ring.r_out {
                 continue;
             }
-            total += layer.nu * PI * r * r;
-            buffers.bundle.push((total, l as u32, j as u32, Kind::Forward));
+            buffers.push(layer.nu * PI * r * r, l, j, Kind::Forward);
         }
     }
     let l3 = config.scene.l3;
@@ -443,7 +439,7 @@ fn plane3_bundle(
         let x2 = [x3[0] + l3 / dir.z * dir.x, x3[1] + l3 / dir.z * dir.y];
         let d = Vector3::new(dir.x, dir.y, -dir.z);
         let candidate = Candidate { x3, x2, d, x1: pixel_hit(config, plan, &d, x2, rng) };
-        let in_plane2 = !cameras.plane2.candidates(x2).iter().all(|&i| !within(x2, cameras.paths[i as usize].x2, r));
+        let in_plane2 = cameras.plane2.candidates(x2).iter().any(|&i| within(x2, cameras.paths[i as usize].x2, r));
         if candidate.x1.is_some()
             || in_plane2
             || in_earlier(cameras.plane3.candidates(x3), j, |i| {
@@ -454,6 +450,16 @@ fn plane3_bundle(
         }
         tally(config, cameras, &candidate, scratch);
     });
+}
+
+/// Thinning of the forward proposals, whose λ̄ uses the density bound L3²/(π d_min⁴) of a Lambert
+/// direction from x3 landing at x2: keeps the candidate with probability (d_min/d)⁴ and returns
+/// its unit direction x3 → x2, or `None`.
+fn thin_by_distance(rng: &mut StreamRng, x3: [f64; 2], x2: [f64; 2], l3: f64, d_min2: f64) -> Option<Vector3<f64>> {
+    let (dx, dy) = (x2[0] - x3[0], x2[1] - x3[1]);
+    let d2 = l3 * l3 + dx * dx + dy * dy;
+    let ratio = d_min2 / d2;
+    (uniform(rng) < ratio * ratio).then(|| Vector3::new(dx, dy, -l3) / d2.sqrt())
 }
 
 /// Whether a camera with index below `j` among `near` satisfies `contains`.
