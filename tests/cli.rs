@@ -89,3 +89,29 @@ fn four_shards_merged_equal_a_single_run() {
             .unwrap();
     assert!(tables.contains("optimal weights (λ = 0.5)"), "{tables}");
 }
+
+/// `optimis bench | head -1` and friends: the reader closing the pipe is not an error (exit 0, no
+/// panic message). The pipe's read end is closed before the child starts, so every write fails.
+#[test]
+fn a_reader_that_leaves_early_is_not_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let commands: [&[&str]; 3] = [
+        &["bench", "--engine", "brute", "--iterations", "1", "--light-paths", "1000"],
+        &["bench", "--engine", "brute", "--iterations", "1", "--light-paths", "1000", "--json"],
+        &["run", "--preset", "paper-table1", "--iterations", "2", "--json"],
+    ];
+    for args in commands {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let output = Command::new(env!("CARGO_BIN_EXE_optimis"))
+            .current_dir(dir.path())
+            .args(args)
+            .stdout(writer)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .expect("optimis runs");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "optimis {args:?} failed on a closed pipe: {stderr}");
+        assert!(!stderr.contains("panicked"), "optimis {args:?} panicked: {stderr}");
+    }
+}

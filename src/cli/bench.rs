@@ -1,6 +1,7 @@
 //! `optimis bench`: iterations and light paths per second of the simulation core at the paper's
 //! parameters, for each engine asked for, and the restricted engine's speed-up over the brute force.
 
+use std::io::Write;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -90,8 +91,11 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
         |e: BenchEngine| results.iter().find(|(x, _)| *x == e).and_then(|(_, v)| v["iterations_per_second"].as_f64());
     let speedup = rate(BenchEngine::Restricted).zip(rate(BenchEngine::Brute)).map(|(r, b)| r / b);
     let config = &job.config;
+    // Written with `?`, not println!: a closed pipe (`optimis bench | head -1`) is the reader
+    // leaving, which main() treats as success instead of a panic.
+    let mut out = std::io::stdout().lock();
     if args.json {
-        let out = json!({
+        let doc = json!({
             "engines": results.iter().map(|(_, v)| v.clone()).collect::<Vec<_>>(),
             "restricted_over_brute": speedup,
             "light_paths_per_iteration": config.light_paths,
@@ -99,27 +103,29 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
             "threads": threads,
             "cores": cores(),
         });
-        println!("{out}");
+        writeln!(out, "{doc}")?;
     } else {
         for (_, v) in &results {
-            println!(
+            writeln!(
+                out,
                 "{:<10} {:>12.4e} iterations/s  {:>12.4e} light paths/s  ({} iterations in {:.2} s)",
                 v["engine"].as_str().unwrap_or("?"),
                 v["iterations_per_second"].as_f64().unwrap_or(0.0),
                 v["light_paths_per_second"].as_f64().unwrap_or(0.0),
                 v["iterations"],
                 v["seconds"].as_f64().unwrap_or(0.0),
-            );
+            )?;
         }
         if let Some(s) = speedup {
-            println!("restricted / brute: {s:.0}× per iteration");
+            writeln!(out, "restricted / brute: {s:.0}× per iteration")?;
         }
-        println!(
+        writeln!(
+            out,
             "(N_F = {}, N_B = {}; {threads} threads on {} cores)",
             config.light_paths,
             config.camera_paths,
             cores()
-        );
+        )?;
     }
     Ok(())
 }

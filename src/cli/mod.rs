@@ -90,8 +90,8 @@ pub fn main() -> ExitCode {
         Command::Serve(args) => serve::serve_command(args),
         #[cfg(feature = "server")]
         Command::Openapi => {
-            print!("{}", crate::api::openapi_yaml());
-            Ok(())
+            use std::io::Write;
+            std::io::stdout().lock().write_all(crate::api::openapi_yaml().as_bytes()).map_err(CliError::from)
         }
     };
     match result {
