@@ -23,7 +23,8 @@
 //! * [`runner`] — runs iterations on the current rayon pool, in order;
 //! * [`solver`], [`noise`], [`report`] — optimal weights, the noise table, the result document;
 //! * [`quadrature`] — the analytic reference luminance;
-//! * [`equivalence`] — block-wise comparison of two engines' figures (the equivalence suite).
+//! * [`equivalence`] — block-wise comparison of two engines' figures (the equivalence suite);
+//! * [`expectation`] — exact expected plane-3 merges given the camera paths (an analytic check).
 //!
 //! Nothing here touches a file, a socket, a clock or a database, so all of it is testable and
 //! benchmarkable alone; the CLI and the server wrap it.
@@ -35,6 +36,7 @@ pub mod coverage;
 pub mod document;
 pub mod equivalence;
 pub mod exact_sum;
+pub mod expectation;
 pub mod fastmath;
 pub mod grid;
 pub mod heuristics;
