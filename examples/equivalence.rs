@@ -5,13 +5,14 @@
 //! Arguments: preset (default paper-table1), blocks (default 100), iterations per block (default
 //! 100); seed 1 for both engines (the same camera paths, different light-path streams). Prints
 //! every compared figure, the mean block difference with its standard error, its z-score (see
-//! `sim::equivalence`: blocks are compared pairwise) and the largest |z|; then each engine's plane-3
-//! merges against their exact expectation given the camera paths (`sim::expectation`). The small-scale version of this comparison is the test suite's tests/engines.rs; this is the
-//! documented long run (docs/results.md).
+//! `sim::equivalence`: blocks are compared pairwise) and the largest |z|; then each engine's
+//! plane-2 and plane-3 merges against their exact expectation given the camera paths
+//! (`sim::expectation`). The small-scale version of this comparison is the test suite's
+//! tests/engines.rs; this is the documented long run (docs/results.md).
 
 use optimis::sim::config::Engine;
 use optimis::sim::equivalence::{compare, measure};
-use optimis::sim::expectation::plane3_merges;
+use optimis::sim::expectation::merges;
 use optimis::sim::restricted::Proposals;
 use optimis::sim::spec::parse_job_spec;
 
@@ -41,14 +42,14 @@ fn main() {
         worst = worst.max(c.z.abs());
     }
     println!("largest |z|: {worst:.2}");
-    // The plane-3 merges of each engine against their exact expectation given the camera paths.
-    let expected = plane3_merges(&job.config, 1, 0..blocks * block_len);
+    // Each engine's plane-2 and plane-3 merges against their exact expectation given the cameras.
+    let expected = merges(&job.config, 1, 0..blocks * block_len);
     for (name, figures) in [("brute", &brute), ("restricted", &restricted)] {
-        let observed = (figures.merges[2].mean * (blocks * block_len) as f64).round();
-        let (mean, sd) = (expected.mean, expected.variance_bound.sqrt());
-        println!(
-            "{name}: plane-3 merges {observed} vs exact expectation {mean:.1} ± {sd:.1} (z = {:+.2})",
-            expected.z(observed)
-        );
+        for (plane, expected) in [(2, expected.plane2), (3, expected.plane3)] {
+            let observed = (figures.merges[plane - 1].mean * (blocks * block_len) as f64).round();
+            let (mean, sd) = (expected.mean, expected.variance_bound.sqrt());
+            let z = expected.z(observed);
+            println!("{name}: plane-{plane} merges {observed} vs exact expectation {mean:.1} ± {sd:.1} (z = {z:+.2})");
+        }
     }
 }

@@ -13,7 +13,7 @@
 
 use optimis::sim::config::Engine;
 use optimis::sim::equivalence::{Figures, compare, measure};
-use optimis::sim::expectation::plane3_merges;
+use optimis::sim::expectation::merges;
 use optimis::sim::restricted::Proposals;
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
@@ -71,37 +71,34 @@ fn engines_agree_under_uniform_illumination() {
     check_scene("uniform", small("uniform-illumination"));
 }
 
-/// Given its camera paths, an iteration's plane-3 merges have an exact expectation
-/// (`sim::expectation`: N_F·Σ_j P(x3l ∈ D(x3c_j, R)) under the light's profile): each engine's total
-/// over many iterations must match the sum of these within 3 standard deviations (at the variance
-/// bound of `sim::expectation`, so the test is conservative), on the spot-lit and the uniform scene.
+/// Given its camera paths, an iteration's plane-2 and plane-3 merges have exact expectations
+/// (`sim::expectation`: N_F·Σ_j P(x_pl ∈ D(x_pc_j, R)), in closed form from the light's profile):
+/// each engine's totals over many iterations must match the sums of these within 3 standard
+/// deviations (at the variance bound of `sim::expectation`, so the test is conservative), on the
+/// spot-lit and the uniform scene.
 #[test]
-fn plane3_merges_match_their_exact_expectation() {
+fn plane2_and_plane3_merges_match_their_exact_expectation() {
     let iterations = 1000;
     for preset in ["paper-table1", "uniform-illumination"] {
         let job = parse_job_spec(&small(preset)).unwrap().validate().unwrap();
+        let expected = merges(&job.config, SEED, 0..iterations);
         for engine in [Engine::Brute, Engine::Restricted(Proposals::Auto)] {
             let config = job.config.with_engine(engine);
-            let observed = run(&config, SEED, 0..iterations).pooled().merges[2] as f64;
-            let expected = plane3_merges(&config, SEED, 0..iterations);
-            let z = expected.z(observed);
-            let (mean, sd) = (expected.mean, expected.variance_bound.sqrt());
-            println!(
-                "{preset}, {}: plane-3 merges {observed} vs exact expectation {mean:.1} ± {sd:.1} (z = {z:+.2})",
-                engine.id()
-            );
-            assert!(mean > 1000.0, "{preset}: too few plane-3 merges to test: {mean:.1}");
-            // The bound must stay close to the mean, or the test would lose its power.
-            assert!(
-                expected.variance_bound < 1.1 * mean,
-                "{preset}: variance bound {:.1} ≫ mean",
-                expected.variance_bound
-            );
-            assert!(
-                z.abs() <= 3.0,
-                "{preset}, {}: plane-3 merges {observed} vs expected {mean:.1}: z = {z:.2}",
-                engine.id()
-            );
+            let observed = run(&config, SEED, 0..iterations).pooled().merges;
+            for (plane, expected, observed) in [(2, expected.plane2, observed[1]), (3, expected.plane3, observed[2])] {
+                let (mean, sd) = (expected.mean, expected.variance_bound.sqrt());
+                let z = expected.z(observed as f64);
+                let what = format!("{preset}, {}: plane-{plane} merges", engine.id());
+                println!("{what} {observed} vs exact expectation {mean:.1} ± {sd:.1} (z = {z:+.2})");
+                assert!(mean > 1000.0, "{what}: too few to test: {mean:.1}");
+                // The bound must stay close to the mean, or the test would lose its power.
+                assert!(
+                    expected.variance_bound < 1.1 * mean,
+                    "{what}: variance bound {:.1} ≫ mean",
+                    expected.variance_bound
+                );
+                assert!(z.abs() <= 3.0, "{what}: {observed} vs expected {mean:.1}: z = {z:.2}");
+            }
         }
     }
 }
