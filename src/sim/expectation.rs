@@ -40,18 +40,17 @@ pub fn disc_overlap_area(r: f64, big: f64, c: f64) -> f64 {
     r * r * angle(r, big) + big * big * angle(big, r) - kite
 }
 
+/// Σ_k (level_k/Φ)·(F(r_out_k) − F(r_in_k)): the integral over the light's rings of a quantity
+/// whose integral over the centred disc of radius r is F(r).
+fn over_rings(illumination: &Illumination, disc: impl Fn(f64) -> f64) -> f64 {
+    let flux = illumination.flux();
+    illumination.rings().iter().map(|ring| ring.level / flux * (disc(ring.r_out) - disc(ring.r_in)).max(0.0)).sum()
+}
+
 /// Probability that a light path starts in the disc of radius `radius` around `centre` (plane 3).
 pub fn start_probability_in_disc(illumination: &Illumination, centre: [f64; 2], radius: f64) -> f64 {
     let c = centre[0].hypot(centre[1]);
-    let flux = illumination.flux();
-    illumination
-        .rings()
-        .iter()
-        .map(|ring| {
-            let area = disc_overlap_area(radius, ring.r_out, c) - disc_overlap_area(radius, ring.r_in, c);
-            ring.level / flux * area.max(0.0)
-        })
-        .sum()
+    over_rings(illumination, |r| disc_overlap_area(radius, r, c))
 }
 
 /// The exact mean of a merge count and a bound on its variance.
@@ -81,15 +80,7 @@ pub fn disc_configuration_factor(r: f64, c: f64, l3: f64) -> f64 {
 /// Density of the light paths' plane-2 vertices x2l at `point`.
 pub fn arrival_density(illumination: &Illumination, l3: f64, point: [f64; 2]) -> f64 {
     let c = point[0].hypot(point[1]);
-    let flux = illumination.flux();
-    illumination
-        .rings()
-        .iter()
-        .map(|ring| {
-            ring.level / flux
-                * (disc_configuration_factor(ring.r_out, c, l3) - disc_configuration_factor(ring.r_in, c, l3))
-        })
-        .sum()
+    over_rings(illumination, |r| disc_configuration_factor(r, c, l3))
 }
 
 /// Expected plane-2 and plane-3 merge events (with variance bounds).
