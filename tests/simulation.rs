@@ -81,23 +81,35 @@ fn uniform_scene_means_match_the_quadrature() {
 }
 
 fn small_job() -> ValidJob {
-    // 3 chunks per iteration (2¹⁷ + a partial one), enough merges to fill many cells.
+    // The restricted engine (the presets' default); enough merges to fill many cells.
     job(json!({
         "preset": "paper-table1", "light_paths": 140_000, "camera_paths": 300,
         "merge_radius": 0.02, "iterations": 12, "seed": 5
     }))
 }
 
-/// Moments are bit-identical on 1, 2 and 8 threads (compared exactly and as serialised JSON).
+fn small_brute_job() -> ValidJob {
+    // 3 chunks per iteration (2¹⁷ + a partial one).
+    job(json!({
+        "preset": "paper-table1", "engine": "brute", "light_paths": 140_000, "camera_paths": 300,
+        "merge_radius": 0.02, "iterations": 12, "seed": 5
+    }))
+}
+
+/// Moments are bit-identical on 1, 2 and 8 threads (compared exactly and as serialised JSON), for
+/// both engines: the brute force's chunks, and the restricted engine's batches of 256 iterations
+/// that workers add to moments of their own (600 iterations: batches split into many pieces).
 #[test]
 fn moments_do_not_depend_on_the_thread_count() {
-    let job = small_job();
-    let runs: Vec<Moments> = [1, 2, 8].iter().map(|&t| pool(t).install(|| run(&job.config, 5, 0..12))).collect();
-    assert!(runs[0].pooled().merges.iter().sum::<u64>() > 100, "the run must have merges to compare");
-    let json0 = serde_json::to_string(&runs[0]).unwrap();
-    for other in &runs[1..] {
-        assert_eq!(&runs[0], other);
-        assert_eq!(json0, serde_json::to_string(other).unwrap());
+    for (job, iterations) in [(small_brute_job(), 12), (small_job(), 600)] {
+        let runs: Vec<Moments> =
+            [1, 2, 8].iter().map(|&t| pool(t).install(|| run(&job.config, 5, 0..iterations))).collect();
+        assert!(runs[0].pooled().merges.iter().sum::<u64>() > 100, "the run must have merges to compare");
+        let json0 = serde_json::to_string(&runs[0]).unwrap();
+        for other in &runs[1..] {
+            assert_eq!(&runs[0], other);
+            assert_eq!(json0, serde_json::to_string(other).unwrap());
+        }
     }
 }
 
@@ -105,7 +117,12 @@ fn moments_do_not_depend_on_the_thread_count() {
 /// so does resuming a run from its own partial moments.
 #[test]
 fn split_and_merge_is_bit_identical() {
-    let job = small_job();
+    for job in [small_job(), small_brute_job()] {
+        split_and_merge_of(&job);
+    }
+}
+
+fn split_and_merge_of(job: &ValidJob) {
     let config = &job.config;
     let whole = pool(2).install(|| run(config, 5, 0..12));
     for k in [1, 5, 11] {

@@ -5,7 +5,9 @@
 //! (seed, iteration, chunk) and the results are reduced per iteration in chunk order and added to
 //! the moments in iteration order — so the moments are bit-identical for any thread count. (They
 //! would be even without the ordering, as the moments' sums are exact; the per-iteration floating
-//! sums are what the ordering protects.)
+//! sums are what the ordering protects.) The restricted engine's iterations are one item each and
+//! take tens of microseconds, so there the workers also add them to moments of their own, which
+//! are merged — adding them one by one on the calling thread would be the serial bottleneck.
 //!
 //! Iterations are processed in batches; between batches the caller sees the moments (for progress
 //! and checkpoints) and may end the run there, and cancellation is checked before every chunk. A
@@ -57,9 +59,6 @@ pub fn run_iterations(
     cancel: &AtomicBool,
     mut on_batch: impl FnMut(&Moments, u64) -> ControlFlow<()>,
 ) -> Result<u64, RunError> {
-    let k = config.cells.len();
-    let chunks = config.chunks();
-    let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
     let per_batch = batch_len(config, rayon::current_num_threads());
     let plan = match config.engine {
         Engine::Brute => None,
@@ -71,32 +70,17 @@ pub fn run_iterations(
             return Err(RunError::Cancelled);
         }
         let end = (start + per_batch).min(range.end);
-        let cameras: Vec<CameraSet> =
-            (start..end).into_par_iter().map(|s| CameraSet::generate(config, seed, s)).collect();
-        let items = (end - start) * chunks;
-        let tallies: Vec<Option<ChunkTally>> = (0..items)
-            .into_par_iter()
-            .map_init(
-                || (ChunkScratch::new(k), RestrictedScratch::default()),
-                |(scratch, buffers), item| {
-                    if cancel.load(Ordering::Relaxed) {
-                        return None;
-                    }
-                    let (i, c) = (item / chunks, item % chunks);
-                    let cameras = &cameras[i as usize];
-                    Some(match &plan {
-                        None => trace_chunk(config, cameras, seed, start + i, c, scratch),
-                        Some(plan) => trace_restricted(config, plan, cameras, seed, start + i, scratch, buffers),
-                    })
-                },
-            )
-            .collect();
-        if tallies.iter().any(Option::is_none) {
-            return Err(RunError::Cancelled);
-        }
-        for (i, per_iteration) in tallies.chunks(chunks as usize).enumerate() {
-            let tally = IterationTally::from_chunks(start + i as u64, k, norm, per_iteration.iter().flatten());
-            moments.add_iteration(seed, &tally)?;
+        match &plan {
+            None => {
+                let tallies = brute_batch(config, seed, start..end, cancel).ok_or(RunError::Cancelled)?;
+                for tally in &tallies {
+                    moments.add_iteration(seed, tally)?;
+                }
+            }
+            Some(plan) => {
+                let batch = restricted_batch(config, plan, seed, start..end, cancel).ok_or(RunError::Cancelled)?;
+                moments.merge(&batch)?;
+            }
         }
         start = end;
         if on_batch(moments, end).is_break() {
@@ -104,6 +88,82 @@ pub fn run_iterations(
         }
     }
     Ok(start)
+}
+
+/// The brute force's iterations `batch`: (iteration, chunk) items in parallel, then each
+/// iteration's chunks reduced in chunk order. None if cancelled.
+fn brute_batch(config: &SimConfig, seed: u64, batch: Range<u64>, cancel: &AtomicBool) -> Option<Vec<IterationTally>> {
+    let (k, chunks) = (config.cells.len(), config.chunks());
+    let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
+    let cameras: Vec<CameraSet> = batch.clone().into_par_iter().map(|s| CameraSet::generate(config, seed, s)).collect();
+    let items = (batch.end - batch.start) * chunks;
+    let tallies: Vec<Option<ChunkTally>> = (0..items)
+        .into_par_iter()
+        .map_init(
+            || ChunkScratch::new(k),
+            |scratch, item| {
+                if cancel.load(Ordering::Relaxed) {
+                    return None;
+                }
+                let (i, c) = (item / chunks, item % chunks);
+                Some(trace_chunk(config, &cameras[i as usize], seed, batch.start + i, c, scratch))
+            },
+        )
+        .collect();
+    if tallies.iter().any(Option::is_none) {
+        return None;
+    }
+    let per_iteration = tallies.chunks(chunks as usize).enumerate();
+    Some(
+        per_iteration
+            .map(|(i, chunks)| IterationTally::from_chunks(batch.start + i as u64, k, norm, chunks.iter().flatten()))
+            .collect(),
+    )
+}
+
+/// The restricted engine's iterations `batch` as moments of their own. An iteration takes tens of
+/// microseconds, so adding it to the moments (exact sums) would be a serial bottleneck: each
+/// worker adds its iterations to moments of its own and those are merged. The sums are exact, so
+/// the grouping does not change a bit. None if cancelled.
+fn restricted_batch(
+    config: &SimConfig,
+    plan: &RestrictedPlan,
+    seed: u64,
+    batch: Range<u64>,
+    cancel: &AtomicBool,
+) -> Option<Moments> {
+    let k = config.cells.len();
+    let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
+    // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value.
+    (0..(batch.end - batch.start) as usize)
+        .into_par_iter()
+        .with_min_len(16)
+        .map_init(
+            || (ChunkScratch::new(k), RestrictedScratch::default()),
+            |(scratch, buffers), i| {
+                let s = batch.start + i as u64;
+                if cancel.load(Ordering::Relaxed) {
+                    return None;
+                }
+                let cameras = CameraSet::generate(config, seed, s);
+                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers);
+                Some(IterationTally::from_chunks(s, k, norm, std::iter::once(&chunk)))
+            },
+        )
+        .try_fold(
+            || Moments::new(config),
+            |mut moments, tally| {
+                moments.add_iteration(seed, &tally?).expect("a batch's iterations are distinct");
+                Some(moments)
+            },
+        )
+        .try_reduce(
+            || Moments::new(config),
+            |mut a, b| {
+                a.merge(&b).expect("pieces of one batch cover distinct iterations");
+                Some(a)
+            },
+        )
 }
 
 /// Runs iterations `range` of `seed` into fresh moments.
