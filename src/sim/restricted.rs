@@ -274,10 +274,53 @@ pub fn trace_restricted(
     buffers: &mut RestrictedScratch,
 ) -> ChunkTally {
     let mut rng = stream(seed, iteration, RESTRICTED_STREAM);
-    plane1_bundle(config, plan, cameras, &mut rng, scratch, buffers);
-    plane2_bundle(config, plan, cameras, &mut rng, scratch, buffers);
-    plane3_bundle(config, plan, cameras, &mut rng, scratch, buffers);
+    let it = Iteration { config, plan, cameras };
+    plane1_bundle(&it, &mut rng, scratch, buffers);
+    plane2_bundle(&it, &mut rng, scratch, buffers);
+    plane3_bundle(&it, &mut rng, scratch, buffers);
     scratch.take()
+}
+
+/// What the bundles of one iteration read: the configuration, the plan and the camera paths.
+#[derive(Clone, Copy)]
+struct Iteration<'a> {
+    config: &'a SimConfig,
+    plan: &'a RestrictedPlan,
+    cameras: &'a CameraSet,
+}
+
+/// The component of S whose bundle drew a candidate (S1's bundle needs no test: it is first).
+#[derive(Clone, Copy)]
+enum Component {
+    Plane2(u32),
+    Plane3(u32),
+}
+
+impl Iteration<'_> {
+    /// Whether a component before `own` in the fixed order S1, S2_1…S2_NB, S3_1…S3_NB contains the
+    /// candidate: the parts T_k are disjoint because a candidate is kept only by the first
+    /// component that contains it (the membership tests are the brute force's merge tests).
+    fn in_earlier_component(&self, c: &Candidate, own: Component) -> bool {
+        let (r, paths) = (self.config.merge_radius, &self.cameras.paths);
+        let plane2_before = match own {
+            Component::Plane2(j) => j,
+            Component::Plane3(_) => u32::MAX,
+        };
+        let in_plane2 = || {
+            let near = self.cameras.plane2.candidates(c.x2);
+            near.iter().any(|&i| i < plane2_before && within(c.x2, paths[i as usize].x2, r))
+        };
+        let in_plane3 = || match own {
+            Component::Plane2(_) => false,
+            Component::Plane3(j) => self
+                .cameras
+                .plane3
+                .candidates(c.x3)
+                .iter()
+                .any(|&i| i < j && paths[i as usize].x3.is_some_and(|x3c| within(c.x3, x3c, r))),
+        };
+        c.x1.is_some() || in_plane2() || in_plane3()
+    }
 }
 
 /// Draws the bundle in `buffers.bundle`: a Poisson count for the total mass, then a pair per
@@ -297,14 +340,8 @@ fn for_each_candidate(
     }
 }
 
-fn plane1_bundle(
-    config: &SimConfig,
-    plan: &RestrictedPlan,
-    cameras: &CameraSet,
-    rng: &mut StreamRng,
-    scratch: &mut ChunkScratch,
-    buffers: &mut RestrictedScratch,
-) {
+fn plane1_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
+    let Iteration { config, plan, cameras } = *it;
     buffers.bundle.clear();
     for &(mass, l, kind) in &plan.plane1 {
         buffers.push(mass, l, 0, kind);
@@ -360,14 +397,8 @@ fn plane1_bundle(
     });
 }
 
-fn plane2_bundle(
-    config: &SimConfig,
-    plan: &RestrictedPlan,
-    cameras: &CameraSet,
-    rng: &mut StreamRng,
-    scratch: &mut ChunkScratch,
-    buffers: &mut RestrictedScratch,
-) {
+fn plane2_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
+    let Iteration { config, plan, cameras } = *it;
     buffers.bundle.clear();
     for (l, layer) in plan.layers.iter().enumerate() {
         for (j, cam) in cameras.paths.iter().enumerate() {
@@ -397,23 +428,14 @@ fn plane2_bundle(
             }
         };
         let candidate = Candidate { x3, x2, d, x1: pixel_hit(config, plan, &d, x2, rng) };
-        if candidate.x1.is_some()
-            || in_earlier(cameras.plane2.candidates(x2), j, |i| within(x2, cameras.paths[i].x2, r))
-        {
-            return;
+        if !it.in_earlier_component(&candidate, Component::Plane2(j)) {
+            tally(config, cameras, &candidate, scratch);
         }
-        tally(config, cameras, &candidate, scratch);
     });
 }
 
-fn plane3_bundle(
-    config: &SimConfig,
-    plan: &RestrictedPlan,
-    cameras: &CameraSet,
-    rng: &mut StreamRng,
-    scratch: &mut ChunkScratch,
-    buffers: &mut RestrictedScratch,
-) {
+fn plane3_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
+    let Iteration { config, plan, cameras } = *it;
     let r = config.merge_radius;
     buffers.bundle.clear();
     for (l, layer) in plan.layers.iter().enumerate() {
@@ -439,16 +461,9 @@ fn plane3_bundle(
         let x2 = [x3[0] + l3 / dir.z * dir.x, x3[1] + l3 / dir.z * dir.y];
         let d = Vector3::new(dir.x, dir.y, -dir.z);
         let candidate = Candidate { x3, x2, d, x1: pixel_hit(config, plan, &d, x2, rng) };
-        let in_plane2 = cameras.plane2.candidates(x2).iter().any(|&i| within(x2, cameras.paths[i as usize].x2, r));
-        if candidate.x1.is_some()
-            || in_plane2
-            || in_earlier(cameras.plane3.candidates(x3), j, |i| {
-                cameras.paths[i].x3.is_some_and(|x3c| within(x3, x3c, r))
-            })
-        {
-            return;
+        if !it.in_earlier_component(&candidate, Component::Plane3(j)) {
+            tally(config, cameras, &candidate, scratch);
         }
-        tally(config, cameras, &candidate, scratch);
     });
 }
 
@@ -460,11 +475,6 @@ fn thin_by_distance(rng: &mut StreamRng, x3: [f64; 2], x2: [f64; 2], l3: f64, d_
     let d2 = l3 * l3 + dx * dx + dy * dy;
     let ratio = d_min2 / d2;
     (uniform(rng) < ratio * ratio).then(|| Vector3::new(dx, dy, -l3) / d2.sqrt())
-}
-
-/// Whether a camera with index below `j` among `near` satisfies `contains`.
-fn in_earlier(near: &[u32], j: u32, contains: impl Fn(usize) -> bool) -> bool {
-    near.iter().any(|&i| i < j && contains(i as usize))
 }
 
 /// The forward lobe draw at x2 for a path travelling along `d`: `Some((x1, ϑ))` if it lands in

@@ -90,11 +90,15 @@ pub fn run_iterations(
     Ok(start)
 }
 
+/// The 1/(N_F·N_B) that turns a tally's sums into the estimator's per-pixel values.
+fn tally_norm(config: &SimConfig) -> f64 {
+    1.0 / (config.light_paths as f64 * config.camera_paths as f64)
+}
+
 /// The brute force's iterations `batch`: (iteration, chunk) items in parallel, then each
 /// iteration's chunks reduced in chunk order. None if cancelled.
 fn brute_batch(config: &SimConfig, seed: u64, batch: Range<u64>, cancel: &AtomicBool) -> Option<Vec<IterationTally>> {
-    let (k, chunks) = (config.cells.len(), config.chunks());
-    let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
+    let (k, chunks, norm) = (config.cells.len(), config.chunks(), tally_norm(config));
     let cameras: Vec<CameraSet> = batch.clone().into_par_iter().map(|s| CameraSet::generate(config, seed, s)).collect();
     let items = (batch.end - batch.start) * chunks;
     let tallies: Vec<Option<ChunkTally>> = (0..items)
@@ -132,8 +136,7 @@ fn restricted_batch(
     batch: Range<u64>,
     cancel: &AtomicBool,
 ) -> Option<Moments> {
-    let k = config.cells.len();
-    let norm = 1.0 / (config.light_paths as f64 * config.camera_paths as f64);
+    let (k, norm) = (config.cells.len(), tally_norm(config));
     // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value.
     (0..(batch.end - batch.start) as usize)
         .into_par_iter()
