@@ -70,10 +70,10 @@ use nalgebra::Vector3;
 
 use super::camera::CameraSet;
 use super::config::SimConfig;
-use super::illumination::Ring;
+use super::illumination::{Ring, unit_disc_point};
 use super::light::PixelCone;
 use super::merge::{merge_plane1, merge_plane2, merge_plane3, within};
-use super::rng::{StreamRng, stream, symmetric_pair, uniform, uniform_open0};
+use super::rng::{StreamRng, stream, uniform, uniform_open0};
 use super::sampling::{LOBE_MAX_SIGMAS, cosine_direction, deflect, sample_lobe};
 use super::tally::{ChunkScratch, ChunkTally};
 
@@ -546,14 +546,10 @@ fn in_ring(ring: &Ring, x: [f64; 2]) -> bool {
     r2 >= ring.r_in * ring.r_in && r2 < ring.r_out * ring.r_out
 }
 
-/// A point uniform in the disc D(`center`, `radius`) (rejection from the square).
+/// A point uniform in the disc D(`center`, `radius`).
 fn disc_point(rng: &mut StreamRng, center: [f64; 2], radius: f64) -> [f64; 2] {
-    loop {
-        let (u, v) = symmetric_pair(rng);
-        if u * u + v * v <= 1.0 {
-            return [center[0] + radius * u, center[1] + radius * v];
-        }
-    }
+    let (u, v, _) = unit_disc_point(rng);
+    [center[0] + radius * u, center[1] + radius * v]
 }
 
 /// A point uniform in the ring (r² uniform between the radii, azimuth uniform).
