@@ -6,15 +6,13 @@ mod common;
 
 use common::process::{Process, get, wait_for};
 
-use optimis::sim::runner::run;
-use optimis::sim::spec::parse_job_spec;
 use serde_json::{Value, json};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_server_resumes_jobs_bit_identically() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("crash.db").display());
-    let client = reqwest::Client::new();
+    let client = common::client();
 
     let first = Process::start(&database);
     let submit = |base: String, spec: Value| {
@@ -53,15 +51,7 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
     assert_eq!(done["progress"]["iterations_done"], 40);
     let document = get(&client, format!("{}/v1/jobs/{id}/moments", second.base)).await;
 
-    // An uninterrupted run of the same spec, in process.
-    let job = parse_job_spec(&spec).unwrap().validate().unwrap();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    let reference = pool.install(|| run(&job.config, 17, 0..40));
-    assert_eq!(
-        document["moments"],
-        serde_json::to_value(&reference).unwrap(),
-        "moments differ from an uninterrupted run"
-    );
+    assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments differ from an uninterrupted run");
 
     // The finished job is untouched.
     assert_eq!(get(&client, format!("{}/v1/jobs/{finished}", second.base)).await, finished_before);
@@ -76,7 +66,7 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
 async fn sigterm_checkpoints_running_jobs_before_exiting() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("term.db").display());
-    let client = reqwest::Client::new();
+    let client = common::client();
     let first = Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
     let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 5 });
     let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();

@@ -6,8 +6,6 @@ mod common;
 
 use common::process::{Process, get, wait_for};
 use common::{TestServer, small_job};
-use optimis::sim::runner::run;
-use optimis::sim::spec::parse_job_spec;
 use serde_json::{Value, json};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -75,25 +73,28 @@ async fn a_failed_solve_still_reports_the_fixed_strategies() {
     server.stop().await;
 }
 
-/// Deterministic pseudo-random delays (a fixed LCG, so the test is reproducible).
-fn delays(count: usize, seed: u64) -> Vec<u64> {
+/// Deterministic pseudo-random numbers in `lo..=hi` (a fixed LCG, so the test is reproducible).
+fn draws(count: usize, seed: u64, lo: u64, hi: u64) -> Vec<u64> {
     let mut state = seed;
     (0..count)
         .map(|_| {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            150 + (state >> 33) % 450 // 150–600 ms after the server is up
+            lo + (state >> 33) % (hi - lo + 1)
         })
         .collect()
 }
 
-/// Twenty SIGKILLs at random moments while a job runs, with a checkpoint after every iteration so
-/// that many kills land inside a checkpoint write. The job always finishes, with moments equal to
-/// an uninterrupted run's; a finished job's data never changes.
+/// Twenty SIGKILLs while a job runs, with a checkpoint after every iteration so that many kills
+/// land inside a checkpoint write. The kills are driven by progress, not by the clock: each
+/// server lives until it has stored 1 to 3 new checkpoints (plus a jitter of 0–5 ms), so the job
+/// cannot finish before the twentieth kill on any machine (20 lives of at most a few iterations
+/// each, of 300). The job always finishes, with moments equal to an uninterrupted run's; a
+/// finished job's data never changes.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn twenty_kills_never_lose_or_corrupt_work() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("faults.db").display());
-    let client = reqwest::Client::new();
+    let client = common::client();
     let flags = ["--checkpoint-iterations", "1", "--checkpoint-seconds", "0.05"];
     let server = Process::start_with(&database, &flags);
     let submit = |base: String, spec: Value| {
@@ -126,24 +127,28 @@ async fn twenty_kills_never_lose_or_corrupt_work() {
     let id = submit(server.base.clone(), spec.clone()).await;
     let mut server = Some(server);
     let mut progress = Vec::new();
-    for delay in delays(20, 7) {
+    let mut stored = 0;
+    let steps = draws(20, 7, 1, 3);
+    let jitters = draws(20, 11, 0, 5);
+    for (step, jitter) in steps.into_iter().zip(jitters) {
         let process = server.take().unwrap_or_else(|| Process::start_with(&database, &flags));
-        tokio::time::sleep(std::time::Duration::from_millis(delay)).await;
-        let job = get(&client, format!("{}/v1/jobs/{id}", process.base)).await;
-        progress.push(job["progress"]["iterations_checkpointed"].as_u64().unwrap());
+        let job = wait_for(&client, &process.base, id, |j| {
+            j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= stored + step
+        })
+        .await;
+        tokio::time::sleep(std::time::Duration::from_millis(jitter)).await;
+        stored = job["progress"]["iterations_checkpointed"].as_u64().unwrap();
+        progress.push(stored);
         process.kill();
     }
-    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "checkpointed work is never lost: {progress:?}");
+    assert!(progress.windows(2).all(|w| w[0] < w[1]), "every life stored new work, none was lost: {progress:?}");
     assert!(*progress.last().unwrap() < 300, "the kills interrupted a running job: {progress:?}");
 
     let last = Process::start_with(&database, &flags);
     let done = wait_for(&client, &last.base, id, |j| j["state"] == "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], 300);
     let document = get(&client, format!("{}/v1/jobs/{id}/moments", last.base)).await;
-    let job = parse_job_spec(&spec).unwrap().validate().unwrap();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    let reference = pool.install(|| run(&job.config, 31, 0..300));
-    assert_eq!(document["moments"], serde_json::to_value(&reference).unwrap(), "moments equal an uninterrupted run's");
+    assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments equal an uninterrupted run's");
     let history = get(&client, format!("{}/v1/jobs/{id}/history", last.base)).await;
     assert!(history["points"].as_array().unwrap().len() >= 20);
     assert_eq!(snapshot(last.base.clone()).await, before, "the finished job's data did not change");

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::process::{Process, get, wait_for};
+use common::process::{Process, free_port, get, wait_for};
 use serde_json::{Value, json};
 
 async fn submit(client: &reqwest::Client, base: &str, spec: &Value) -> i64 {
@@ -36,9 +36,19 @@ fn study(seed: u64, shard: Option<(u64, u64)>, radius: f64) -> Value {
 async fn shards_on_two_servers_merge_into_the_whole_study() {
     let dir = tempfile::tempdir().unwrap();
     let db = |name: &str| format!("sqlite://{}", dir.path().join(name).display());
-    let a = Process::start(&db("a.db"));
-    let b = Process::start(&db("b.db"));
-    let client = reqwest::Client::new();
+    // A pulls from itself and from B (its allow-list names both, and port 9, where nothing
+    // listens); B allows no peers.
+    let (pa, pb) = (free_port(), free_port());
+    let peer = |p: u16| format!("http://127.0.0.1:{p}");
+    let (peer_a, peer_b, peer_9) = (peer(pa), peer(pb), peer(9));
+    let flags = ["--checkpoint-iterations", "3", "--checkpoint-seconds", "0.5"];
+    let b = Process::start_on(&db("b.db"), pb, &flags);
+    let a = Process::start_on(
+        &db("a.db"),
+        pa,
+        &[&flags[..], &["--peer", &peer_a, "--peer", &peer_b, "--peer", &peer_9]].concat(),
+    );
+    let client = common::client();
 
     let shard0 = submit(&client, &a.base, &study(21, Some((0, 2)), 0.02)).await;
     let shard1 = submit(&client, &b.base, &study(21, Some((1, 2)), 0.02)).await;
@@ -104,23 +114,39 @@ async fn shards_on_two_servers_merge_into_the_whole_study() {
     let pos = text[at..].find(|c: char| c.is_ascii_digit() && c != '0').unwrap() + at;
     let mut corrupted = text.clone().into_bytes();
     corrupted[pos] = if corrupted[pos] == b'9' { b'1' } else { corrupted[pos] + 1 };
-    let response = client.post(&merge_url).body(corrupted).send().await.unwrap();
+    let response =
+        client.post(&merge_url).header("content-type", "application/json").body(corrupted).send().await.unwrap();
     assert_eq!(response.status(), 422);
     let problem: Value = response.json().await.unwrap();
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
     assert_eq!(unchanged().await, before);
 
     // A truncated document: 400.
-    let response = client.post(&merge_url).body(text[..text.len() / 2].to_string()).send().await.unwrap();
+    let response = client
+        .post(&merge_url)
+        .header("content-type", "application/json")
+        .body(text[..text.len() / 2].to_string())
+        .send()
+        .await
+        .unwrap();
     assert_eq!(response.status(), 400);
     assert_eq!(unchanged().await, before);
 
-    // A peer that is not there: 422 naming the source.
+    // An allowed peer that is not there: 422 naming the source.
     let (status, problem) = post(&client, merge_url.clone(), &json!({ "from": "http://127.0.0.1:9/v1/jobs/1" })).await;
     assert_eq!(status, 422);
     assert_eq!(problem["field"], "from");
-    assert!(problem["detail"].as_str().unwrap().contains("cannot reach the peer"), "{problem}");
+    assert!(problem["detail"].as_str().unwrap().contains("could not be reached"), "{problem}");
     assert_eq!(unchanged().await, before);
+    // A server that is not on the allow-list: 403, nothing pulled.
+    let (status, problem) =
+        post(&client, merge_url.clone(), &json!({ "from": format!("{}/v1/jobs/1", peer(free_port())) })).await;
+    assert_eq!(status, 403, "{problem}");
+    assert!(problem["detail"].as_str().unwrap().contains("--peer"), "{problem}");
+    // B allows no peers at all.
+    let (status, _) =
+        post(&client, format!("{}/v1/studies", b.base), &json!({ "sources": [from(&a.base, shard0)] })).await;
+    assert_eq!(status, 403);
 
     // The intact document of another seed merges: 30 more iterations, results recomputed.
     let (status, result) = post(&client, merge_url, &serde_json::from_str::<Value>(&text).unwrap()).await;

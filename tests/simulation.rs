@@ -43,7 +43,7 @@ fn check_means_against_quadrature(doc: Value, strategies: &[&str]) {
     let job = job(doc);
     let config: &SimConfig = &job.config;
     let moments = pool(2).install(|| run(config, job.spec.seed, 0..job.spec.iterations));
-    let reference = reference_luminance(&config.scene);
+    let reference = reference_luminance(&config.scene).expect("the reference converges");
     let table = noise_table(&moments, &config.cells, &job.spec.solver);
     for name in strategies {
         let row = table.rows.iter().find(|r| r.strategy == *name).expect("strategy in the table");

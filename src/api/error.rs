@@ -59,12 +59,26 @@ pub enum ApiError {
     /// 401: the route needs `Authorization: Bearer <token>` and none or a wrong one came.
     #[error("{0}")]
     Unauthorized(String),
+    /// 403: a cross-origin request (another site's page), or a `Host` this server does not answer
+    /// to (DNS rebinding).
+    #[error("{0}")]
+    Forbidden(String),
+    /// 408: the request body did not arrive in time.
+    #[error("{0}")]
+    RequestTimeout(String),
+    /// 415: a body that is not `application/json`.
+    #[error("{0}")]
+    UnsupportedMediaType(String),
     /// 429: a limit is reached (queue, event streams); retry after the given seconds.
     #[error("{detail}")]
     TooManyRequests { detail: String, retry_after_seconds: u64 },
     /// 503: shutting down, or the database is busy; retry later.
     #[error("{0}")]
     Unavailable(String),
+    /// 503 with Retry-After: the database cannot store anything right now (disk full, I/O error);
+    /// nothing was acknowledged.
+    #[error("{detail}")]
+    StorageUnavailable { detail: String, retry_after_seconds: u64 },
     /// 500: a bug or an infrastructure failure; logged, never described to the client.
     #[error("internal error: {0}")]
     Internal(String),
@@ -80,17 +94,25 @@ impl From<JobError> for ApiError {
     fn from(e: JobError) -> Self {
         match e {
             JobError::Invalid(s) => s.into(),
+            JobError::Malformed(m) => ApiError::MalformedJson(m),
             JobError::NotFound(id) => ApiError::NotFound(format!("no job with id {id}")),
             JobError::Conflict(m) => ApiError::Conflict(m),
             JobError::Document(e @ DocumentError::Merge(MergeError::Overlap(_) | MergeError::Fingerprint { .. })) => {
                 ApiError::Conflict(format!("the statistics cannot be merged: {e}"))
             }
             JobError::Document(e) => ApiError::Invalid { field: String::new(), message: e.to_string() },
-            JobError::Peer(m) => ApiError::Invalid { field: "from".into(), message: m },
+            JobError::Peer { field, message } => ApiError::Invalid { field, message },
+            JobError::PeerNotAllowed { field, message } => ApiError::Forbidden(format!("{field}: {message}")),
             JobError::Busy { detail, retry_after_seconds } => ApiError::TooManyRequests { detail, retry_after_seconds },
             JobError::ShuttingDown => {
                 ApiError::Unavailable("the server is shutting down; retry on its successor".into())
             }
+            JobError::Store(e) if e.is_storage_failure() => ApiError::StorageUnavailable {
+                detail: "the database cannot store anything right now (disk full or an I/O error); nothing was \
+                         changed; retry later"
+                    .into(),
+                retry_after_seconds: 30,
+            },
             JobError::Store(e) if e.is_transient() => {
                 ApiError::Unavailable(format!("the database is busy; retry ({e})"))
             }
@@ -112,8 +134,11 @@ impl ApiError {
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
+            ApiError::Forbidden(_) => StatusCode::FORBIDDEN,
+            ApiError::RequestTimeout(_) => StatusCode::REQUEST_TIMEOUT,
+            ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::TooManyRequests { .. } => StatusCode::TOO_MANY_REQUESTS,
-            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Unavailable(_) | ApiError::StorageUnavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -127,8 +152,12 @@ impl ApiError {
             ApiError::Conflict(_) => "conflict",
             ApiError::PayloadTooLarge(_) => "payload-too-large",
             ApiError::Unauthorized(_) => "unauthorized",
+            ApiError::Forbidden(_) => "forbidden",
+            ApiError::RequestTimeout(_) => "request-timeout",
+            ApiError::UnsupportedMediaType(_) => "unsupported-media-type",
             ApiError::TooManyRequests { .. } => "too-many-requests",
             ApiError::Unavailable(_) => "unavailable",
+            ApiError::StorageUnavailable { .. } => "storage-unavailable",
             ApiError::Internal(_) => "internal",
         }
     }
@@ -172,7 +201,8 @@ impl IntoResponse for ApiError {
         }
         let mut response = problem_response(&self.problem());
         match &self {
-            ApiError::TooManyRequests { retry_after_seconds, .. } => {
+            ApiError::TooManyRequests { retry_after_seconds, .. }
+            | ApiError::StorageUnavailable { retry_after_seconds, .. } => {
                 response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after_seconds));
             }
             ApiError::Unauthorized(_) => {

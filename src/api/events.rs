@@ -1,12 +1,16 @@
 //! `GET /v1/jobs/{id}/events`: Server-Sent Events of a job's resource as it changes.
 //!
 //! Each event is named `job` and carries the job resource. The stream sends the current resource
-//! first, then every change (progress is published at most every 250 ms), and ends after the
-//! event that shows a terminal state, or with a `shutdown` event when the server stops. A job that
-//! is not queued or running gets its one current event.
+//! first, then changes — at most one event per [`MIN_EVENT_INTERVAL`] (changes in between are
+//! coalesced: the next event carries the latest state) — and ends after the event that shows a
+//! terminal state, or with a `shutdown` event when the server stops. A job that is not queued or
+//! running gets its one current event, which does not take one of the `--max-event-streams`
+//! slots (only streams that stay open do).
 
 use std::convert::Infallible;
 use std::time::Duration;
+
+use tokio::time::Instant;
 
 use axum::extract::State;
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -18,6 +22,9 @@ use super::error::{ApiError, Problem};
 use super::extract::JobId;
 use crate::jobs::resource::JobResource;
 
+/// Shortest time between two events of a stream.
+pub const MIN_EVENT_INTERVAL: Duration = Duration::from_millis(250);
+
 fn job_event(resource: &JobResource) -> Event {
     Event::default().event("job").json_data(resource).unwrap_or_else(|_| Event::default().event("job"))
 }
@@ -25,8 +32,8 @@ fn job_event(resource: &JobResource) -> Event {
 enum Phase {
     /// Send the current resource next.
     First(watch::Receiver<JobResource>, watch::Receiver<bool>),
-    /// Wait for changes.
-    Follow(watch::Receiver<JobResource>, watch::Receiver<bool>),
+    /// Wait for changes, sending none before the instant given.
+    Follow(watch::Receiver<JobResource>, watch::Receiver<bool>, Instant),
     /// Send this one event, then end.
     Last(Event),
     Done,
@@ -48,12 +55,11 @@ pub async fn events(
     JobId(id): JobId,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let shutdown = state.jobs.shutdown_signal();
-    let start = match state.jobs.subscribe(id) {
-        Some(rx) => Phase::First(rx, shutdown),
-        None => Phase::Last(job_event(&state.jobs.get(id).await?)),
+    let (start, slot) = match state.jobs.subscribe(id) {
+        // Held by the stream: the slot frees when the stream ends or the client goes away.
+        Some(rx) => (Phase::First(rx, shutdown), Some(state.streams.acquire()?)),
+        None => (Phase::Last(job_event(&state.jobs.get(id).await?)), None),
     };
-    // Held by the stream: the slot frees when the stream ends or the client goes away.
-    let slot = state.streams.acquire()?;
     let events = stream::unfold((start, slot), |(phase, slot)| async move {
         step(phase).await.map(|(event, next)| (event, (next, slot)))
     });
@@ -63,20 +69,35 @@ pub async fn events(
 /// The next event of a stream and the phase after it.
 async fn step(phase: Phase) -> Option<(Result<Event, Infallible>, Phase)> {
     match phase {
-        Phase::First(rx, shutdown) => {
-            let current = rx.borrow().clone();
-            let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
+        Phase::First(mut rx, shutdown) => {
+            let current = rx.borrow_and_update().clone();
+            let next = if current.state.is_terminal() {
+                Phase::Done
+            } else {
+                Phase::Follow(rx, shutdown, Instant::now() + MIN_EVENT_INTERVAL)
+            };
             Some((Ok(job_event(&current)), next))
         }
-        Phase::Follow(mut rx, mut shutdown) => {
+        Phase::Follow(mut rx, mut shutdown, not_before) => {
             if *shutdown.borrow() {
                 return Some((Ok(Event::default().event("shutdown").data("the server is shutting down")), Phase::Done));
+            }
+            // Pace the stream: changes published meanwhile are coalesced by the watch channel.
+            tokio::select! {
+                _ = tokio::time::sleep_until(not_before) => {}
+                _ = shutdown.changed() => {
+                    return Some((Ok(Event::default().event("shutdown").data("the server is shutting down")), Phase::Done));
+                }
             }
             tokio::select! {
                 changed = rx.changed() => match changed {
                     Ok(()) => {
                         let current = rx.borrow_and_update().clone();
-                        let next = if current.state.is_terminal() { Phase::Done } else { Phase::Follow(rx, shutdown) };
+                        let next = if current.state.is_terminal() {
+                            Phase::Done
+                        } else {
+                            Phase::Follow(rx, shutdown, Instant::now() + MIN_EVENT_INTERVAL)
+                        };
                         Some((Ok(job_event(&current)), next))
                     }
                     // The job left memory (finished and dropped): its last state was sent.

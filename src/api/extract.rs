@@ -1,7 +1,15 @@
-//! Request extractors whose failures are problem documents, like every other error.
+//! Request extractors whose failures are problem documents, like every other error, and whose work
+//! is bounded.
 //!
-//! Bodies are read as JSON whatever their Content-Type (curl's `-d` sends a form type), and a
-//! syntax error is a 400 that says where; what the JSON means is checked by the handlers (422).
+//! A body must arrive whole within the server's body timeout (a client trickling bytes holds a
+//! connection for at most that long) and within its size limit. [`JsonBody`] parses it as JSON —
+//! inline for small bodies, on the blocking pool above [`INLINE_PARSE_LIMIT`] so that no tokio
+//! worker spends milliseconds parsing; a syntax error is a 400 that says where, and what the JSON
+//! means is checked by the handlers (422). [`DocumentBody`] hands the bytes of a moments document
+//! to the job layer, which parses them straight into typed values on its request pool; at most a
+//! few such requests are read at once ([`super::AppState::documents`]).
+
+use std::time::Duration;
 
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
@@ -10,28 +18,85 @@ use axum::http::StatusCode;
 use axum::http::request::Parts;
 use serde_json::Value;
 
+use super::AppState;
 use super::error::ApiError;
 
-/// A JSON request body, parsed but not interpreted.
-pub struct JsonBody(pub Value);
+/// Bodies up to this size are parsed on the worker that read them (microseconds); larger ones on
+/// the blocking pool.
+const INLINE_PARSE_LIMIT: usize = 64 << 10;
 
-impl<S: Send + Sync> FromRequest<S> for JsonBody {
-    type Rejection = ApiError;
+/// How long a document request waits for a free reading slot before it is told to retry.
+const DOCUMENT_SLOT_WAIT: Duration = Duration::from_secs(10);
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
-        let bytes = Bytes::from_request(req, state).await.map_err(|e: BytesRejection| {
+/// Reads the whole body within `timeout`, honouring the route's size limit.
+async fn read_body(req: Request, state: &AppState) -> Result<Bytes, ApiError> {
+    let timeout = state.body_timeout;
+    let read = Bytes::from_request(req, state);
+    let bytes = tokio::time::timeout(timeout, read)
+        .await
+        .map_err(|_| {
+            ApiError::RequestTimeout(format!(
+                "the request body did not arrive within {} s (--body-timeout)",
+                timeout.as_secs_f64()
+            ))
+        })?
+        .map_err(|e: BytesRejection| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
                 ApiError::PayloadTooLarge(format!("the request body is too large: {e}"))
             } else {
                 ApiError::MalformedJson(format!("the request body could not be read: {e}"))
             }
         })?;
-        if bytes.iter().all(u8::is_ascii_whitespace) {
-            return Err(ApiError::MalformedJson("the request body is empty; expected a JSON object".into()));
+    if bytes.iter().all(u8::is_ascii_whitespace) {
+        return Err(ApiError::MalformedJson("the request body is empty; expected a JSON object".into()));
+    }
+    Ok(bytes)
+}
+
+/// A JSON request body, parsed but not interpreted.
+pub struct JsonBody(pub Value);
+
+impl FromRequest<AppState> for JsonBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
+        let bytes = read_body(req, state).await?;
+        let small = bytes.len() <= INLINE_PARSE_LIMIT;
+        let parse = move || {
+            serde_json::from_slice(&bytes)
+                .map(JsonBody)
+                .map_err(|e| ApiError::MalformedJson(format!("the request body is not valid JSON: {e}")))
+        };
+        if small {
+            return parse();
         }
-        serde_json::from_slice(&bytes)
-            .map(JsonBody)
-            .map_err(|e| ApiError::MalformedJson(format!("the request body is not valid JSON: {e}")))
+        tokio::task::spawn_blocking(parse)
+            .await
+            .map_err(|_| ApiError::Internal("parsing a request body panicked".into()))?
+    }
+}
+
+/// The bytes of a moments document (merges and studies), read under the document size limit
+/// while holding one of the few document slots.
+pub struct DocumentBody {
+    pub bytes: Bytes,
+    /// Held until the handler has finished with the document.
+    pub _slot: tokio::sync::OwnedSemaphorePermit,
+}
+
+impl FromRequest<AppState> for DocumentBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
+        let slot = tokio::time::timeout(DOCUMENT_SLOT_WAIT, state.documents.clone().acquire_owned())
+            .await
+            .map_err(|_| ApiError::TooManyRequests {
+                detail: "the server is busy with other documents (--max-document-requests); retry".into(),
+                retry_after_seconds: 5,
+            })?
+            .map_err(|_| ApiError::Unavailable("the server is shutting down".into()))?;
+        let bytes = read_body(req, state).await?;
+        Ok(DocumentBody { bytes, _slot: slot })
     }
 }
 

@@ -23,6 +23,13 @@ const MAX_KEY_LEN: usize = 255;
 /// A job submission: a preset and any fields to override (JSON Merge Patch on the preset; an
 /// object whose `kind` differs from the preset's replaces it whole). Omitted fields keep the
 /// preset's values; unknown fields are rejected.
+///
+/// Every value inside the ranges below is accepted in bounded time. The reference luminance is a
+/// quadrature with an evaluation budget (about a second): a geometry it cannot resolve within it
+/// (a lobe of 10⁻⁹ degrees, a merge radius far below every other length) runs normally with
+/// `reference_luminance: null`. A server also refuses (422, stating its limit) a job whose single
+/// iteration is expected to cost more than its `--max-iteration-work`, and one beyond its job budget
+/// or cell limit.
 #[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)] // documents the request body; the body is parsed by `sim::spec::parse_job_spec`
@@ -127,14 +134,23 @@ pub struct SolverPatch {
     cv_lambdas: Option<Vec<f64>>,
 }
 
-/// Iterations to add to a job.
+/// Iterations to add to a job: exactly one of `iterations` and `total`.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ExtendRequest {
-    /// At least 1; the total may not exceed 10^9.
+    /// How many more iterations to run beyond what the job would otherwise reach: its
+    /// `iterations_total` while it is queued or running, the iterations it holds
+    /// (`iterations_done`) once it succeeded or was cancelled. At least 1; the new total may not
+    /// exceed 10^9.
     #[schema(minimum = 1, maximum = 1_000_000_000)]
-    #[serde(deserialize_with = "crate::sim::spec::count")]
-    pub iterations: u64,
+    #[serde(default, deserialize_with = "crate::sim::spec::optional_count")]
+    pub iterations: Option<u64>,
+    /// The new target instead: run until the job holds this many iterations (resume a cancelled
+    /// job to its original target with `total` = its `iterations_total`). Above the iterations it
+    /// holds, at most 10^9.
+    #[schema(minimum = 1, maximum = 1_000_000_000)]
+    #[serde(default, deserialize_with = "crate::sim::spec::optional_count")]
+    pub total: Option<u64>,
 }
 
 /// Query of the job list.
@@ -173,8 +189,8 @@ fn accepted(resource: &JobResource) -> Response {
             headers(("Location" = String, description = "URL of the job"))),
         (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Shutting down", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid, or the job exceeds a limit of this server (job budget, cells, the expected work of one iteration); the detail states the limit", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Shutting down, or the database cannot store the job (disk full; nothing was created; retry after Retry-After seconds)", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -199,7 +215,7 @@ pub async fn submit(
             )
         }
     };
-    let (resource, replayed) = state.jobs.submit(&doc, key).await?;
+    let (resource, replayed) = state.jobs.submit(doc, key).await?;
     let mut response = accepted(&resource);
     if replayed {
         response.headers_mut().insert("idempotent-replayed", HeaderValue::from_static("true"));
@@ -332,7 +348,7 @@ pub async fn extend(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let request: ExtendRequest = typed(&body)?;
-    Ok(accepted(&state.jobs.extend(id, request.iterations).await?))
+    Ok(accepted(&state.jobs.extend(id, request.iterations, request.total).await?))
 }
 
 /// Delete a job that is not running, with its checkpoint.

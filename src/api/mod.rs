@@ -10,12 +10,14 @@ mod dashboard;
 pub mod error;
 mod events;
 mod extract;
+pub mod guard;
 mod health;
 mod jobs;
 mod openapi;
 mod studies;
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use axum::Router;
 use axum::extract::{DefaultBodyLimit, State};
@@ -29,6 +31,7 @@ use utoipa_axum::routes;
 use crate::jobs::JobManager;
 use crate::server::{BearerToken, Limits};
 use error::ApiError;
+use guard::Guard;
 
 /// What every handler can reach; cheap to clone.
 #[derive(Clone)]
@@ -40,6 +43,13 @@ pub struct AppState {
     pub token_digest: Option<[u8; 32]>,
     /// Open event streams, bounded.
     pub streams: Arc<auth::StreamSlots>,
+    /// Origin, Host and Content-Type rules.
+    pub guard: Guard,
+    /// The whole request body must arrive within this.
+    pub body_timeout: Duration,
+    /// Document requests (merges, studies) being read or processed at once: each may hold up to
+    /// `--document-limit` bytes and its parsed document.
+    pub documents: Arc<tokio::sync::Semaphore>,
 }
 
 #[derive(OpenApi)]
@@ -61,8 +71,10 @@ pub struct AppState {
 )]
 struct ApiDoc;
 
-/// Body limit of the routes that take moments documents (which grow with the cell grid).
-pub const DEFAULT_DOCUMENT_LIMIT: usize = 256 << 20;
+/// Body limit of the routes that take moments documents (which grow with the cell grid): 32 MiB,
+/// several times the largest document a single job can export (docs/results.md), and what the
+/// document parser may be asked to hold per request.
+pub const DEFAULT_DOCUMENT_LIMIT: usize = 32 << 20;
 
 fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
     let with_limit = |(schemas, paths, method_router): utoipa_axum::router::UtoipaMethodRouter<AppState>| {
@@ -113,10 +125,10 @@ async fn observe(
         .extensions()
         .get::<axum::extract::MatchedPath>()
         .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
-    let method = request.method().as_str().to_string();
+    let method = crate::metrics::method_label(request.method());
     let started = std::time::Instant::now();
     let response = next.run(request).await;
-    state.jobs.metrics().observe_request(&method, &route, response.status().as_u16(), started.elapsed());
+    state.jobs.metrics().observe_request(method, &route, response.status().as_u16(), started.elapsed());
     response
 }
 
@@ -132,15 +144,20 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
     axum::response::IntoResponse::into_response(ApiError::Internal("a request handler panicked".into()))
 }
 
-/// The application: every route, with request tracing, metrics, authentication (when `token` is
-/// set), the body limits of `limits` and panics answered as problem documents.
-pub fn router(jobs: JobManager, limits: &Limits, token: Option<BearerToken>) -> Router {
+/// The application: every route, with request tracing, metrics, the cross-site guard,
+/// authentication (when `token` is set), the body limits and timeout of `limits`, and panics
+/// answered as problem documents. Layers run outside in: trace → metrics → guard → auth → panics
+/// → the route (whose body limit applies as its body is read).
+pub fn router(jobs: JobManager, limits: &Limits, token: Option<BearerToken>, guard: Guard) -> Router {
     let (router, api) = routes_and_document(limits.document_bytes);
     let state = AppState {
         jobs,
         openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into(),
         token_digest: token.map(|t| auth::digest(&t.0)),
         streams: auth::StreamSlots::new(limits.max_event_streams),
+        guard,
+        body_timeout: limits.body_timeout,
+        documents: Arc::new(tokio::sync::Semaphore::new(limits.max_document_requests)),
     };
     let body_limit = limits.body_bytes;
     router
@@ -149,6 +166,7 @@ pub fn router(jobs: JobManager, limits: &Limits, token: Option<BearerToken>) -> 
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(axum::middleware::from_fn_with_state(state.clone(), auth::authenticate))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard::guard))
         .layer(axum::middleware::from_fn_with_state(state.clone(), observe))
         .layer(TraceLayer::new_for_http())
         .with_state(state)

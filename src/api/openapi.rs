@@ -1,5 +1,6 @@
-//! Post-processing of the generated OpenAPI document: the bearer security scheme, the 401 and 429
-//! responses, added to every operation they apply to so that no route can forget them, and links
+//! Post-processing of the generated OpenAPI document: the bearer security scheme, the responses
+//! every route shares (401, 403 from the cross-site guard, 408 and 415 for bodies, 429, 503 for
+//! writes), added to every operation they apply to so that no route can forget them, and links
 //! from the responses that create a job to the operations on it (so that clients and API fuzzers
 //! know where a job's `id` comes from).
 
@@ -70,6 +71,29 @@ impl Modify for Security {
                         .responses
                         .responses
                         .insert("429".into(), problem("A limit is reached; retry after Retry-After seconds"));
+                }
+                let responses = &mut operation.responses.responses;
+                responses.entry("403".into()).or_insert_with(|| {
+                    problem(
+                        "A cross-origin request (an Origin other than this server's), or a Host this server does not \
+                         answer to",
+                    )
+                });
+                if operation.request_body.is_some() {
+                    responses
+                        .insert("415".into(), problem("The body is not JSON: send Content-Type: application/json"));
+                    responses.insert(
+                        "408".into(),
+                        problem("The body did not arrive within the server's body timeout (--body-timeout)"),
+                    );
+                }
+                if matches!(method, "post" | "delete") {
+                    responses.entry("503".into()).or_insert_with(|| {
+                        problem(
+                            "The database cannot store anything right now (disk full or an I/O error); nothing was \
+                             changed; retry after Retry-After seconds",
+                        )
+                    });
                 }
             }
         }

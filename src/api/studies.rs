@@ -1,31 +1,36 @@
 //! Merging statistics: into an existing job (`POST /v1/jobs/{id}/merge`) or into a new study job
-//! (`POST /v1/studies`), from moments documents or from jobs on peer servers.
+//! (`POST /v1/studies`), from moments documents or from jobs on allowed peer servers.
+//!
+//! Both routes take their body as bytes ([`DocumentBody`]: the document size limit, the body
+//! timeout, and a few requests at a time); the job layer parses it straight into typed values on
+//! its request pool. The types below only describe the bodies for the OpenAPI document.
 
 use axum::Json;
 use axum::extract::State;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
-use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::AppState;
 use super::error::{ApiError, Problem};
-use super::extract::{JobId, JsonBody};
+use super::extract::{DocumentBody, JobId};
 use super::jobs::SolverPatch;
 use crate::jobs::documents::JobResult;
 use crate::jobs::resource::JobResource;
 use crate::sim::document::MomentsDocument;
 
-/// A job on a peer optimis server whose moments are pulled over HTTP.
+/// A job on a peer optimis server whose moments are pulled over http or https. The peer must be
+/// on this server's allow-list (`optimis serve --peer BASE_URL`); any other URL is refused with
+/// 403 before a connection is made.
 #[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-#[allow(dead_code)] // documents the body; sources are parsed by `jobs::peers::parse_source`
+#[allow(dead_code)] // documents the body; sources are parsed by `jobs::statistics`
 pub struct PeerSource {
-    /// URL of the job: `http://host:port/v1/jobs/ID` (plain HTTP).
+    /// URL of the job: `https://host:port[/prefix]/v1/jobs/ID`.
     #[schema(
-        example = "http://10.0.0.2:8080/v1/jobs/7",
-        pattern = r"^http://[^/?#\s]+/v1/jobs/[1-9][0-9]{0,18}(/moments)?/?$"
+        example = "https://node2:8443/v1/jobs/7",
+        pattern = r"^https?://[^/?#\s@]+(/[^?#\s]*)?/v1/jobs/[1-9][0-9]{0,18}(/moments)?/?$"
     )]
     pub from: String,
 }
@@ -57,19 +62,21 @@ pub struct StudyRequest {
     responses(
         (status = 200, description = "Merged; the results recomputed", body = JobResult),
         (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The source names a peer that is not on this server's allow-list (--peer)", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "Another configuration, iterations already counted, or the job is active", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Not a valid moments document (corrupted, truncated, foreign), or a peer that could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Another configuration, iterations already counted, or the job is active or taking another merge", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large (--document-limit)", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Not a valid moments document (corrupted, truncated, inconsistent, foreign), statistics that would overflow or exceed the job budget, or a peer that could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Too many document requests at once; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn merge(
     State(state): State<AppState>,
     JobId(id): JobId,
-    JsonBody(body): JsonBody,
+    body: DocumentBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.merge_into(id, &body).await?))
+    Ok(Json(state.jobs.merge_into(id, body.bytes.clone()).await?))
 }
 
 /// Create a finished job from merged statistics of several documents or peer jobs.
@@ -80,29 +87,17 @@ pub async fn merge(
         (status = 201, description = "The study's job, with its results computed", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
         (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "A source names a peer that is not on this server's allow-list (--peer)", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The sources have different configurations or overlapping iterations", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A source is invalid, or a peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Shutting down", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large (--document-limit)", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A source is invalid, statistics that would overflow or exceed the job budget, or a peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Too many document requests at once; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Shutting down, or the database cannot store the study (retry after Retry-After seconds)", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn create(State(state): State<AppState>, JsonBody(body): JsonBody) -> Result<Response, ApiError> {
-    let object = body.as_object().ok_or_else(|| ApiError::Invalid {
-        field: String::new(),
-        message: "the body must be an object with `sources`".into(),
-    })?;
-    if let Some(unknown) = object.keys().find(|k| !["sources", "solver"].contains(&k.as_str())) {
-        return Err(ApiError::Invalid {
-            field: unknown.clone(),
-            message: "unknown field; expected `sources` and `solver`".into(),
-        });
-    }
-    let sources = object.get("sources").and_then(Value::as_array).ok_or_else(|| ApiError::Invalid {
-        field: "sources".into(),
-        message: "a list of moments documents or {\"from\": URL} is required".into(),
-    })?;
-    let resource = state.jobs.create_study(sources, object.get("solver")).await?;
+pub async fn create(State(state): State<AppState>, body: DocumentBody) -> Result<Response, ApiError> {
+    let resource = state.jobs.create_study(body.bytes.clone()).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/jobs/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);

@@ -69,7 +69,8 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
     let job = doc.spec.validate()?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
-    let report = build_report(&doc.moments, &job.config.cells, &solver, reference_luminance(&job.config.scene));
+    let reference = reference_luminance(&job.config.scene).ok();
+    let report = build_report(&doc.moments, &job.config.cells, &solver, reference);
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;

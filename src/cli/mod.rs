@@ -51,6 +51,9 @@ pub enum CliError {
     Json { path: PathBuf, source: serde_json::Error },
     #[error("invalid job specification: {0}")]
     Spec(#[from] SpecError),
+    /// A flag or the environment is misconfigured (not a job specification).
+    #[error("invalid configuration: {0}")]
+    Config(String),
     #[error("{path}: {source}")]
     Document { path: PathBuf, source: crate::sim::document::DocumentError },
     #[error("cannot start the worker threads: {0}")]

@@ -1,13 +1,14 @@
 //! `optimis serve`: the HTTP job server on its embedded SQLite database.
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 
 use super::{CliError, cores};
-use crate::server::{BearerToken, Limits, ServerConfig, serve, termination_signal};
-use crate::sim::spec::SpecError;
+use crate::jobs::peers::{Peer, read_secret};
+use crate::server::{BearerToken, Limits, ServerConfig, TlsFiles, serve, termination_signal};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum LogFormat {
@@ -41,9 +42,12 @@ pub struct ServeArgs {
     /// Largest body of the routes that take moments documents (merge, studies), in bytes.
     #[arg(long, default_value_t = crate::api::DEFAULT_DOCUMENT_LIMIT as u64, value_parser = clap::value_parser!(u64).range(1024..=(1 << 34)))]
     pub document_limit: u64,
-    /// Largest light_paths × camera_paths × iterations of one job.
+    /// Largest light_paths × camera_paths × iterations of one job (also of merged statistics).
     #[arg(long, default_value_t = 1e16, value_parser = positive_number)]
     pub max_job_budget: f64,
+    /// Largest expected work of one iteration, in light-path equivalents (a merge counts 50).
+    #[arg(long, default_value_t = crate::server::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
+    pub max_iteration_work: f64,
     /// Most cells of a job's weight grid.
     #[arg(long, default_value_t = crate::sim::spec::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::spec::MAX_CELLS as u64))]
     pub max_cells: u64,
@@ -53,9 +57,43 @@ pub struct ServeArgs {
     /// Most event streams open at once (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_event_streams: u64,
-    /// A file holding the bearer token every request must carry (see also OPTIMIS_TOKEN).
+    /// Most merge and study requests (which carry moments documents) handled at once.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub max_document_requests: u64,
+    /// Most connections open at once (further ones wait to be accepted).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub max_connections: u64,
+    /// Seconds for a request head (or a TLS handshake) to arrive; also how long a keep-alive
+    /// connection may sit idle between requests.
+    #[arg(long, default_value_t = 10.0, value_parser = positive_seconds)]
+    pub header_timeout: f64,
+    /// Seconds for a whole request body to arrive.
+    #[arg(long, default_value_t = 60.0, value_parser = positive_seconds)]
+    pub body_timeout: f64,
+    /// Seconds after which a connection on which nothing moves is closed.
+    #[arg(long, default_value_t = 120.0, value_parser = positive_seconds)]
+    pub idle_timeout: f64,
+    /// Serve https with this PEM certificate chain (with --tls-key).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The PEM private key of --tls-cert (readable by its owner only).
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// A server merges and studies may pull statistics from: BASE_URL[,token-file=PATH], e.g.
+    /// https://node2:8443,token-file=/etc/optimis/node2.token. Repeatable; nothing else is pulled.
+    #[arg(long = "peer", value_name = "BASE_URL[,token-file=PATH]")]
+    pub peers: Vec<String>,
+    /// PEM certificates trusted for https peers besides the system's (e.g. a self-signed one).
+    #[arg(long, value_name = "FILE")]
+    pub peer_ca: Option<PathBuf>,
+    /// A host name this server also answers to when bound to loopback (a proxy's public name).
+    /// Repeatable.
+    #[arg(long = "allowed-host", value_name = "NAME")]
+    pub allowed_hosts: Vec<String>,
+    /// A file holding the bearer token every request must carry, readable by its owner only (see
+    /// also OPTIMIS_TOKEN).
     #[arg(long, value_name = "FILE", conflicts_with = "token")]
-    pub token_file: Option<std::path::PathBuf>,
+    pub token_file: Option<PathBuf>,
     /// The bearer token every request must carry. Prefer the environment variable or a file:
     /// command lines are visible to other users of the machine.
     #[arg(long, env = "OPTIMIS_TOKEN", hide_env_values = true)]
@@ -72,26 +110,48 @@ fn positive_number(s: &str) -> Result<f64, String> {
     }
 }
 
-/// The configured token: from the file or the flag/environment; empty or short tokens are refused.
+/// The configured token: from the file (which must be readable by its owner only) or the
+/// flag/environment; empty or short tokens are refused.
 fn token(args: &ServeArgs) -> Result<Option<BearerToken>, CliError> {
-    let raw = match (&args.token_file, &args.token) {
-        (Some(path), _) => Some(
-            std::fs::read_to_string(path)
-                .map_err(|source| CliError::Read { path: path.clone(), source })?
-                .trim()
-                .to_string(),
-        ),
-        (None, Some(t)) => Some(t.trim().to_string()),
-        (None, None) => None,
-    };
-    match raw {
-        None => Ok(None),
-        Some(t) if t.len() >= 16 && t.chars().all(|c| c.is_ascii_graphic()) => Ok(Some(BearerToken(t.into()))),
-        Some(_) => {
-            Err(SpecError::new("token", "must be at least 16 visible ASCII characters (e.g. `openssl rand -hex 32`)")
-                .into())
+    match (&args.token_file, &args.token) {
+        (Some(path), _) => {
+            let token = read_secret(path).map_err(|e| CliError::Config(format!("--token-file: {e}")))?;
+            Ok(Some(BearerToken(token.into())))
+        }
+        (None, Some(t)) => {
+            let t = t.trim();
+            if t.len() >= 16 && t.chars().all(|c| c.is_ascii_graphic()) {
+                Ok(Some(BearerToken(t.into())))
+            } else {
+                Err(CliError::Config(
+                    "--token (or OPTIMIS_TOKEN) must be at least 16 visible ASCII characters (e.g. `openssl rand -hex 32`)"
+                        .into(),
+                ))
+            }
+        }
+        (None, None) => Ok(None),
+    }
+}
+
+/// Refuses a secret file that users other than its owner can read.
+fn check_private(path: &std::path::Path) -> Result<(), CliError> {
+    let metadata = std::fs::metadata(path).map_err(|source| CliError::Read { path: path.to_path_buf(), source })?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = metadata.permissions().mode();
+        if mode & 0o077 != 0 {
+            return Err(CliError::Config(format!(
+                "{} is readable by other users (mode {:o}); chmod 600 {}",
+                path.display(),
+                mode & 0o777,
+                path.display()
+            )));
         }
     }
+    #[cfg(not(unix))]
+    let _ = metadata;
+    Ok(())
 }
 
 fn positive_seconds(s: &str) -> Result<f64, String> {
@@ -115,6 +175,16 @@ fn init_logging(format: LogFormat) {
 pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
     init_logging(args.log_format);
     let token = token(&args)?;
+    let peers = args
+        .peers
+        .iter()
+        .map(|p| Peer::parse(p))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CliError::Config(e.to_string()))?;
+    if let Some(key) = &args.tls_key {
+        // The key is a secret like the token: refuse one that other users can read.
+        check_private(key)?;
+    }
     let config = ServerConfig {
         bind: args.bind,
         database: args.database,
@@ -126,19 +196,27 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
             body_bytes: args.body_limit as usize,
             document_bytes: args.document_limit as usize,
             job_budget: args.max_job_budget,
+            max_iteration_work: args.max_iteration_work,
             max_cells: args.max_cells as usize,
             max_queued_jobs: args.max_queued_jobs as usize,
             max_event_streams: args.max_event_streams as usize,
+            max_document_requests: args.max_document_requests as usize,
+            max_connections: args.max_connections as usize,
+            header_timeout: Duration::from_secs_f64(args.header_timeout),
+            body_timeout: Duration::from_secs_f64(args.body_timeout),
+            idle_timeout: Duration::from_secs_f64(args.idle_timeout),
         },
         token,
+        tls: args.tls_cert.zip(args.tls_key).map(|(cert, key)| TlsFiles { cert, key }),
+        peers,
+        peer_ca: args.peer_ca,
+        allowed_hosts: args.allowed_hosts,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind(config.bind)
             .await
             .map_err(|source| crate::server::ServerError::Bind { addr: config.bind, source })?;
-        tracing::info!(address = %listener.local_addr()?, database = %config.database, workers = config.workers,
-            threads = config.threads, authentication = config.token.is_some(), "optimis listening");
         if config.token.is_none() && !config.bind.ip().is_loopback() {
             tracing::warn!("listening beyond loopback without a token: anyone who can reach this port can submit jobs");
         }

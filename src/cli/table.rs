@@ -40,7 +40,10 @@ pub fn write_report(
         })
         .collect();
     writeln!(out, "iterations covered: {}", covered.join("; "))?;
-    writeln!(out, "reference (quadrature) L·10⁵ = {:.4}", report.reference_luminance * 1e5)?;
+    match report.reference_luminance {
+        Some(l) => writeln!(out, "reference (quadrature) L·10⁵ = {:.4}", l * 1e5)?,
+        None => writeln!(out, "reference (quadrature): did not converge for this geometry")?,
+    }
     writeln!(out)?;
     writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
     for row in &report.noise_table {

@@ -2,10 +2,16 @@
 //! segment, with a checkpoint after every segment.
 //!
 //! A segment ends when a checkpoint is due (every K iterations or T seconds), when the job is
-//! asked to stop (cancel or shutdown: within one chunk of light paths), or at the last iteration.
-//! A checkpoint writes the moments, their checksum and the result document computed from them in
-//! one transaction. Because iteration s draws only from the streams of (seed, s), a job resumed from
-//! a checkpoint ends with moments bit-identical to an uninterrupted run.
+//! asked to stop (cancel or shutdown: within one chunk of light paths, or 1,024 candidates of a
+//! restricted iteration), or at the last iteration. A checkpoint writes the moments, their
+//! checksum and the result document computed from them in one transaction. Because iteration s
+//! draws only from the streams of (seed, s), a job resumed from a checkpoint ends with moments
+//! bit-identical to an uninterrupted run.
+//!
+//! A database that cannot store (disk full, I/O error, busy) does not fail the job: its writes are
+//! retried with a growing pause (up to [`STORAGE_RETRY_CAP`]) for as long as the job is not asked
+//! to stop, with the iterations kept in memory; once storage is back the job carries on. If the
+//! server stops meanwhile, the job resumes at the next start from its last stored checkpoint.
 
 use std::ops::ControlFlow;
 use std::sync::atomic::Ordering;
@@ -13,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use super::documents::StrategyPoint;
 use super::error::JobError;
-use super::manager::{ActiveJob, Inner, STOP_CANCEL, best_strategy};
+use super::manager::{ActiveJob, Inner, StopReason, best_strategy};
 use super::resource::{now_ms, rfc3339};
 use crate::sim::config::sha256_hex;
 use crate::sim::coverage::Coverage;
@@ -27,8 +33,8 @@ use crate::store::{Checkpoint, StoreError};
 /// How often progress is published to the job's watchers.
 const PROGRESS_INTERVAL: Duration = Duration::from_millis(250);
 
-/// Attempts for a database write that failed transiently (busy, locked).
-const WRITE_ATTEMPTS: u32 = 5;
+/// Longest pause between two attempts of a write that failed for lack of storage.
+const STORAGE_RETRY_CAP: Duration = Duration::from_secs(30);
 
 /// Runs `job` to its end (or until stopped) and records the outcome.
 pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
@@ -95,7 +101,9 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid, true)?,
         None => Moments::new(config),
     };
-    rt.block_on(inner.mark_running(job))?;
+    if !persist(inner, job, "mark the job running", || rt.block_on(inner.mark_running(job)))? {
+        return stopped(inner, job);
+    }
     let reference = job.view.borrow().reference_luminance;
     let mut checkpointed = moments.iterations();
     let start = job.start;
@@ -110,7 +118,14 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             return stopped(inner, job);
         }
         if done >= total {
-            if rt.block_on(inner.finish(job, done))? {
+            let mut finished = false;
+            if !persist(inner, job, "mark the job succeeded", || {
+                finished = rt.block_on(inner.finish(job, done))?;
+                Ok(())
+            })? {
+                return stopped(inner, job);
+            }
+            if finished {
                 return Ok(());
             }
             continue; // extended while finishing
@@ -132,7 +147,9 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             })
         });
         if moments.iterations() > checkpointed {
-            write_checkpoint(inner, job, &moments, reference)?;
+            if !write_checkpoint(inner, job, &moments, reference)? {
+                return stopped(inner, job);
+            }
             checkpointed = moments.iterations();
         }
         match outcome {
@@ -143,12 +160,70 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     }
 }
 
-/// Records a stopped job: cancelled on request, interrupted (to resume later) on shutdown.
+/// Records a stopped job: cancelled on request, interrupted (to resume later) on shutdown. While
+/// the database cannot store, a cancel is retried until it can (or the server stops); the cancel
+/// itself is already stored (`cancel_requested`), so a restart ends the job cancelled either way.
 fn stopped(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
-    if job.stop_reason.load(Ordering::SeqCst) == STOP_CANCEL {
-        inner.runtime.block_on(inner.mark_cancelled(job))
-    } else {
-        inner.runtime.block_on(inner.mark_interrupted(job))
+    let mut pause = Duration::from_millis(100);
+    loop {
+        let outcome = if job.stop_reason() == Some(StopReason::Cancel) {
+            inner.runtime.block_on(inner.mark_cancelled(job))
+        } else {
+            inner.runtime.block_on(inner.mark_interrupted(job))
+        };
+        match outcome {
+            Err(JobError::Store(e)) if e.is_storage_failure() || e.is_transient() => {
+                if inner.shutting_down() {
+                    tracing::warn!(job = job.id, error = %e, "could not record the stopped job; it is settled at the next start");
+                    return Ok(());
+                }
+                tracing::warn!(job = job.id, error = %e, "could not record the stopped job: storage unavailable, retrying");
+                wait(pause, || inner.shutting_down());
+                pause = (pause * 2).min(STORAGE_RETRY_CAP);
+            }
+            other => return other,
+        }
+    }
+}
+
+/// Runs a database write of the running job, retrying for as long as the storage refuses it
+/// (full, failing or busy) and the job is not asked to stop. `Ok(false)`: it was asked to stop
+/// before the write succeeded.
+fn persist(
+    inner: &Inner,
+    job: &ActiveJob,
+    what: &str,
+    mut write: impl FnMut() -> Result<(), JobError>,
+) -> Result<bool, JobError> {
+    let mut pause = Duration::from_millis(100);
+    loop {
+        match write() {
+            Ok(()) => return Ok(true),
+            Err(JobError::Store(e)) if e.is_storage_failure() || e.is_transient() => {
+                tracing::warn!(job = job.id, error = %e, pause_ms = pause.as_millis() as u64,
+                    "could not {what}: storage unavailable, retrying");
+                if wait(pause, || job.stop.load(Ordering::SeqCst) || inner.shutting_down()) {
+                    return Ok(false);
+                }
+                pause = (pause * 2).min(STORAGE_RETRY_CAP);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Sleeps for `pause` in short steps, so that `interrupt` is honoured promptly; true if it was.
+fn wait(pause: Duration, interrupt: impl Fn() -> bool) -> bool {
+    let until = Instant::now() + pause;
+    loop {
+        if interrupt() {
+            return true;
+        }
+        let now = Instant::now();
+        if now >= until {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(20).min(until - now));
     }
 }
 
@@ -171,7 +246,7 @@ fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, s
 
 /// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
 /// them with the job's solver options.
-pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: f64) -> Result<Checkpoint, JobError> {
+pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
     let report = build_report(moments, &job.config.cells, &job.spec.solver, reference);
     let best = best_strategy(&report.noise_table);
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
@@ -191,37 +266,37 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: f64) -
     })
 }
 
-/// Writes a checkpoint (retrying transient database errors) and publishes it.
-fn write_checkpoint(inner: &Inner, job: &ActiveJob, moments: &Moments, reference: f64) -> Result<(), JobError> {
+/// Writes a checkpoint (retrying while storage is unavailable, see [`persist`]) and publishes it.
+/// `Ok(false)`: the job was asked to stop before the checkpoint could be stored.
+fn write_checkpoint(
+    inner: &Inner,
+    job: &ActiveJob,
+    moments: &Moments,
+    reference: Option<f64>,
+) -> Result<bool, JobError> {
     let started = Instant::now();
     let checkpoint = checkpoint_of(moments, &job.job, reference)?;
     let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<super::resource::BestStrategy>(b).ok());
-    let mut attempt = 0;
-    loop {
-        attempt += 1;
-        let now = now_ms();
-        match inner.runtime.block_on(inner.store.write_checkpoint(job.id, &checkpoint, now)) {
-            Ok(()) => {
-                inner.metrics.observe_checkpoint(started.elapsed());
-                job.view.send_modify(|r| {
-                    r.progress.iterations_checkpointed = checkpoint.iterations_done;
-                    r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);
-                    r.progress.best = best.clone();
-                    r.updated_at = rfc3339(now);
-                });
-                tracing::debug!(
-                    job = job.id,
-                    iterations = checkpoint.iterations_done,
-                    seconds = started.elapsed().as_secs_f64(),
-                    "checkpoint written"
-                );
-                return Ok(());
-            }
-            Err(e) if e.is_transient() && attempt < WRITE_ATTEMPTS => {
-                tracing::warn!(job = job.id, attempt, error = %e, "checkpoint write failed, retrying");
-                std::thread::sleep(Duration::from_millis(100 << attempt));
-            }
-            Err(e) => return Err(e.into()),
-        }
+    let mut now = now_ms();
+    let stored = persist(inner, job, "write a checkpoint", || {
+        now = now_ms();
+        inner.runtime.block_on(inner.store.write_checkpoint(job.id, &checkpoint, now)).map_err(JobError::from)
+    })?;
+    if !stored {
+        return Ok(false);
     }
+    inner.metrics.observe_checkpoint(started.elapsed());
+    job.view.send_modify(|r| {
+        r.progress.iterations_checkpointed = checkpoint.iterations_done;
+        r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);
+        r.progress.best = best.clone();
+        r.updated_at = rfc3339(now);
+    });
+    tracing::debug!(
+        job = job.id,
+        iterations = checkpoint.iterations_done,
+        seconds = started.elapsed().as_secs_f64(),
+        "checkpoint written"
+    );
+    Ok(true)
 }

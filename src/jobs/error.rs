@@ -10,6 +10,9 @@ pub enum JobError {
     /// A field of the request is invalid (HTTP 422).
     #[error(transparent)]
     Invalid(#[from] SpecError),
+    /// The body is not JSON at all (HTTP 400).
+    #[error("{0}")]
+    Malformed(String),
     /// No such job (HTTP 404).
     #[error("no job with id {0}")]
     NotFound(String),
@@ -21,9 +24,13 @@ pub enum JobError {
     #[error(transparent)]
     Document(#[from] DocumentError),
     /// A peer could not be reached or did not answer with a moments document (HTTP 422: the
-    /// request names a source that yields no statistics).
-    #[error("{0}")]
-    Peer(String),
+    /// request names a source that yields no statistics). `field` is the JSON path of its `from`.
+    #[error("{field}: {message}")]
+    Peer { field: String, message: String },
+    /// The source names a server that is not on this server's allow-list (HTTP 403); nothing was
+    /// sent to it.
+    #[error("{field}: {message}")]
+    PeerNotAllowed { field: String, message: String },
     /// The server is at a limit; retry later (HTTP 429 with Retry-After).
     #[error("{detail}")]
     Busy { detail: String, retry_after_seconds: u64 },

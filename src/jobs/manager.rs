@@ -7,15 +7,22 @@
 //! * `queue` — job ids waiting for a worker, oldest first;
 //! * `lifecycle` — one async mutex that serialises state transitions (submit, start, cancel,
 //!   extend, delete, finish), so that "check the state, write the database, update memory" is
-//!   atomic with respect to every other transition. Transitions are rare; the CPU work is not
-//!   under it.
+//!   atomic with respect to every other transition. It is held across database writes only, never
+//!   across computation: work whose length depends on the input (verifying and merging documents,
+//!   solving) runs before it is taken or after it is released;
+//! * `merging` — jobs whose statistics a merge is changing (reserved under the lock, released when
+//!   the merge ends), which extend and delete refuse to touch meanwhile.
 //!
 //! CPU work never runs on tokio's workers: jobs run on a blocking thread that drives the dedicated
-//! rayon pool (see `driver`), and one-off computations a request waits for (reference luminance,
-//! re-solves) go to a small second rayon pool through a oneshot channel, so that they never queue
-//! behind a running job's chunks.
+//! rayon pool (see `driver`), and one-off computations a request waits for (validation with the
+//! reference luminance and the iteration's expected work, verification of documents, re-solves)
+//! go to a small second rayon pool through a oneshot channel, so that they never queue behind a
+//! running job's chunks. Each of them is bounded (see `sim::quadrature`, `sim::cost`,
+//! `sim::exact_sum`).
+//!
+//! The statistics operations (results, re-solves, merges, studies) live in `statistics`.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -25,19 +32,16 @@ use serde_json::Value;
 use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
-use super::documents::{HistoryPoint, JobHistory, JobList, JobResult, MAX_HISTORY_POINTS, thin};
 use super::driver;
 use super::error::JobError;
-use super::peers::{Source, parse_source, pull};
+use super::peers::Peers;
 use super::resource::{BestStrategy, JobResource, JobState, Progress, now_ms, rfc3339};
 use crate::metrics::{JobSample, Metrics};
 use crate::sim::config::sha256_hex;
-use crate::sim::document::{MomentsDocument, merge_documents};
-use crate::sim::moments::Moments;
+use crate::sim::cost::iteration_work;
 use crate::sim::quadrature::reference_luminance;
-use crate::sim::report::{RunReport, build_report};
-use crate::sim::spec::{JobSpec, SpecError, ValidJob, merge_patch, parse_job_spec, validate_solver};
-use crate::store::{Checkpoint, Inserted, JobRow, NewJob, Store, StoreError};
+use crate::sim::spec::{JobSpec, SpecError, ValidJob, parse_job_spec};
+use crate::store::{Inserted, JobRow, NewJob, Store, StoreError};
 
 /// How jobs are run.
 #[derive(Debug, Clone)]
@@ -50,6 +54,8 @@ pub struct RunPolicy {
     pub checkpoint_interval: Duration,
     /// Largest N_F · N_B · iterations of one job.
     pub job_budget: f64,
+    /// Largest expected work of one iteration, in light-path equivalents (`sim::cost`).
+    pub max_iteration_work: f64,
     /// Most cells of a job's grid.
     pub max_cells: usize,
     /// Most jobs waiting in the queue.
@@ -57,8 +63,14 @@ pub struct RunPolicy {
 }
 
 /// Why a running job was asked to stop.
-pub(crate) const STOP_CANCEL: u8 = 1;
-pub(crate) const STOP_SHUTDOWN: u8 = 2;
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub(crate) enum StopReason {
+    /// The user cancelled it: it ends `cancelled` (the request is also stored).
+    Cancel = 1,
+    /// The server is stopping: it stays `queued` and resumes at the next start.
+    Shutdown = 2,
+}
 
 /// A queued or running job, in memory.
 pub(crate) struct ActiveJob {
@@ -66,10 +78,10 @@ pub(crate) struct ActiveJob {
     pub job: ValidJob,
     /// First iteration index of the job's range (see `JobSpec::iteration_range`).
     pub start: u64,
-    /// Checked by the simulation before every chunk.
+    /// Checked by the simulation before every chunk (and inside restricted iterations).
     pub stop: AtomicBool,
-    /// STOP_CANCEL or STOP_SHUTDOWN once `stop` is set.
-    pub stop_reason: AtomicU8,
+    /// A `StopReason` once `stop` is set (0 before).
+    stop_reason: AtomicU8,
     /// Iterations to reach (extend raises it while the job runs).
     pub total: AtomicU64,
     /// The job's current resource; GET and the event stream read it.
@@ -77,9 +89,24 @@ pub(crate) struct ActiveJob {
 }
 
 impl ActiveJob {
-    pub fn request_stop(&self, reason: u8) {
-        self.stop_reason.store(reason, Ordering::SeqCst);
+    /// Asks the job to stop. A cancel wins over a shutdown (a shutdown never turns an
+    /// acknowledged cancel into "resume later").
+    pub fn request_stop(&self, reason: StopReason) {
+        match reason {
+            StopReason::Cancel => self.stop_reason.store(reason as u8, Ordering::SeqCst),
+            StopReason::Shutdown => {
+                let _ = self.stop_reason.compare_exchange(0, reason as u8, Ordering::SeqCst, Ordering::SeqCst);
+            }
+        }
         self.stop.store(true, Ordering::SeqCst);
+    }
+
+    pub fn stop_reason(&self) -> Option<StopReason> {
+        match self.stop_reason.load(Ordering::SeqCst) {
+            1 => Some(StopReason::Cancel),
+            2 => Some(StopReason::Shutdown),
+            _ => None,
+        }
     }
 
     pub fn state(&self) -> JobState {
@@ -91,11 +118,11 @@ pub(crate) struct Inner {
     pub store: Store,
     /// The simulation pool, shared by the running jobs.
     pub pool: Arc<rayon::ThreadPool>,
-    /// A small pool for computations a request waits for (reference luminance, re-solves): on the
-    /// simulation pool they would queue behind thousands of chunks of the running jobs.
+    /// A small pool for computations a request waits for (validation, verification, re-solves):
+    /// on the simulation pool they would queue behind thousands of chunks of the running jobs.
     requests: rayon::ThreadPool,
-    /// HTTP client for pulling moments from peers.
-    http: reqwest::Client,
+    /// The allowed peers and the client that pulls from them.
+    pub(super) peers: Peers,
     pub metrics: Arc<Metrics>,
     pub policy: RunPolicy,
     pub runtime: Handle,
@@ -104,7 +131,9 @@ pub(crate) struct Inner {
     /// std Mutex, same reason.
     queue: Mutex<VecDeque<i64>>,
     /// Serialises state transitions; async because it is held across database writes.
-    lifecycle: tokio::sync::Mutex<()>,
+    pub(super) lifecycle: tokio::sync::Mutex<()>,
+    /// Jobs a merge is changing; std Mutex, held for set operations only.
+    merging: Mutex<HashSet<i64>>,
     /// Wakes the scheduler: a job was queued or a worker became free.
     wake: Notify,
     running: AtomicUsize,
@@ -116,16 +145,28 @@ pub(crate) struct Inner {
 /// Handle to the job manager; cheap to clone.
 #[derive(Clone)]
 pub struct JobManager {
-    inner: Arc<Inner>,
+    pub(super) inner: Arc<Inner>,
 }
 
-fn parse_stored_spec(row: &JobRow) -> Result<JobSpec, JobError> {
+/// A job's merge in progress: released (and the job open to extend and delete again) on drop.
+pub(super) struct MergeReservation {
+    inner: Arc<Inner>,
+    id: i64,
+}
+
+impl Drop for MergeReservation {
+    fn drop(&mut self) {
+        self.inner.merging.lock().expect("merging set").remove(&self.id);
+    }
+}
+
+pub(super) fn parse_stored_spec(row: &JobRow) -> Result<JobSpec, JobError> {
     serde_json::from_str(&row.spec)
         .map_err(|e| JobError::Internal(format!("stored spec of job {} is unreadable: {e}", row.id)))
 }
 
 /// The resource of a job that is not active, from its row.
-fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
+pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
     let state = JobState::parse(&row.state)
         .ok_or_else(|| JobError::Internal(format!("job {} has an unknown state {:?}", row.id, row.state)))?;
     Ok(JobResource {
@@ -164,30 +205,82 @@ pub(crate) fn best_strategy(rows: &[crate::sim::noise::NoiseRow]) -> Option<Best
         .min_by(|a, b| a.rms_percent.total_cmp(&b.rms_percent))
 }
 
+/// Refuses jobs beyond this server's budget: N_F · N_B · `iterations` and the cell count.
+pub(super) fn check_budget(policy: &RunPolicy, spec: &JobSpec, iterations: u64) -> Result<(), JobError> {
+    let pairs = spec.light_paths as f64 * spec.camera_paths as f64 * iterations as f64;
+    if pairs > policy.job_budget {
+        return Err(SpecError::new(
+            "iterations",
+            format!(
+                "light_paths × camera_paths × iterations = {pairs:.3e} exceeds this server's per-job budget of {:.3e} \
+                 (--max-job-budget); run fewer iterations, or split the study into shards",
+                policy.job_budget
+            ),
+        )
+        .into());
+    }
+    let cells = spec.cells.r2_edges.len() * spec.cells.r3_edges.len() * spec.cells.phi_bins as usize;
+    if cells > policy.max_cells {
+        return Err(SpecError::new(
+            "cells",
+            format!("the grid has {cells} cells; this server accepts at most {} (--max-cells)", policy.max_cells),
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Refuses a configuration whose single iteration is expected to cost more than the server
+/// allows (the check behind "a job that cannot be cancelled": an iteration of 10¹⁷ light-path
+/// equivalents once ran for ever). CPU work: call it on the request pool.
+fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobError> {
+    let work = iteration_work(&job.config);
+    let total = work.total();
+    if total.is_finite() && total <= policy.max_iteration_work {
+        return Ok(());
+    }
+    let field =
+        if work.light_paths >= crate::sim::cost::MERGE_WEIGHT * work.merges { "light_paths" } else { "merge_radius" };
+    Err(SpecError::new(
+        field,
+        format!(
+            "one iteration is expected to cost {total:.3e} light-path equivalents ({:.3e} light paths traced, {:.3e} \
+             merges) — beyond this server's per-iteration limit of {:.3e} (--max-iteration-work); reduce merge_radius, \
+             light_paths or camera_paths",
+            work.light_paths, work.merges, policy.max_iteration_work
+        ),
+    )
+    .into())
+}
+
 impl JobManager {
     /// Starts the manager on `store`: re-queues the jobs a previous server left running or queued
-    /// (running ones first, each to resume from its last checkpoint) and starts the scheduler.
+    /// (running ones first, each to resume from its last checkpoint; a job whose cancel was
+    /// acknowledged ends cancelled instead) and starts the scheduler.
     ///
-    /// `pool` runs the jobs; `requests` runs the computations requests wait for.
+    /// `pool` runs the jobs; `requests` runs the computations requests wait for; `peers` are the
+    /// servers merges may pull from.
     pub async fn start(
         store: Store,
         policy: RunPolicy,
         pool: Arc<rayon::ThreadPool>,
         requests: rayon::ThreadPool,
         metrics: Arc<Metrics>,
+        peers: Peers,
     ) -> Result<Self, StoreError> {
         let (shutdown, _) = watch::channel(false);
         let inner = Arc::new(Inner {
             store,
             pool,
             requests,
-            http: super::peers::client(),
+            peers,
             metrics,
             policy,
             runtime: Handle::current(),
             active: Mutex::new(HashMap::new()),
             queue: Mutex::new(VecDeque::new()),
             lifecycle: tokio::sync::Mutex::new(()),
+            merging: Mutex::new(HashSet::new()),
             wake: Notify::new(),
             running: AtomicUsize::new(0),
             driver_ended: Notify::new(),
@@ -201,6 +294,12 @@ impl JobManager {
 
     async fn recover(&self) -> Result<(), StoreError> {
         for row in self.inner.store.unfinished_jobs().await? {
+            if row.cancel_requested {
+                // The cancel was acknowledged before the server stopped: honour it.
+                self.inner.store.set_state(row.id, "cancelled", None, now_ms()).await?;
+                tracing::info!(job = row.id, iterations_done = row.iterations_done, "cancelled job stays cancelled");
+                continue;
+            }
             let valid = parse_stored_spec(&row)
                 .map_err(|e| e.to_string())
                 .and_then(|s| s.validate().map_err(|e| e.to_string()));
@@ -240,12 +339,31 @@ impl JobManager {
         self.inner.wake.notify_one();
     }
 
-    fn active(&self, id: i64) -> Option<Arc<ActiveJob>> {
+    pub(super) fn active(&self, id: i64) -> Option<Arc<ActiveJob>> {
         self.inner.active.lock().expect("active map").get(&id).cloned()
     }
 
+    /// Reserves job `id` for a merge (call under the lifecycle lock), or says that another merge
+    /// holds it.
+    pub(super) fn reserve_for_merge(&self, id: i64) -> Result<MergeReservation, JobError> {
+        if !self.inner.merging.lock().expect("merging set").insert(id) {
+            return Err(JobError::Conflict(format!("job {id} is taking another merge; retry when it has finished")));
+        }
+        Ok(MergeReservation { inner: self.inner.clone(), id })
+    }
+
+    fn refuse_while_merging(&self, id: i64) -> Result<(), JobError> {
+        if self.inner.merging.lock().expect("merging set").contains(&id) {
+            return Err(JobError::Conflict(format!("job {id} is taking a merge; retry when it has finished")));
+        }
+        Ok(())
+    }
+
     /// Runs `f` on the request pool and awaits its result (CPU work stays off tokio's workers).
-    async fn compute<T: Send + 'static>(&self, f: impl FnOnce() -> T + Send + 'static) -> Result<T, JobError> {
+    pub(super) async fn compute<T: Send + 'static>(
+        &self,
+        f: impl FnOnce() -> T + Send + 'static,
+    ) -> Result<T, JobError> {
         let (tx, rx) = tokio::sync::oneshot::channel();
         self.inner.requests.spawn(move || {
             // A panic must not abort the process (rayon's default for spawned work).
@@ -260,6 +378,10 @@ impl JobManager {
     /// Receives shutdown: true once the server is stopping.
     pub fn shutdown_signal(&self) -> watch::Receiver<bool> {
         self.inner.shutdown.subscribe()
+    }
+
+    pub(super) fn is_shutting_down(&self) -> bool {
+        *self.inner.shutdown.borrow()
     }
 
     /// The store behind the manager.
@@ -291,24 +413,36 @@ impl JobManager {
     }
 
     /// Validates and queues a job. With an idempotency key, a repeated request with the same body
-    /// returns the original job (`true` in the result) instead of creating a second one.
+    /// returns the original job (`true` in the result) instead of creating a second one. The job
+    /// is acknowledged only once its row is committed.
     pub async fn submit(
         &self,
-        document: &Value,
+        document: Value,
         idempotency_key: Option<String>,
     ) -> Result<(JobResource, bool), JobError> {
-        if *self.inner.shutdown.borrow() {
+        if self.is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
-        let job = parse_job_spec(document)?.validate()?;
-        self.check_budget(&job.spec, range_len(&job.spec))?;
         self.check_queue()?;
-        let config = job.config.clone();
-        let reference = self.compute(move || reference_luminance(&config.scene)).await?;
-        let spec_json = spec_json(&job.spec)?;
-        let request_hash = idempotency_key.as_ref().map(|_| sha256_hex(document.to_string().as_bytes()));
+        let policy = self.inner.policy.clone();
+        let hash_body = idempotency_key.is_some();
+        // Validation, the reference quadrature and the expected work of an iteration: CPU work,
+        // each bounded, on the request pool.
+        let (job, reference, request_hash) = self
+            .compute(move || -> Result<_, JobError> {
+                let job = parse_job_spec(&document)?.validate()?;
+                check_budget(&policy, &job.spec, range_len(&job.spec))?;
+                check_iteration_work(&policy, &job)?;
+                let reference = reference_luminance(&job.config.scene);
+                if let Err(e) = &reference {
+                    tracing::warn!(error = %e, "the job has no reference luminance");
+                }
+                let hash = hash_body.then(|| sha256_hex(document.to_string().as_bytes()));
+                Ok((job, reference.ok(), hash))
+            })
+            .await??;
         let new = NewJob {
-            spec: spec_json,
+            spec: spec_json(&job.spec)?,
             fingerprint: job.config.fingerprint().to_string(),
             iterations_total: range_len(&job.spec),
             reference_luminance: reference,
@@ -334,32 +468,6 @@ impl JobManager {
         }
     }
 
-    /// Refuses jobs beyond this server's budget: N_F · N_B · `iterations` and the cell count.
-    fn check_budget(&self, spec: &JobSpec, iterations: u64) -> Result<(), JobError> {
-        let policy = &self.inner.policy;
-        let pairs = spec.light_paths as f64 * spec.camera_paths as f64 * iterations as f64;
-        if pairs > policy.job_budget {
-            return Err(SpecError::new(
-                "iterations",
-                format!(
-                    "light_paths × camera_paths × iterations = {pairs:.3e} exceeds this server's per-job budget of {:.3e} \
-                     (--max-job-budget); run fewer iterations, or split the study into shards",
-                    policy.job_budget
-                ),
-            )
-            .into());
-        }
-        let cells = spec.cells.r2_edges.len() * spec.cells.r3_edges.len() * spec.cells.phi_bins as usize;
-        if cells > policy.max_cells {
-            return Err(SpecError::new(
-                "cells",
-                format!("the grid has {cells} cells; this server accepts at most {} (--max-cells)", policy.max_cells),
-            )
-            .into());
-        }
-        Ok(())
-    }
-
     /// Refuses a new job when the queue is full.
     fn check_queue(&self) -> Result<(), JobError> {
         let queued = self.inner.queue.lock().expect("queue").len();
@@ -382,7 +490,12 @@ impl JobManager {
     }
 
     /// A page of jobs, newest first, optionally in one state, after `cursor` (the last id seen).
-    pub async fn list(&self, state: Option<JobState>, cursor: Option<i64>, limit: u32) -> Result<JobList, JobError> {
+    pub async fn list(
+        &self,
+        state: Option<JobState>,
+        cursor: Option<i64>,
+        limit: u32,
+    ) -> Result<super::documents::JobList, JobError> {
         let mut rows = self.inner.store.list_jobs(state.map(JobState::as_str), cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
@@ -394,11 +507,13 @@ impl JobManager {
                 None => resource_from_row(row),
             })
             .collect::<Result<_, _>>()?;
-        Ok(JobList { jobs, next_cursor })
+        Ok(super::documents::JobList { jobs, next_cursor })
     }
 
-    /// Cancels a queued job at once, or asks a running one to stop (it stops within one chunk of
-    /// light paths and keeps the iterations it completed).
+    /// Cancels a queued job at once, or asks a running one to stop (within one chunk of light
+    /// paths, or 1,024 candidates of a restricted iteration; it keeps the iterations it
+    /// completed). The cancel is stored before it is acknowledged, so a restart does not run the
+    /// job again.
     pub async fn cancel(&self, id: i64) -> Result<JobResource, JobError> {
         let _guard = self.inner.lifecycle.lock().await;
         let Some(job) = self.active(id) else {
@@ -408,36 +523,37 @@ impl JobManager {
                 row.state
             )));
         };
-        let waiting = {
-            let mut queue = self.inner.queue.lock().expect("queue");
-            let before = queue.len();
-            queue.retain(|&q| q != id);
-            queue.len() < before
-        };
+        let waiting = self.inner.queue.lock().expect("queue").contains(&id);
         if waiting {
             self.inner.store.set_state(id, "cancelled", None, now_ms()).await?;
+            self.inner.queue.lock().expect("queue").retain(|&q| q != id);
             self.inner.active.lock().expect("active map").remove(&id);
             job.view.send_modify(|r| {
                 r.state = JobState::Cancelled;
                 r.updated_at = rfc3339(now_ms());
             });
         } else {
-            job.request_stop(STOP_CANCEL);
+            self.inner.store.request_cancel(id, now_ms()).await?;
+            job.request_stop(StopReason::Cancel);
         }
         let resource = job.view.borrow().clone();
         Ok(resource)
     }
 
-    /// Adds `iterations` to a job; they continue the same deterministic sequence. A succeeded or
-    /// cancelled job is queued again; a queued or running one just runs longer.
-    pub async fn extend(&self, id: i64, iterations: u64) -> Result<JobResource, JobError> {
+    /// Adds iterations to a job; they continue the same deterministic sequence. `iterations` more
+    /// than the job would otherwise reach: its total if it is queued or running, the iterations it
+    /// holds if it succeeded or was cancelled. Or `total`: run until the job holds that many
+    /// (resuming a cancelled job to its original target is `total` = its `iterations_total`). A
+    /// succeeded or cancelled job is queued again; a queued or running one just runs longer.
+    pub async fn extend(&self, id: i64, more: Option<u64>, total: Option<u64>) -> Result<JobResource, JobError> {
         let _guard = self.inner.lifecycle.lock().await;
+        self.refuse_while_merging(id)?;
         let now = now_ms();
         if let Some(job) = self.active(id) {
             refuse_shard_extension(id, &job.job.spec)?;
-            let total = job.total.load(Ordering::SeqCst);
-            let new_total = checked_total(total, iterations)?;
-            self.check_budget(&job.job.spec, new_total)?;
+            let current = job.total.load(Ordering::SeqCst);
+            let new_total = target_total(current, current, more, total)?;
+            check_budget(&self.inner.policy, &job.job.spec, new_total)?;
             let mut spec = job.view.borrow().spec.clone();
             spec.iterations = new_total;
             self.inner.store.set_total(id, new_total, &spec_json(&spec)?, job.state().as_str(), now).await?;
@@ -462,11 +578,14 @@ impl JobManager {
                 row.state
             )));
         }
-        let new_total = checked_total(row.iterations_total, iterations)?;
+        let new_total = target_total(row.iterations_done, row.iterations_total, more, total)?;
         let mut spec = parse_stored_spec(&row)?;
         refuse_shard_extension(id, &spec)?;
-        self.check_budget(&spec, new_total)?;
+        check_budget(&self.inner.policy, &spec, new_total)?;
         self.check_queue()?;
+        // A job resumes from its checkpoint: refuse now (nothing changed) if it is corrupted,
+        // rather than queueing a job that can only fail.
+        self.verified_checkpoint(id).await?;
         spec.iterations = new_total;
         let job = spec.validate()?;
         self.inner.store.set_total(id, new_total, &spec_json(&spec)?, "queued", now).await?;
@@ -483,187 +602,20 @@ impl JobManager {
     /// Deletes a job that is not running, with its checkpoint.
     pub async fn delete(&self, id: i64) -> Result<(), JobError> {
         let _guard = self.inner.lifecycle.lock().await;
+        self.refuse_while_merging(id)?;
         if let Some(job) = self.active(id) {
-            let mut queue = self.inner.queue.lock().expect("queue");
-            if !queue.contains(&id) {
+            if !self.inner.queue.lock().expect("queue").contains(&id) {
                 return Err(JobError::Conflict(format!("job {id} is running; cancel it before deleting it")));
             }
-            queue.retain(|&q| q != id);
-            drop(queue);
+            if !self.inner.store.delete_job(id).await? {
+                return Err(JobError::NotFound(id.to_string()));
+            }
+            self.inner.queue.lock().expect("queue").retain(|&q| q != id);
             self.inner.active.lock().expect("active map").remove(&id);
             job.view.send_modify(|r| r.state = JobState::Cancelled);
+            return Ok(());
         }
         if self.inner.store.delete_job(id).await? { Ok(()) } else { Err(JobError::NotFound(id.to_string())) }
-    }
-
-    async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
-        let resource = self.get(id).await?;
-        Ok((resource.state, resource.progress.iterations_total, resource.spec, resource.merged))
-    }
-
-    /// The results of the latest checkpoint.
-    pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
-        let (state, total, _, _) = self.state_and_total(id).await?;
-        let (done, json) = self.inner.store.load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let report: RunReport = serde_json::from_str(&json)
-            .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
-        Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })
-    }
-
-    /// Each strategy's figures at every checkpoint (thinned to at most 1,000 points).
-    pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
-        self.get(id).await?;
-        let rows = self.inner.store.load_history(id).await?;
-        let points = thin(rows, MAX_HISTORY_POINTS)
-            .into_iter()
-            .map(|(iterations, json)| {
-                serde_json::from_str(&json)
-                    .map(|strategies| HistoryPoint { iterations, strategies })
-                    .map_err(|e| JobError::Internal(format!("stored history of job {id} is unreadable: {e}")))
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(JobHistory { job_id: id, points })
-    }
-
-    /// The latest checkpoint's moments, verified against their checksum (and, for a job's own
-    /// run, against the range it ran).
-    async fn checkpoint_moments(
-        &self,
-        id: i64,
-        spec: &JobSpec,
-        merged: bool,
-    ) -> Result<(Moments, Checkpoint), JobError> {
-        let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let job = spec.validate()?;
-        let moments = driver::decode_checkpoint(id, &checkpoint, &job, !merged)?;
-        Ok((moments, checkpoint))
-    }
-
-    /// Re-solves the latest checkpoint with other solver options (a merge patch on the job's
-    /// `solver`), without running anything or storing anything.
-    pub async fn solve(&self, id: i64, patch: &Value) -> Result<JobResult, JobError> {
-        if !patch.is_object() {
-            return Err(SpecError::new("", "the body must be a JSON object of solver options").into());
-        }
-        let (state, total, spec, merged) = self.state_and_total(id).await?;
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
-        let mut solver = serde_json::to_value(&spec.solver).map_err(|e| JobError::Internal(e.to_string()))?;
-        merge_patch(&mut solver, patch);
-        let solver = serde_path_to_error::deserialize(&solver).map_err(|e| {
-            let path = e.path().to_string();
-            SpecError::new(if path == "." { String::new() } else { path }, e.into_inner().to_string())
-        })?;
-        validate_solver(&solver)?;
-        let job = spec.validate()?;
-        let reference = self.get(id).await?.reference_luminance;
-        let report = self.compute(move || build_report(&moments, &job.config.cells, &solver, reference)).await?;
-        let partial = !(state == JobState::Succeeded && checkpoint.iterations_done >= total);
-        Ok(JobResult { job_id: id, partial, state, report })
-    }
-
-    /// The latest checkpoint's moments as a portable, checksummed document.
-    pub async fn moments(&self, id: i64) -> Result<MomentsDocument, JobError> {
-        let (_, _, spec, merged) = self.state_and_total(id).await?;
-        let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
-        Ok(MomentsDocument::new(spec, moments))
-    }
-
-    /// The verified document of a source (pulled from the peer if it names one).
-    async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
-        match source {
-            Source::Document(doc) => Ok(*doc),
-            Source::Peer(url) => {
-                let bytes = pull(&self.inner.http, &url).await?;
-                let doc = self.compute(move || MomentsDocument::from_json(&bytes)).await?;
-                doc.map_err(|e| JobError::Peer(format!("the peer {url} sent an unusable document: {e}")))
-            }
-        }
-    }
-
-    /// Merges a moments document (inline, or pulled from a peer's job) into a finished job's
-    /// statistics and recomputes its results. Refused, with nothing changed, if the job is active,
-    /// the configuration differs, or any iteration would be counted twice.
-    pub async fn merge_into(&self, id: i64, body: &Value) -> Result<JobResult, JobError> {
-        let doc = self.fetch(parse_source(body, "")?).await?;
-        {
-            let _guard = self.inner.lifecycle.lock().await;
-            if self.active(id).is_some() {
-                return Err(JobError::Conflict(format!(
-                    "job {id} is queued or running; merge into it once it has finished, or cancel it first"
-                )));
-            }
-            let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
-            if !matches!(row.state.as_str(), "succeeded" | "cancelled") {
-                return Err(JobError::Conflict(format!(
-                    "job {id} is {}; only a succeeded or cancelled job takes merges",
-                    row.state
-                )));
-            }
-            let job = parse_stored_spec(&row)?.validate()?;
-            let mut moments = match self.inner.store.load_checkpoint(id).await? {
-                Some(checkpoint) => driver::decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
-                None => Moments::new(&job.config),
-            };
-            moments.merge(&doc.moments).map_err(crate::sim::document::DocumentError::from)?;
-            let reference = row.reference_luminance;
-            let checkpoint = self.compute(move || driver::checkpoint_of(&moments, &job, reference)).await??;
-            self.inner.store.write_merged(id, &checkpoint, now_ms()).await?;
-        }
-        self.result(id).await
-    }
-
-    /// Creates a finished job from several moments documents or peer jobs (a study): their
-    /// statistics merged, their results computed. `solver` optionally patches the solver options
-    /// of the first source's spec.
-    pub async fn create_study(&self, sources: &[Value], solver: Option<&Value>) -> Result<JobResource, JobError> {
-        if *self.inner.shutdown.borrow() {
-            return Err(JobError::ShuttingDown);
-        }
-        if !(1..=256).contains(&sources.len()) {
-            return Err(SpecError::new("sources", format!("must list 1 to 256 sources, got {}", sources.len())).into());
-        }
-        let parsed = sources
-            .iter()
-            .enumerate()
-            .map(|(i, s)| parse_source(s, &format!("sources[{i}]")))
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut documents = Vec::with_capacity(parsed.len());
-        for source in parsed {
-            documents.push(self.fetch(source).await?);
-        }
-        let mut merged = self.compute(move || merge_documents(&documents)).await??;
-        if let Some(patch) = solver {
-            let mut options =
-                serde_json::to_value(&merged.spec.solver).map_err(|e| JobError::Internal(e.to_string()))?;
-            merge_patch(&mut options, patch);
-            merged.spec.solver = serde_path_to_error::deserialize(&options).map_err(|e| {
-                SpecError::new(
-                    format!("solver.{}", e.path()).trim_end_matches('.').to_string(),
-                    e.into_inner().to_string(),
-                )
-            })?;
-        }
-        let job = merged.spec.validate()?;
-        let config = job.config.clone();
-        let fingerprint = config.fingerprint().to_string();
-        let spec = spec_json(&job.spec)?;
-        let (reference, checkpoint) = self
-            .compute(move || {
-                let reference = reference_luminance(&config.scene);
-                (reference, driver::checkpoint_of(&merged.moments, &job, reference))
-            })
-            .await?;
-        let new = NewJob {
-            spec,
-            fingerprint,
-            iterations_total: checkpoint.as_ref().map_or(0, |c| c.iterations_done),
-            reference_luminance: reference,
-            idempotency_key: None,
-            request_hash: None,
-            now: now_ms(),
-        };
-        let row = self.inner.store.insert_study(&new, &checkpoint?).await?;
-        resource_from_row(&row)
     }
 
     /// A receiver of the job's resource as it changes, for active jobs.
@@ -676,17 +628,18 @@ impl JobManager {
     pub fn stop_all_now(&self) {
         self.inner.shutdown.send_replace(true);
         for job in self.inner.active.lock().expect("active map").values() {
-            job.request_stop(STOP_SHUTDOWN);
+            job.request_stop(StopReason::Shutdown);
         }
     }
 
     /// Stops accepting work, asks every running job to checkpoint and stop, and waits for them.
-    /// Interrupted jobs stay `queued` in the database and resume when a server starts again.
+    /// Interrupted jobs stay `queued` in the database and resume when a server starts again;
+    /// cancelled ones end cancelled.
     pub async fn shutdown(&self) {
         self.inner.shutdown.send_replace(true);
         let jobs: Vec<Arc<ActiveJob>> = self.inner.active.lock().expect("active map").values().cloned().collect();
         for job in jobs {
-            job.request_stop(STOP_SHUTDOWN);
+            job.request_stop(StopReason::Shutdown);
         }
         while self.inner.running.load(Ordering::SeqCst) > 0 {
             let ended = self.inner.driver_ended.notified();
@@ -698,8 +651,34 @@ impl JobManager {
     }
 }
 
+/// The new total of an extension: `more` beyond `base`, or `total` outright (which must exceed
+/// `done`); at most 10⁹.
+fn target_total(base: u64, done: u64, more: Option<u64>, total: Option<u64>) -> Result<u64, JobError> {
+    const MAX: u64 = 1_000_000_000;
+    match (more, total) {
+        (Some(add), None) => match base.checked_add(add) {
+            Some(t) if add >= 1 && t <= MAX => Ok(t),
+            _ => Err(SpecError::new(
+                "iterations",
+                format!("must be ≥ 1 and bring the total ({base}) to at most 10^9, got {add}"),
+            )
+            .into()),
+        },
+        (None, Some(t)) if t > done && t <= MAX => Ok(t),
+        (None, Some(t)) => Err(SpecError::new(
+            "total",
+            format!("must exceed the iterations the job holds ({done}) and be at most 10^9, got {t}"),
+        )
+        .into()),
+        _ => {
+            Err(SpecError::new("", "give exactly one of `iterations` (how many more) and `total` (the new target)")
+                .into())
+        }
+    }
+}
+
 /// Iterations a job runs (its range's length).
-fn range_len(spec: &JobSpec) -> u64 {
+pub(super) fn range_len(spec: &JobSpec) -> u64 {
     let r = spec.iteration_range();
     r.end - r.start
 }
@@ -714,23 +693,8 @@ fn refuse_shard_extension(id: i64, spec: &JobSpec) -> Result<(), JobError> {
     }
 }
 
-fn spec_json(spec: &JobSpec) -> Result<String, JobError> {
+pub(super) fn spec_json(spec: &JobSpec) -> Result<String, JobError> {
     serde_json::to_string(spec).map_err(|e| JobError::Internal(e.to_string()))
-}
-
-fn checked_total(total: u64, add: u64) -> Result<u64, JobError> {
-    match total.checked_add(add) {
-        Some(t) if add >= 1 && t <= 1_000_000_000 => Ok(t),
-        _ => Err(SpecError::new(
-            "iterations",
-            format!("must be ≥ 1 and bring the total ({total}) to at most 10^9, got {add}"),
-        )
-        .into()),
-    }
-}
-
-fn no_checkpoint(id: i64) -> JobError {
-    JobError::Conflict(format!("job {id} has no checkpoint yet: results appear after its first checkpoint"))
 }
 
 /// Starts queued jobs while workers are free; runs until shutdown.
@@ -816,6 +780,11 @@ impl Inner {
         }
     }
 
+    /// Whether the server is stopping.
+    pub(crate) fn shutting_down(&self) -> bool {
+        *self.shutdown.borrow()
+    }
+
     async fn end(&self, job: &ActiveJob, state: JobState, error: Option<&str>) -> Result<(), JobError> {
         let now = now_ms();
         self.store.set_state(job.id, state.as_str(), error, now).await?;
@@ -828,5 +797,22 @@ impl Inner {
             r.progress.eta_seconds = None;
         });
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn extensions_add_to_what_the_job_would_reach_or_set_the_target() {
+        // A cancelled job holding 100 of 1,000: 50 more → 150; resume to its target → 1,000.
+        assert_eq!(target_total(100, 100, Some(50), None).unwrap(), 150);
+        assert_eq!(target_total(100, 100, None, Some(1000)).unwrap(), 1000);
+        assert!(target_total(100, 100, None, Some(100)).is_err(), "the target must exceed what it holds");
+        assert!(target_total(100, 100, Some(0), None).is_err());
+        assert!(target_total(100, 100, Some(1), Some(200)).is_err(), "one of the two");
+        assert!(target_total(100, 100, None, None).is_err());
+        assert!(target_total(999_999_999, 0, Some(2), None).is_err());
     }
 }

@@ -80,8 +80,9 @@ pub struct JobResource {
     pub error: Option<String>,
     /// Configuration fingerprint (moments merge only between equal fingerprints).
     pub fingerprint: String,
-    /// Quadrature value of the expected luminance.
-    pub reference_luminance: f64,
+    /// Quadrature value of the expected luminance; null when the quadrature did not converge
+    /// within its evaluation budget (extreme geometry).
+    pub reference_luminance: Option<f64>,
     /// True when the job holds statistics merged from other runs (shards, peers, documents);
     /// such a job is complete and cannot be extended.
     pub merged: bool,

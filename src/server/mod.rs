@@ -1,15 +1,25 @@
-//! The server process: configuration, wiring (store → pool → job manager → router) and graceful
-//! shutdown.
+//! The server process: configuration, wiring (store → pool → peers → job manager → router →
+//! listener) and graceful shutdown.
+//!
+//! * [`listener`] — the accept loop: connection limit, timeouts, TLS, graceful shutdown;
+//! * [`tls`] — the server's certificate and key.
+
+pub mod listener;
+pub mod tls;
 
 use std::future::Future;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::net::TcpListener;
 
+use crate::api::guard::Guard;
+use crate::jobs::peers::{Peer, PeerConfigError, Peers};
 use crate::jobs::{JobManager, RunPolicy};
 use crate::store::{Store, StoreError};
+use listener::ConnectionLimits;
 
 /// Everything `optimis serve` can be told, validated.
 #[derive(Debug, Clone)]
@@ -27,6 +37,21 @@ pub struct ServerConfig {
     /// When set, every route but `/healthz`, `/readyz` and the dashboard's static files requires
     /// `Authorization: Bearer <token>`.
     pub token: Option<BearerToken>,
+    /// Serve https with this certificate chain and key (PEM files).
+    pub tls: Option<TlsFiles>,
+    /// The servers merges and studies may pull statistics from (nothing else is ever contacted).
+    pub peers: Vec<Peer>,
+    /// Extra roots (PEM) trusted for https peers, besides the system's.
+    pub peer_ca: Option<PathBuf>,
+    /// Host names this server also answers to, besides loopback ones (a proxy's public name).
+    pub allowed_hosts: Vec<String>,
+}
+
+/// The PEM files of the server's TLS certificate chain and private key.
+#[derive(Debug, Clone)]
+pub struct TlsFiles {
+    pub cert: PathBuf,
+    pub key: PathBuf,
 }
 
 /// What one client may ask of the server; every limit is configurable, the defaults are safe.
@@ -38,12 +63,25 @@ pub struct Limits {
     pub document_bytes: usize,
     /// Largest N_F · N_B · iterations of one job (the number of light–camera path pairs).
     pub job_budget: f64,
+    /// Largest expected work of one iteration, in light-path equivalents (`sim::cost`).
+    pub max_iteration_work: f64,
     /// Most cells of a job's grid.
     pub max_cells: usize,
     /// Most jobs waiting in the queue; beyond it submissions get 429 with Retry-After.
     pub max_queued_jobs: usize,
     /// Most event streams open at once; beyond it 429 with Retry-After.
     pub max_event_streams: usize,
+    /// Most requests carrying moments documents (merges, studies) read or processed at once.
+    pub max_document_requests: usize,
+    /// Most connections open at once.
+    pub max_connections: usize,
+    /// A request head (and a TLS handshake) must arrive within this; keep-alive connections idle
+    /// this long are closed.
+    pub header_timeout: Duration,
+    /// A whole request body must arrive within this.
+    pub body_timeout: Duration,
+    /// A connection on which nothing moves for this long is closed.
+    pub idle_timeout: Duration,
 }
 
 impl Default for Limits {
@@ -52,12 +90,22 @@ impl Default for Limits {
             body_bytes: 1 << 20,
             document_bytes: crate::api::DEFAULT_DOCUMENT_LIMIT,
             job_budget: 1e16,
+            max_iteration_work: DEFAULT_MAX_ITERATION_WORK,
             max_cells: crate::sim::spec::MAX_CELLS,
             max_queued_jobs: 1000,
             max_event_streams: 256,
+            max_document_requests: 2,
+            max_connections: 512,
+            header_timeout: Duration::from_secs(10),
+            body_timeout: Duration::from_secs(60),
+            idle_timeout: Duration::from_secs(120),
         }
     }
 }
+
+/// Default per-iteration work limit: 10¹⁰ light-path equivalents, about 45 s of the brute force
+/// on 2 cores (the paper's brute-force iteration is 10⁷, its restricted one ~3·10³).
+pub const DEFAULT_MAX_ITERATION_WORK: f64 = 1e10;
 
 /// A shared secret for bearer authentication; never printed.
 #[derive(Clone)]
@@ -78,6 +126,10 @@ pub enum ServerError {
     Bind { addr: SocketAddr, source: std::io::Error },
     #[error("cannot start the simulation threads: {0}")]
     Threads(#[from] rayon::ThreadPoolBuildError),
+    #[error(transparent)]
+    Peers(#[from] PeerConfigError),
+    #[error(transparent)]
+    Tls(#[from] tls::TlsError),
     #[error("server error: {0}")]
     Io(#[from] std::io::Error),
 }
@@ -99,17 +151,32 @@ impl RunningServer {
 }
 
 /// Opens the store, recovers unfinished jobs and serves on `listener` until `shutdown` resolves;
-/// then stops accepting requests, checkpoints and stops running jobs, and returns.
+/// then stops accepting requests, checkpoints and stops running jobs, and returns. Logs
+/// "optimis listening" (with the address) once the database is open and the server accepts
+/// requests.
 pub async fn serve(
     listener: TcpListener,
     config: &ServerConfig,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServerError> {
-    let (jobs, app) = build(config).await?;
-    run_app(listener, jobs, app, shutdown).await
+    let app = build(config, listener.local_addr()?).await?;
+    tracing::info!(address = %listener.local_addr()?, database = %config.database, workers = config.workers,
+        threads = config.threads, authentication = config.token.is_some(), tls = config.tls.is_some(),
+        peers = config.peers.len(), "optimis listening");
+    run_app(listener, app, config, shutdown).await
 }
 
-async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), ServerError> {
+/// What `build` wires together.
+struct App {
+    jobs: JobManager,
+    router: axum::Router,
+    tls: Option<tokio_rustls::TlsAcceptor>,
+}
+
+async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerError> {
+    // Everything that can be refused is checked before the database is touched.
+    let tls = config.tls.as_ref().map(|f| tls::acceptor(&f.cert, &f.key)).transpose()?;
+    let peers = Peers::new(config.peers.clone(), config.peer_ca.as_deref(), config.limits.document_bytes)?;
     let store = Store::open(&config.database).await?;
     let pool = Arc::new(
         rayon::ThreadPoolBuilder::new()
@@ -122,33 +189,44 @@ async fn build(config: &ServerConfig) -> Result<(JobManager, axum::Router), Serv
         checkpoint_iterations: config.checkpoint_iterations,
         checkpoint_interval: config.checkpoint_interval,
         job_budget: config.limits.job_budget,
+        max_iteration_work: config.limits.max_iteration_work,
         max_cells: config.limits.max_cells,
         max_queued_jobs: config.limits.max_queued_jobs,
     };
-    // Requests that compute (reference luminance, re-solves) get their own two threads, so they
-    // never wait behind a running job's chunks.
+    // Requests that compute (validation, references, documents, re-solves) get their own two
+    // threads, so they never wait behind a running job's chunks.
     let requests =
         rayon::ThreadPoolBuilder::new().num_threads(2).thread_name(|i| format!("optimis-requests-{i}")).build()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
-    let jobs = JobManager::start(store, policy, pool, requests, metrics).await?;
-    let app = crate::api::router(jobs.clone(), &config.limits, config.token.clone());
-    Ok((jobs, app))
+    let jobs = JobManager::start(store, policy, pool, requests, metrics, peers).await?;
+    let guard = Guard {
+        loopback: bound.ip().is_loopback(),
+        allowed_hosts: config.allowed_hosts.iter().map(|h| h.to_ascii_lowercase()).collect::<Vec<_>>().into(),
+    };
+    let router = crate::api::router(jobs.clone(), &config.limits, config.token.clone(), guard);
+    Ok(App { jobs, router, tls })
 }
 
 async fn run_app(
     listener: TcpListener,
-    jobs: JobManager,
-    app: axum::Router,
+    app: App,
+    config: &ServerConfig,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServerError> {
+    let App { jobs, router, tls } = app;
     let stopping = jobs.clone();
     let graceful = async move {
         shutdown.await;
         tracing::info!("shutting down: checkpointing running jobs");
-        // Jobs stop first, so that event streams end and the HTTP server can drain.
+        // Jobs stop first, so that event streams end and connections can drain.
         stopping.shutdown().await;
     };
-    axum::serve(listener, app).with_graceful_shutdown(graceful).await?;
+    let limits = ConnectionLimits {
+        max_connections: config.limits.max_connections,
+        header_timeout: config.limits.header_timeout,
+        idle_timeout: config.limits.idle_timeout,
+    };
+    listener::serve(listener, router, tls, limits, graceful).await;
     jobs.shutdown().await;
     Ok(())
 }
@@ -159,11 +237,15 @@ pub async fn spawn(config: ServerConfig) -> Result<RunningServer, ServerError> {
     let listener =
         TcpListener::bind(config.bind).await.map_err(|source| ServerError::Bind { addr: config.bind, source })?;
     let addr = listener.local_addr()?;
-    let (jobs, app) = build(&config).await?;
+    let app = build(&config, addr).await?;
+    let jobs = app.jobs.clone();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let task = tokio::spawn(run_app(listener, jobs.clone(), app, async move {
-        let _ = stopped.await;
-    }));
+    let task = tokio::spawn(async move {
+        run_app(listener, app, &config, async move {
+            let _ = stopped.await;
+        })
+        .await
+    });
     Ok(RunningServer { addr, jobs, stop, task })
 }
 

@@ -2,8 +2,21 @@
 //!
 //! Iteration s of seed σ is a deterministic draw, so counting it twice would bias every statistic.
 //! Coverage lets a merge refuse exactly that, naming the overlap.
+//!
+//! Coverage read from outside is bounded before anything walks it: indices below
+//! [`MAX_ITERATION_INDEX`], at most [`MAX_RANGES`] ranges in all, and counts added with checked
+//! arithmetic (four ranges `[0, 2⁶³)` once wrapped to a small total). Overlaps and unions walk the
+//! two sorted lists side by side, so they cost O(n + m), never O(n·m).
 
 use serde::{Deserialize, Serialize};
+
+/// Largest iteration index (exclusive) a coverage may name: the same bound as a job's range, far
+/// from where index arithmetic overflows.
+pub const MAX_ITERATION_INDEX: u64 = 1 << 62;
+
+/// Most ranges (over all seeds) a coverage may hold. A study of shards of one seed is one range
+/// and every further seed adds one; a hundred thousand leaves room for any real study.
+pub const MAX_RANGES: usize = 100_000;
 
 /// Half-open iteration ranges `[start, end)` per seed, sorted, disjoint and non-adjacent.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -35,6 +48,19 @@ impl std::fmt::Display for Overlap {
     }
 }
 
+/// Why a coverage read from outside is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CoverageError {
+    #[error("coverage seeds are not sorted and distinct")]
+    Seeds,
+    #[error("coverage ranges of seed {0} are not sorted, non-empty and disjoint")]
+    Ranges(u64),
+    #[error("coverage of seed {seed} names iteration {end}, beyond the largest index 2^62")]
+    Index { seed: u64, end: u64 },
+    #[error("coverage holds more than {MAX_RANGES} ranges")]
+    TooManyRanges,
+}
+
 impl Coverage {
     /// Nothing covered.
     pub fn new() -> Self {
@@ -53,30 +79,48 @@ impl Coverage {
         &self.0
     }
 
-    /// Total number of iterations covered.
-    pub fn iterations(&self) -> u64 {
-        self.0.iter().flat_map(|s| &s.ranges).map(|r| r[1] - r[0]).sum()
+    /// Number of ranges over all seeds.
+    pub fn range_count(&self) -> usize {
+        self.0.iter().map(|s| s.ranges.len()).sum()
+    }
+
+    /// Total number of iterations covered (u128: a well-formed coverage of many seeds may exceed
+    /// u64, and then no moments can match it).
+    pub fn iterations(&self) -> u128 {
+        self.0.iter().flat_map(|s| &s.ranges).map(|r| u128::from(r[1].saturating_sub(r[0]))).sum()
+    }
+
+    /// Iterations covered with an even and with an odd index.
+    pub fn parity_counts(&self) -> (u128, u128) {
+        self.0.iter().flat_map(|s| &s.ranges).fold((0, 0), |(e, o), r| {
+            let len = r[1].saturating_sub(r[0]);
+            let evens = len / 2 + u64::from(len % 2 == 1 && r[0] % 2 == 0);
+            (e + u128::from(evens), o + u128::from(len - evens))
+        })
     }
 
     /// Whether iteration `s` of `seed` is covered.
     pub fn contains(&self, seed: u64, s: u64) -> bool {
-        self.0.iter().find(|x| x.seed == seed).is_some_and(|x| x.ranges.iter().any(|r| r[0] <= s && s < r[1]))
+        let Ok(i) = self.0.binary_search_by_key(&seed, |x| x.seed) else { return false };
+        let ranges = &self.0[i].ranges;
+        // The last range starting at or before s.
+        let after = ranges.partition_point(|r| r[0] <= s);
+        after > 0 && s < ranges[after - 1][1]
     }
 
-    /// The ranges covered by both `self` and `other`.
+    /// The ranges covered by both `self` and `other`, in O(n + m) (both are sorted).
     pub fn overlaps(&self, other: &Coverage) -> Vec<Overlap> {
         let mut out = Vec::new();
-        for a in &self.0 {
-            let Some(b) = other.0.iter().find(|b| b.seed == a.seed) else { continue };
-            for ra in &a.ranges {
-                for rb in &b.ranges {
-                    let (lo, hi) = (ra[0].max(rb[0]), ra[1].min(rb[1]));
-                    if lo < hi {
-                        out.push(Overlap { seed: a.seed, range: [lo, hi] });
-                    }
+        for_matching_seeds(&self.0, &other.0, |seed, a, b| {
+            let (mut i, mut j) = (0, 0);
+            while i < a.len() && j < b.len() {
+                let (lo, hi) = (a[i][0].max(b[j][0]), a[i][1].min(b[j][1]));
+                if lo < hi {
+                    out.push(Overlap { seed, range: [lo, hi] });
                 }
+                if a[i][1] < b[j][1] { i += 1 } else { j += 1 }
             }
-        }
+        });
         out
     }
 
@@ -101,35 +145,117 @@ impl Coverage {
             last[1] = end;
             return;
         }
-        ranges.push([start, end]);
-        ranges.sort_unstable();
-        let mut merged: Vec<[u64; 2]> = Vec::with_capacity(ranges.len());
-        for r in ranges.drain(..) {
-            match merged.last_mut() {
-                Some(last) if last[1] >= r[0] => last[1] = last[1].max(r[1]),
-                _ => merged.push(r),
-            }
-        }
+        let merged = union_ranges(ranges, &[[start, end]]);
         *ranges = merged;
     }
 
-    /// Adds everything `other` covers.
+    /// Adds everything `other` covers, in O(n + m).
     pub fn union(&mut self, other: &Coverage) {
-        for s in &other.0 {
-            for r in &s.ranges {
-                self.insert(s.seed, r[0], r[1]);
+        let mut out = Vec::with_capacity(self.0.len() + other.0.len());
+        let (mut i, mut j) = (0, 0);
+        let (a, b) = (&self.0, &other.0);
+        while i < a.len() || j < b.len() {
+            match (a.get(i), b.get(j)) {
+                (Some(x), Some(y)) if x.seed == y.seed => {
+                    out.push(SeedRanges { seed: x.seed, ranges: union_ranges(&x.ranges, &y.ranges) });
+                    i += 1;
+                    j += 1;
+                }
+                (Some(x), Some(y)) if x.seed < y.seed => {
+                    out.push(x.clone());
+                    i += 1;
+                }
+                (Some(x), None) => {
+                    out.push(x.clone());
+                    i += 1;
+                }
+                (_, Some(y)) => {
+                    out.push(y.clone());
+                    j += 1;
+                }
+                (None, None) => unreachable!("the loop runs while either list has entries"),
+            }
+        }
+        self.0 = out;
+    }
+
+    /// Checks the invariants of a coverage read from outside: seeds sorted and distinct, ranges
+    /// sorted, non-empty, disjoint and non-adjacent, below [`MAX_ITERATION_INDEX`], and at most
+    /// [`MAX_RANGES`] of them.
+    pub fn check(&self) -> Result<(), CoverageError> {
+        if !self.0.windows(2).all(|w| w[0].seed < w[1].seed) {
+            return Err(CoverageError::Seeds);
+        }
+        if self.range_count() > MAX_RANGES {
+            return Err(CoverageError::TooManyRanges);
+        }
+        for s in &self.0 {
+            if !(s.ranges.iter().all(|r| r[0] < r[1]) && s.ranges.windows(2).all(|w| w[0][1] < w[1][0])) {
+                return Err(CoverageError::Ranges(s.seed));
+            }
+            if let Some(last) = s.ranges.last()
+                && last[1] > MAX_ITERATION_INDEX
+            {
+                return Err(CoverageError::Index { seed: s.seed, end: last[1] });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether [`Coverage::check`] passes.
+    pub fn is_well_formed(&self) -> bool {
+        self.check().is_ok()
+    }
+
+    /// Whether every iteration of `self` is also in `other`.
+    pub fn is_within(&self, other: &Coverage) -> bool {
+        let inside: u128 = self.overlaps(other).iter().map(|o| u128::from(o.range[1] - o.range[0])).sum();
+        inside == self.iterations()
+    }
+}
+
+/// Calls `f(seed, a_ranges, b_ranges)` for every seed in both sorted lists.
+fn for_matching_seeds(a: &[SeedRanges], b: &[SeedRanges], mut f: impl FnMut(u64, &[[u64; 2]], &[[u64; 2]])) {
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].seed.cmp(&b[j].seed) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                f(a[i].seed, &a[i].ranges, &b[j].ranges);
+                i += 1;
+                j += 1;
             }
         }
     }
+}
 
-    /// Checks the invariants (for documents read from outside).
-    pub fn is_well_formed(&self) -> bool {
-        self.0.windows(2).all(|w| w[0].seed < w[1].seed)
-            && self
-                .0
-                .iter()
-                .all(|s| s.ranges.iter().all(|r| r[0] < r[1]) && s.ranges.windows(2).all(|w| w[0][1] < w[1][0]))
+/// The union of two sorted lists of ranges, with touching or overlapping ranges joined.
+fn union_ranges(a: &[[u64; 2]], b: &[[u64; 2]]) -> Vec<[u64; 2]> {
+    let mut out: Vec<[u64; 2]> = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() || j < b.len() {
+        let next = match (a.get(i), b.get(j)) {
+            (Some(x), Some(y)) if x[0] <= y[0] => {
+                i += 1;
+                *x
+            }
+            (Some(x), None) => {
+                i += 1;
+                *x
+            }
+            (_, Some(y)) => {
+                j += 1;
+                *y
+            }
+            (None, None) => unreachable!("the loop runs while either list has entries"),
+        };
+        match out.last_mut() {
+            Some(last) if last[1] >= next[0] => last[1] = last[1].max(next[1]),
+            _ => out.push(next),
+        }
     }
+    out
 }
 
 #[cfg(test)]
@@ -143,6 +269,7 @@ mod tests {
         c.insert(1, 30, 40);
         c.insert(2, 0, 5);
         assert_eq!(c.iterations(), 35);
+        assert_eq!(c.parity_counts(), (18, 17));
         assert_eq!(c.seeds()[0].ranges, vec![[0, 20], [30, 40]]);
         assert!(c.contains(1, 19) && !c.contains(1, 20) && c.contains(2, 4) && !c.contains(3, 0));
         let other = Coverage::range(1, 15, 35);
@@ -160,9 +287,48 @@ mod tests {
 
     #[test]
     fn malformed_coverage_is_detected() {
-        let bad: Coverage = serde_json::from_str(r#"[{"seed":1,"ranges":[[5,3]]}]"#).unwrap();
-        assert!(!bad.is_well_formed());
-        let overlapping: Coverage = serde_json::from_str(r#"[{"seed":1,"ranges":[[0,5],[4,8]]}]"#).unwrap();
-        assert!(!overlapping.is_well_formed());
+        let parse = |text: &str| serde_json::from_str::<Coverage>(text).unwrap();
+        assert_eq!(parse(r#"[{"seed":1,"ranges":[[5,3]]}]"#).check(), Err(CoverageError::Ranges(1)));
+        assert_eq!(parse(r#"[{"seed":1,"ranges":[[0,5],[4,8]]}]"#).check(), Err(CoverageError::Ranges(1)));
+        assert_eq!(parse(r#"[{"seed":2,"ranges":[]},{"seed":1,"ranges":[]}]"#).check(), Err(CoverageError::Seeds));
+        // Four ranges [0, 2^63) once summed to a wrapped total; now the index bound refuses them
+        // and the total is exact.
+        let huge = parse(
+            r#"[{"seed":1,"ranges":[[0,9223372036854775808]]},{"seed":2,"ranges":[[0,9223372036854775808]]},
+                {"seed":3,"ranges":[[0,9223372036854775808]]},{"seed":4,"ranges":[[0,9223372036854775808]]}]"#,
+        );
+        assert!(matches!(huge.check(), Err(CoverageError::Index { seed: 1, .. })));
+        assert_eq!(huge.iterations(), 1u128 << 65);
+    }
+
+    /// Overlaps and unions of long coverages agree with a per-iteration reference and take linear
+    /// time (two lists of 50,000 ranges: quadratic would be 2.5·10⁹ steps).
+    #[test]
+    fn overlaps_and_unions_are_linear_and_exact() {
+        let mut a = Coverage::new();
+        let mut b = Coverage::new();
+        for k in 0..50_000u64 {
+            a.insert(7, 4 * k, 4 * k + 2);
+            b.insert(7, 4 * k + 1, 4 * k + 3);
+        }
+        let overlaps = a.overlaps(&b);
+        assert_eq!(overlaps.len(), 50_000);
+        assert!(overlaps.iter().enumerate().all(|(k, o)| o.range == [4 * k as u64 + 1, 4 * k as u64 + 2]));
+        let mut u = a.clone();
+        u.union(&b);
+        assert_eq!(u.range_count(), 50_000);
+        assert_eq!(u.iterations(), 150_000);
+        assert!(a.is_within(&u) && b.is_within(&u) && !u.is_within(&a));
+        // A small case against brute force, with other seeds on either side.
+        let mut x = Coverage::range(1, 0, 3);
+        x.insert(5, 10, 20);
+        let mut y = Coverage::range(5, 15, 25);
+        y.insert(9, 0, 1);
+        x.union(&y);
+        assert_eq!(
+            serde_json::to_string(&x).unwrap(),
+            r#"[{"seed":1,"ranges":[[0,3]]},{"seed":5,"ranges":[[10,25]]},{"seed":9,"ranges":[[0,1]]}]"#
+        );
+        assert!((0..30).all(|s| x.contains(5, s) == (10..25).contains(&s)));
     }
 }

@@ -12,6 +12,14 @@
 //! (serde_json's `float_roundtrip`), so a document re-serialises to the very bytes it was written
 //! from and any change of content — one digit — breaks the checksum. `fingerprint` and `coverage`
 //! repeat the moments' own, for people and tools reading the file; they must agree.
+//!
+//! The checksum is *integrity*, not *authenticity*: it is a plain SHA-256 that anyone can
+//! recompute, so it catches corruption and accidental edits, never a forgery. A document is
+//! therefore treated as hostile input whatever its checksum says: it is parsed straight into typed
+//! values with bounded lists ([`MomentsDocument::from_json`]) and [`MomentsDocument::verify`]
+//! checks that its spec, coverage and sums agree with each other before anything uses it. Trust
+//! in where a document comes from belongs to the transport (a bearer token to an allowed peer over
+//! https).
 
 use serde::{Deserialize, Serialize};
 
@@ -26,7 +34,10 @@ pub const DOCUMENT_KIND: &str = "optimis-moments";
 /// Version of the document layout.
 pub const DOCUMENT_VERSION: u32 = 1;
 
-/// A moments document.
+/// A moments document: a run's statistics, their configuration and coverage, with a SHA-256
+/// checksum. The checksum is integrity, not authenticity — anyone can recompute it — so a server
+/// checks every document's internal consistency whatever its checksum, and trusts where a document
+/// comes from only through the transport (an allowed peer, its token, https).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
@@ -43,7 +54,7 @@ pub struct MomentsDocument {
     /// with `iterations` set to the total covered and no shard).
     pub spec: JobSpec,
     pub moments: Moments,
-    /// SHA-256 (hex) of the canonical JSON of all other fields.
+    /// SHA-256 (hex) of the canonical JSON of all other fields: detects corruption, not forgery.
     pub checksum: String,
 }
 
@@ -71,8 +82,22 @@ pub enum DocumentError {
     Checksum,
     #[error("the document is inconsistent: {0}")]
     Inconsistent(String),
+    #[error("the document holds no iterations")]
+    Empty,
     #[error(transparent)]
     Merge(#[from] MergeError),
+}
+
+/// Parses JSON text straight into `T`, naming the path of the first error (`moments.folds[0]…`)
+/// and refusing trailing text.
+pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+    let mut deserializer = serde_json::Deserializer::from_slice(bytes);
+    let value: T = serde_path_to_error::deserialize(&mut deserializer).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." { e.inner().to_string() } else { format!("{path}: {}", e.inner()) }
+    })?;
+    deserializer.end().map_err(|e| e.to_string())?;
+    Ok(value)
 }
 
 fn checksum_of(body: &Body<'_>) -> String {
@@ -126,22 +151,49 @@ impl MomentsDocument {
         if job.config.fingerprint() != self.fingerprint {
             return Err(DocumentError::Inconsistent("the spec does not describe the moments' configuration".into()));
         }
+        self.check_spec_covers()?;
+        if self.moments.iterations() == 0 {
+            return Err(DocumentError::Empty);
+        }
         Ok(())
     }
 
-    /// Parses and verifies a document from JSON text.
+    /// The spec says which iterations the document can hold: never more than `iterations`, and for
+    /// one job's own run (a shard or a `first_iteration`) only that run's range of its seed.
+    fn check_spec_covers(&self) -> Result<(), DocumentError> {
+        let covered = self.coverage.iterations();
+        if covered > u128::from(self.spec.iterations) {
+            return Err(DocumentError::Inconsistent(format!(
+                "the coverage holds {covered} iterations but the spec only {}",
+                self.spec.iterations
+            )));
+        }
+        if self.spec.shard.is_some() || self.spec.first_iteration.is_some() {
+            let range = self.spec.iteration_range();
+            if !self.coverage.is_within(&Coverage::range(self.spec.seed, range.start, range.end)) {
+                return Err(DocumentError::Inconsistent(format!(
+                    "the coverage lies outside the spec's iterations [{}, {}) of seed {}",
+                    range.start, range.end, self.spec.seed
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Parses and verifies a document from JSON text: straight into the typed document (every list
+    /// bounded, see [`crate::sim::moments`]), so memory stays within a few times the text's size.
     pub fn from_json(bytes: &[u8]) -> Result<Self, DocumentError> {
-        let doc: Self = serde_json::from_slice(bytes).map_err(|e| DocumentError::Unreadable(e.to_string()))?;
+        let doc: Self = parse_json(bytes).map_err(DocumentError::Unreadable)?;
         doc.verify()?;
         Ok(doc)
     }
 
-    /// Parses and verifies a document from a JSON value.
-    pub fn from_value(value: &serde_json::Value) -> Result<Self, DocumentError> {
-        let doc: Self = serde_path_to_error::deserialize(value)
-            .map_err(|e| DocumentError::Unreadable(format!("{}: {}", e.path(), e.inner())))?;
-        doc.verify()?;
-        Ok(doc)
+    /// The document with its checksum recomputed for its current content. Anyone can do this (the
+    /// checksum is integrity, not authenticity), which is why [`MomentsDocument::verify`] checks
+    /// everything else on its own; tests use it to forge documents.
+    pub fn sealed(mut self) -> Self {
+        self.checksum = checksum_of(&self.body());
+        self
     }
 
     /// The canonical JSON text of the document.
@@ -160,16 +212,24 @@ pub fn merge_documents(documents: &[MomentsDocument]) -> Result<MomentsDocument,
     for doc in rest {
         moments.merge(&doc.moments)?;
     }
-    let mut spec = first.spec.clone();
+    moments.check_bounded()?;
+    Ok(MomentsDocument::new(merged_spec(&first.spec, &moments), moments))
+}
+
+/// The spec of merged statistics: `base` with `iterations` set to the total covered and no shard
+/// or first iteration (the coverage says which iterations they are).
+pub fn merged_spec(base: &JobSpec, moments: &Moments) -> JobSpec {
+    let mut spec = base.clone();
     spec.iterations = moments.iterations().max(1);
     spec.shard = None;
     spec.first_iteration = None;
-    Ok(MomentsDocument::new(spec, moments))
+    spec
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::exact_sum::ExactSum;
     use crate::sim::runner::run;
     use crate::sim::spec::parse_job_spec;
     use serde_json::json;
@@ -204,6 +264,98 @@ mod tests {
         let mut wrong_kind = doc.clone();
         wrong_kind.kind = "something".into();
         assert!(matches!(wrong_kind.verify(), Err(DocumentError::Kind(_))));
+    }
+
+    /// Recomputes the checksum after an edit: anyone can, so every check below must hold on its
+    /// own, whatever the checksum says.
+    fn reseal(doc: MomentsDocument) -> MomentsDocument {
+        doc.sealed()
+    }
+
+    fn refused(doc: MomentsDocument) -> DocumentError {
+        let bytes = reseal(doc).to_json();
+        MomentsDocument::from_json(&bytes).expect_err("a forged document must be refused")
+    }
+
+    #[test]
+    fn forged_documents_that_contradict_themselves_are_refused() {
+        let doc = shard(0, 2);
+        let mut negative = doc.clone();
+        negative.moments.folds[0].strategies[2][1] = ExactSum::from_parts(&[-1.0]).unwrap();
+        assert!(matches!(refused(negative), DocumentError::Merge(MergeError::Malformed(m)) if m.contains("plane3")));
+        let mut counts = doc.clone();
+        counts.moments.folds[1].cell_counts[0] += 1;
+        assert!(matches!(refused(counts), DocumentError::Merge(MergeError::Malformed(m)) if m.contains("cells count")));
+        let mut squares = doc.clone();
+        squares.moments.folds[0].merges_sq[1] = 0;
+        assert!(matches!(refused(squares), DocumentError::Merge(MergeError::Malformed(_))));
+        // The spec of a shard names its range: a coverage elsewhere is a forgery.
+        let mut elsewhere = doc.clone();
+        elsewhere.spec.shard = Some(crate::sim::spec::Shard { index: 1, count: 2 });
+        assert!(matches!(refused(elsewhere), DocumentError::Inconsistent(m) if m.contains("outside")));
+        // More iterations than the spec allows.
+        let mut short = doc.clone();
+        short.spec.shard = None;
+        short.spec.iterations = 2;
+        assert!(matches!(refused(short), DocumentError::Inconsistent(m) if m.contains("only 2")));
+        // No iterations at all (once a 500 from the database's CHECK constraint).
+        let spec = doc.spec.clone();
+        let empty = MomentsDocument::new(spec.clone(), Moments::new(&spec.validate().unwrap().config));
+        assert_eq!(MomentsDocument::from_json(&empty.to_json()), Err(DocumentError::Empty));
+        // A coverage whose counts once wrapped: four ranges [0, 2^63).
+        let mut wrapped = serde_json::to_value(&doc).unwrap();
+        let huge = serde_json::json!([
+            { "seed": 1, "ranges": [[0u64, 1u64 << 63]] }, { "seed": 2, "ranges": [[0u64, 1u64 << 63]] },
+            { "seed": 3, "ranges": [[0u64, 1u64 << 63]] }, { "seed": 4, "ranges": [[0u64, 1u64 << 63]] }]);
+        wrapped["coverage"] = huge.clone();
+        wrapped["moments"]["coverage"] = huge;
+        let wrapped: MomentsDocument = serde_json::from_value(wrapped).unwrap();
+        assert!(matches!(refused(wrapped), DocumentError::Merge(MergeError::Malformed(_))));
+    }
+
+    #[test]
+    fn oversized_lists_stop_the_parser() {
+        let doc = shard(0, 2);
+        let mut value = serde_json::to_value(&doc).unwrap();
+        value["moments"]["folds"][0]["sum_y"] = serde_json::json!(vec![0.0; 600]);
+        let e = MomentsDocument::from_json(value.to_string().as_bytes()).unwrap_err();
+        assert!(
+            matches!(&e, DocumentError::Unreadable(m) if m.contains("more than 513 entries") && m.contains("sum_y")),
+            "{e}"
+        );
+    }
+
+    /// Squared merge counts are u128: a document holding one ≥ 2⁶⁴ reads back (through JSON text,
+    /// not an intermediate value that cannot hold it).
+    #[test]
+    fn wide_counters_round_trip() {
+        let mut doc = shard(0, 2);
+        let fold = &mut doc.moments.folds[0];
+        let k = doc.moments.cells;
+        let big = 1u64 << 33;
+        fold.cell_counts[2 * k] += big - fold.merges[2];
+        fold.merges[2] = big;
+        fold.merges_sq[2] = u128::from(big) * u128::from(big) / 2;
+        let doc = reseal(doc);
+        let back = MomentsDocument::from_json(&doc.to_json()).unwrap();
+        assert_eq!(back.moments.folds[0].merges_sq[2], 1u128 << 65);
+    }
+
+    /// Two documents whose sums are each within bounds but whose total is not: the merge is
+    /// refused (its canonical form could not be read back), and nothing is returned.
+    #[test]
+    fn merges_that_leave_the_bounds_are_refused() {
+        let a = shard(0, 2);
+        let b = shard(1, 2);
+        let n = 2 * a.moments.cells + 1;
+        let huge = |mut doc: MomentsDocument| {
+            // An off-diagonal entry of ΣYYᵀ: no Cauchy–Schwarz check applies to it.
+            doc.moments.folds[0].sum_yy[crate::sim::moments::packed_index(n, 0, 1)] =
+                ExactSum::from_parts(&[1e301]).unwrap();
+            MomentsDocument::from_json(&reseal(doc).to_json()).unwrap()
+        };
+        let e = merge_documents(&[huge(a), huge(b)]).unwrap_err();
+        assert!(matches!(e, DocumentError::Merge(MergeError::Overflow(_))), "{e}");
     }
 
     #[test]

@@ -12,9 +12,42 @@
 //! The expansion itself is not unique, so comparison and serialisation go through the
 //! [canonical form](ExactSum::canonical): c₁ = round(S), c₂ = round(S − c₁), …, which is unique for
 //! a given exact sum S. Reading the value gives c₁, the correctly rounded sum.
+//!
+//! # Sums read from outside
+//!
+//! A document may hold any list of parts, so parsing is where hostile input is stopped: at most
+//! [`MAX_PARTS`] parts (a canonical form never needs more), each finite, and an exact total whose
+//! magnitude stays below [`MAX_MAGNITUDE`]. Finite parts can have an infinite sum
+//! (`[1.8e308, 1.8e308]`): the expansion arithmetic then overflows, and before these checks the
+//! canonical form of such a sum looped forever. Two sums below `MAX_MAGNITUDE` add without overflow
+//! (see [`ExactSum::can_add`]), which is how merges check before they change anything.
 
-use serde::de::Error as _;
+use serde::de::{self, Error as _};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+/// Most parts of a canonical form, and so of any sum a document may hold.
+///
+/// Each canonical part is the rounded remainder of the one before, so |c_{k+1}| ≤ ulp(c_k)/2 and
+/// its binary exponent is at least 53 below c_k's. Exponents run from 1023 down to −1074 (the
+/// subnormals, where the remainder below ulp/2 = 2⁻¹⁰⁷⁵ is exactly zero as every part is a
+/// multiple of 2⁻¹⁰⁷⁴): at most ⌊2097/53⌋ + 1 = 40 parts.
+pub const MAX_PARTS: usize = 40;
+
+/// Largest magnitude (2¹⁰⁰⁰ ≈ 1.07·10³⁰¹) of a sum read from outside. Real statistics are
+/// hundreds of orders of magnitude smaller; the margin below f64::MAX lets two such sums be added
+/// without overflow.
+pub const MAX_MAGNITUDE: f64 = f64::from_bits((1023 + 1000) << 52);
+
+/// Why a list of parts is not an acceptable sum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SumError {
+    #[error("a sum has more than {MAX_PARTS} parts (a canonical sum never needs more)")]
+    TooManyParts,
+    #[error("a sum part is not finite")]
+    NotFinite,
+    #[error("a sum exceeds 2^1000 in magnitude (its parts overflow when added)")]
+    TooLarge,
+}
 
 /// The exact sum of the finite `f64` values added to it.
 #[derive(Clone, Debug, Default)]
@@ -102,10 +135,17 @@ impl ExactSum {
 
     /// The unique representation of the exact sum S: c₁ = round(S), c₂ = round(S − c₁), … until
     /// the remainder is zero. Empty for a zero sum.
+    ///
+    /// Bounded: at most [`MAX_PARTS`] steps for a finite sum (see there). A sum whose expansion
+    /// overflowed (only possible when it was not checked with [`ExactSum::is_finite`]) gives its
+    /// non-finite value alone instead of looping.
     pub fn canonical(&self) -> Vec<f64> {
+        if !self.is_finite() {
+            return vec![self.value()];
+        }
         let mut rest = self.clone();
-        let mut out = Vec::with_capacity(self.parts.len());
-        loop {
+        let mut out = Vec::with_capacity(self.parts.len().min(MAX_PARTS));
+        for _ in 0..MAX_PARTS {
             let c = rest.value();
             if c == 0.0 {
                 return out;
@@ -113,18 +153,52 @@ impl ExactSum {
             out.push(c);
             rest.add(-c);
         }
+        debug_assert_eq!(rest.value(), 0.0, "a finite sum has at most {MAX_PARTS} canonical parts");
+        out
     }
 
-    /// Rebuilds a sum from any list of finite parts (for example a canonical form).
-    pub fn from_parts(parts: &[f64]) -> Option<Self> {
+    /// Whether every part and the rounded value are finite (false once an addition overflowed).
+    pub fn is_finite(&self) -> bool {
+        self.parts.iter().all(|p| p.is_finite()) && self.value().is_finite()
+    }
+
+    /// Whether `self` and `other` are finite with magnitudes at most [`MAX_MAGNITUDE`], so that
+    /// adding them is exact and cannot overflow.
+    ///
+    /// The parts of an expansion do not overlap, so the largest is the sum to within an ulp and
+    /// every part is at most |S|·(1 + 2⁻⁵²): all intermediate values of the addition stay below
+    /// 2·2¹⁰⁰⁰·(1 + 2⁻⁵²) ≪ f64::MAX.
+    pub fn can_add(&self, other: &ExactSum) -> bool {
+        self.is_bounded() && other.is_bounded()
+    }
+
+    /// Finite, with a magnitude of at most [`MAX_MAGNITUDE`].
+    pub fn is_bounded(&self) -> bool {
+        self.is_finite() && self.value().abs() <= MAX_MAGNITUDE
+    }
+
+    /// Rebuilds a sum from a list of parts read from outside (for example a canonical form):
+    /// at most [`MAX_PARTS`] finite parts whose exact sum is below [`MAX_MAGNITUDE`].
+    pub fn from_parts(parts: &[f64]) -> Result<Self, SumError> {
+        if parts.len() > MAX_PARTS {
+            return Err(SumError::TooManyParts);
+        }
         let mut sum = Self::new();
         for &p in parts {
             if !p.is_finite() {
-                return None;
+                return Err(SumError::NotFinite);
+            }
+            if p.abs() > MAX_MAGNITUDE {
+                return Err(SumError::TooLarge);
             }
             sum.add(p);
         }
-        Some(sum)
+        // Each part is below 2¹⁰⁰⁰, so at most 40 of them cannot overflow the expansion; only the
+        // total can exceed the bound.
+        if !sum.is_bounded() {
+            return Err(SumError::TooLarge);
+        }
+        Ok(sum)
     }
 }
 
@@ -154,19 +228,57 @@ impl Serialize for ExactSum {
     }
 }
 
+/// Read as a number or a list of at most [`MAX_PARTS`] numbers, without buffering: a visitor
+/// (not an untagged enum, which would first copy the whole list into serde's generic `Content`)
+/// that stops at the first part too many.
 impl<'de> Deserialize<'de> for ExactSum {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Repr {
-            One(f64),
-            Many(Vec<f64>),
+        struct SumVisitor;
+
+        impl<'de> de::Visitor<'de> for SumVisitor {
+            type Value = ExactSum;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "a number or a list of at most {MAX_PARTS} numbers")
+            }
+
+            fn visit_f64<E: de::Error>(self, x: f64) -> Result<ExactSum, E> {
+                ExactSum::from_parts(&[x]).map_err(E::custom)
+            }
+
+            // Integers are accepted where a double holds them exactly (this module writes floats,
+            // but people write `0`); anything else would be silently rounded.
+            fn visit_u64<E: de::Error>(self, x: u64) -> Result<ExactSum, E> {
+                let y = x as f64;
+                if y >= 18_446_744_073_709_551_616.0 || y as u64 != x {
+                    return Err(E::custom(format!("{x} is not exactly a double; write it as a float")));
+                }
+                self.visit_f64(y)
+            }
+
+            fn visit_i64<E: de::Error>(self, x: i64) -> Result<ExactSum, E> {
+                let y = x as f64;
+                if y >= 9_223_372_036_854_775_808.0 || y as i64 != x {
+                    return Err(E::custom(format!("{x} is not exactly a double; write it as a float")));
+                }
+                self.visit_f64(y)
+            }
+
+            fn visit_seq<A: de::SeqAccess<'de>>(self, mut seq: A) -> Result<ExactSum, A::Error> {
+                let mut parts = [0.0; MAX_PARTS];
+                let mut n = 0;
+                while let Some(x) = seq.next_element::<f64>()? {
+                    if n == MAX_PARTS {
+                        return Err(A::Error::custom(SumError::TooManyParts));
+                    }
+                    parts[n] = x;
+                    n += 1;
+                }
+                ExactSum::from_parts(&parts[..n]).map_err(A::Error::custom)
+            }
         }
-        let parts = match Repr::deserialize(deserializer)? {
-            Repr::One(x) => vec![x],
-            Repr::Many(v) => v,
-        };
-        ExactSum::from_parts(&parts).ok_or_else(|| D::Error::custom("a sum part is not finite"))
+
+        deserializer.deserialize_any(SumVisitor)
     }
 }
 
@@ -239,6 +351,62 @@ mod tests {
         let back: ExactSum = serde_json::from_str(&json).unwrap();
         assert_eq!(back, s);
         assert_eq!(serde_json::to_string(&sum_of(&[2.5])).unwrap(), "2.5");
+    }
+
+    /// Finite parts with an infinite sum once made `canonical` loop forever; they are refused at
+    /// parse time, and `canonical` is bounded even for a sum that overflowed.
+    #[test]
+    fn poisoned_sums_are_refused_and_canonical_is_bounded() {
+        let max = f64::MAX;
+        assert_eq!(ExactSum::from_parts(&[max, max]).unwrap_err(), SumError::TooLarge);
+        assert_eq!(ExactSum::from_parts(&[1e301, 1e301]).unwrap_err(), SumError::TooLarge);
+        assert_eq!(ExactSum::from_parts(&[1.0; MAX_PARTS + 1]).unwrap_err(), SumError::TooManyParts);
+        assert!(ExactSum::from_parts(&[1.0; MAX_PARTS]).is_ok());
+        for text in [
+            "[1.7976931348623157e308, 1.7976931348623157e308]",
+            "[1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300, 1e300]",
+            "1e400",
+            "null",
+            "[1, \"2\"]",
+            "18446744073709551615",
+        ] {
+            assert!(serde_json::from_str::<ExactSum>(text).is_err(), "{text} must be refused");
+        }
+        let many = format!("[{}]", vec!["1e-300"; MAX_PARTS + 1].join(","));
+        let e = serde_json::from_str::<ExactSum>(&many).unwrap_err().to_string();
+        assert!(e.contains("more than 40 parts"), "{e}");
+        // An overflowed expansion (only reachable by adding unchecked values) has a bounded,
+        // non-finite canonical form instead of a loop.
+        let mut overflowed = ExactSum::new();
+        overflowed.add(max);
+        overflowed.add(max);
+        assert!(!overflowed.is_finite() && !overflowed.can_add(&ExactSum::new()));
+        let c = overflowed.canonical();
+        assert!(c.len() == 1 && !c[0].is_finite(), "{c:?}");
+    }
+
+    /// One of the widest sums: a part every 54 binary orders of magnitude from 2¹⁰⁰⁰ down to the
+    /// subnormals (each below half an ulp of the one before, so they are their own canonical form).
+    /// Its 39 parts are within the bound, and it reads back.
+    #[test]
+    fn the_widest_canonical_form_reads_back() {
+        let parts: Vec<f64> = (0..39).map(|k| 2f64.powi(1000 - 54 * k)).rev().collect();
+        let sum = ExactSum::from_parts(&parts).unwrap();
+        let mut canonical = sum.canonical();
+        canonical.reverse();
+        assert_eq!(canonical, parts);
+        let back: ExactSum = serde_json::from_str(&serde_json::to_string(&sum).unwrap()).unwrap();
+        assert_eq!(back, sum);
+    }
+
+    #[test]
+    fn sums_below_the_bound_add_without_overflow() {
+        let big = ExactSum::from_parts(&[MAX_MAGNITUDE]).unwrap();
+        assert!(big.can_add(&big));
+        let mut twice = big.clone();
+        twice.add_sum(&big);
+        assert!(twice.is_finite() && twice.value() == 2.0 * MAX_MAGNITUDE);
+        assert!(ExactSum::from_parts(&[MAX_MAGNITUDE * 2.0]).is_err());
     }
 
     proptest! {

@@ -22,7 +22,8 @@
 //! * [`document`] — the portable, checksummed moments document and merging of documents;
 //! * [`runner`] — runs iterations on the current rayon pool, in order;
 //! * [`solver`], [`noise`], [`report`] — optimal weights, the noise table, the result document;
-//! * [`quadrature`] — the analytic reference luminance;
+//! * [`quadrature`] — the analytic reference luminance (within an evaluation budget);
+//! * [`cost`] — the expected work of one iteration, checked before a server accepts a job;
 //! * [`equivalence`] — block-wise comparison of two engines' figures (the equivalence suite);
 //! * [`expectation`] — exact expected plane-3 merges given the camera paths (an analytic check).
 //!
@@ -32,6 +33,7 @@
 pub mod camera;
 pub mod cells;
 pub mod config;
+pub mod cost;
 pub mod coverage;
 pub mod document;
 pub mod equivalence;

@@ -13,13 +13,63 @@
 //! bit-identical result; the [`Coverage`] records which (seed, iteration) pairs are included so that
 //! a merge can refuse to count an iteration twice, and the fingerprint refuses moments of another
 //! configuration.
+//!
+//! # Moments read from outside
+//!
+//! Documents and checkpoints are parsed straight into these types with every list bounded by what
+//! the largest grid needs ([`crate::sim::spec::MAX_CELLS`]), so a hostile body cannot make the
+//! parser allocate beyond a few times its size. [`Moments::check_well_formed`] then checks what a
+//! parser cannot: the shapes, the coverage, and that the sums agree with their counts (no sum over
+//! zero iterations, no negative sum of squares, events per cell adding up to events per plane).
+//! Merges add counters with checked arithmetic and check, before changing anything, that no exact
+//! sum can overflow: a refused merge leaves the target as it was.
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
 use super::config::{MOMENTS_FORMAT_VERSION, SimConfig};
-use super::coverage::{Coverage, Overlap};
-use super::exact_sum::ExactSum;
+use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
+use super::exact_sum::{ExactSum, MAX_MAGNITUDE};
+use super::spec::MAX_CELLS;
 use super::tally::{IterationTally, PathStrategy};
+
+/// Longest moment vector: n = 2K + 1 for the largest grid.
+const MAX_DIMENSION: usize = 2 * MAX_CELLS + 1;
+/// Longest packed ΣYYᵀ.
+const MAX_PACKED: usize = MAX_DIMENSION * (MAX_DIMENSION + 1) / 2;
+/// Longest per-slot list (three planes per cell).
+const MAX_SLOTS: usize = 3 * MAX_CELLS;
+
+/// Deserialises a list of at most `MAX` elements, failing at the first one too many (before it is
+/// allocated), so that the size of what a document makes us allocate is set by the largest grid,
+/// not by the length of the body.
+fn bounded<'de, D, T, const MAX: usize>(deserializer: D) -> Result<Vec<T>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    struct Bounded<T, const MAX: usize>(std::marker::PhantomData<T>);
+
+    impl<'de, T: Deserialize<'de>, const MAX: usize> serde::de::Visitor<'de> for Bounded<T, MAX> {
+        type Value = Vec<T>;
+
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            write!(f, "a list of at most {MAX} entries")
+        }
+
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<T>, A::Error> {
+            let mut out = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(MAX).min(4096));
+            while let Some(x) = seq.next_element()? {
+                if out.len() == MAX {
+                    return Err(serde::de::Error::custom(format!("more than {MAX} entries")));
+                }
+                out.push(x);
+            }
+            Ok(out)
+        }
+    }
+
+    deserializer.deserialize_seq(Bounded::<T, MAX>(std::marker::PhantomData))
+}
 
 /// Sums over the iterations of one parity.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -29,16 +79,20 @@ pub struct FoldMoments {
     /// Number of iterations M_f.
     pub iterations: u64,
     /// ΣY (length n).
+    #[serde(deserialize_with = "bounded::<_, _, MAX_DIMENSION>")]
     pub sum_y: Vec<ExactSum>,
     /// ΣYYᵀ, upper triangle packed row by row: (0,0), (0,1), …, (0,n−1), (1,1), …
+    #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
     pub sum_yy: Vec<ExactSum>,
     /// Per path strategy (in [`PathStrategy::ALL`] order): Σ C_s, Σ C_s², Σ C_s³, Σ C_s⁴.
+    #[serde(deserialize_with = "bounded::<_, _, { PathStrategy::COUNT }>")]
     pub strategies: Vec<[ExactSum; 4]>,
     /// Merge events per plane, summed over iterations.
     pub merges: [u64; 3],
     /// Σ (merge events per plane)², for the spread of the counts.
     pub merges_sq: [u128; 3],
     /// Merge events per slot m·K + α (the samples behind each cell's weights).
+    #[serde(deserialize_with = "bounded::<_, _, MAX_SLOTS>")]
     pub cell_counts: Vec<u64>,
 }
 
@@ -68,8 +122,19 @@ impl FoldMoments {
         }
     }
 
-    fn add_iteration(&mut self, cells: usize, tally: &IterationTally) {
+    fn add_iteration(&mut self, cells: usize, tally: &IterationTally) -> Result<(), MergeError> {
         let n = 2 * cells + 1;
+        // Counters first, checked, so that an overflow leaves the fold unchanged.
+        let mut merges = self.merges;
+        let mut merges_sq = self.merges_sq;
+        for m in 0..3 {
+            merges[m] = merges[m].checked_add(tally.merges[m]).ok_or_else(|| overflow("merge count"))?;
+            let sq = u128::from(tally.merges[m]) * u128::from(tally.merges[m]);
+            merges_sq[m] = merges_sq[m].checked_add(sq).ok_or_else(|| overflow("squared merge count"))?;
+        }
+        if self.cell_counts.iter().zip(&tally.cell_counts).any(|(a, b)| a.checked_add(*b).is_none()) {
+            return Err(overflow("cell event count"));
+        }
         let y = tally.moment_vector(cells);
         for (a, &(i, yi)) in y.iter().enumerate() {
             self.sum_y[i].add(yi);
@@ -84,16 +149,39 @@ impl FoldMoments {
                 power *= c;
             }
         }
-        for m in 0..3 {
-            self.merges[m] += tally.merges[m];
-            self.merges_sq[m] += u128::from(tally.merges[m]) * u128::from(tally.merges[m]);
-        }
+        self.merges = merges;
+        self.merges_sq = merges_sq;
         for (acc, &c) in self.cell_counts.iter_mut().zip(&tally.cell_counts) {
             *acc += c;
         }
         self.iterations += 1;
+        Ok(())
     }
 
+    /// The sums in one list, for checks that treat them alike.
+    fn sums(&self) -> impl Iterator<Item = &ExactSum> {
+        self.sum_y.iter().chain(&self.sum_yy).chain(self.strategies.iter().flatten())
+    }
+
+    /// Checks, without changing anything, that [`FoldMoments::add`] of `other` cannot overflow:
+    /// every counter fits its type and every pair of sums can be added exactly (see
+    /// [`ExactSum::can_add`]).
+    fn check_add(&self, other: &FoldMoments) -> Result<(), MergeError> {
+        self.iterations.checked_add(other.iterations).ok_or_else(|| overflow("iteration count"))?;
+        for m in 0..3 {
+            self.merges[m].checked_add(other.merges[m]).ok_or_else(|| overflow("merge count"))?;
+            self.merges_sq[m].checked_add(other.merges_sq[m]).ok_or_else(|| overflow("squared merge count"))?;
+        }
+        if self.cell_counts.iter().zip(&other.cell_counts).any(|(a, b)| a.checked_add(*b).is_none()) {
+            return Err(overflow("cell event count"));
+        }
+        if !self.sums().zip(other.sums()).all(|(a, b)| a.can_add(b)) {
+            return Err(overflow("exact sum"));
+        }
+        Ok(())
+    }
+
+    /// Adds `other` (checked beforehand with [`FoldMoments::check_add`]).
     fn add(&mut self, other: &FoldMoments) {
         self.iterations += other.iterations;
         for (a, b) in self.sum_y.iter_mut().zip(&other.sum_y) {
@@ -123,6 +211,74 @@ impl FoldMoments {
             && self.strategies.len() == PathStrategy::COUNT
             && self.cell_counts.len() == 3 * cells
     }
+
+    /// What a parser cannot check: that the sums agree with their counts. Fails with the first
+    /// contradiction found.
+    fn check_consistent(&self, cells: usize) -> Result<(), String> {
+        let n = 2 * cells + 1;
+        if let Some(bad) = self.sums().position(|s| !(s.is_finite() && s.value().abs() <= MAX_MAGNITUDE)) {
+            return Err(format!("sum #{bad} is not finite or exceeds 2^1000"));
+        }
+        for m in 0..3 {
+            let per_cell = self.cell_counts[m * cells..(m + 1) * cells]
+                .iter()
+                .try_fold(0u64, |acc, &c| acc.checked_add(c))
+                .ok_or("cell event counts overflow")?;
+            if per_cell != self.merges[m] {
+                return Err(format!(
+                    "plane {} has {} merge events but its cells count {per_cell}",
+                    m + 1,
+                    self.merges[m]
+                ));
+            }
+            // For counts c_s ≥ 0: Σc ≤ Σc² ≤ (Σc)².
+            let (total, squares) = (u128::from(self.merges[m]), self.merges_sq[m]);
+            if squares < total || squares > total * total {
+                return Err(format!(
+                    "plane {}'s sum of squared merge counts {squares} contradicts its total {total}",
+                    m + 1
+                ));
+            }
+        }
+        if self.iterations == 0 {
+            if self.sums().any(|s| s.value() != 0.0) || self.merges != [0; 3] {
+                return Err("a fold without iterations holds non-zero sums".into());
+            }
+            return Ok(());
+        }
+        // Sums of squares and fourth powers are ≥ 0, and (Σx)² ≤ M·Σx² (Cauchy–Schwarz; a relative
+        // slack of 10⁻⁹ covers the rounding of the values compared).
+        let m = self.iterations as f64;
+        let cauchy = |sum: &ExactSum, squares: &ExactSum| {
+            let (a, q) = (sum.value(), squares.value());
+            q >= 0.0 && a * a <= m * q * (1.0 + 1e-9) + f64::MIN_POSITIVE
+        };
+        for i in 0..n {
+            if !cauchy(&self.sum_y[i], &self.sum_yy[packed_index(n, i, i)]) {
+                return Err(format!("ΣY[{i}] and ΣY[{i}]² contradict each other over {} iterations", self.iterations));
+            }
+        }
+        for (k, powers) in self.strategies.iter().enumerate() {
+            let name = PathStrategy::ALL[k].name();
+            if !cauchy(&powers[0], &powers[1]) || !cauchy(&powers[1], &powers[3]) {
+                return Err(format!("the power sums of strategy {name} contradict each other"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether the counters of `folds` added together fit their types.
+fn counters_fit(folds: [&FoldMoments; 4]) -> bool {
+    let fits = |total: u128| total <= u128::from(u64::MAX);
+    (0..3).all(|m| {
+        fits(folds.iter().map(|f| u128::from(f.merges[m])).sum())
+            && folds.iter().try_fold(0u128, |acc, f| acc.checked_add(f.merges_sq[m])).is_some()
+    }) && (0..folds[0].cell_counts.len()).all(|i| fits(folds.iter().map(|f| u128::from(f.cell_counts[i])).sum()))
+}
+
+fn overflow(what: &str) -> MergeError {
+    MergeError::Overflow(what.to_string())
 }
 
 /// The moments of a set of iterations of one configuration.
@@ -155,6 +311,9 @@ pub enum MergeError {
     Overlap(Vec<Overlap>),
     #[error("malformed moments: {0}")]
     Malformed(String),
+    /// A counter would wrap or an exact sum would leave the representable range; nothing changed.
+    #[error("the merged statistics would overflow: {0}")]
+    Overflow(String),
 }
 
 fn list(overlaps: &[Overlap]) -> String {
@@ -185,14 +344,16 @@ impl Moments {
         if self.coverage.contains(seed, s) {
             return Err(MergeError::Overlap(vec![Overlap { seed, range: [s, s + 1] }]));
         }
-        self.folds[(s % 2) as usize].add_iteration(self.cells, tally);
+        self.folds[(s % 2) as usize].add_iteration(self.cells, tally)?;
         self.coverage.insert(seed, s, s + 1);
         Ok(())
     }
 
-    /// Checks that `other` could be merged into `self`, without changing anything.
+    /// Checks that `other` could be merged into `self`, without changing anything: the same
+    /// configuration, no iteration counted twice, and nothing that overflows (in either fold, nor
+    /// in the two folds pooled).
     pub fn check_mergeable(&self, other: &Moments) -> Result<(), MergeError> {
-        other.check_well_formed()?;
+        other.check_shape()?;
         if other.fingerprint != self.fingerprint || other.cells != self.cells {
             return Err(MergeError::Fingerprint {
                 found: other.fingerprint.clone(),
@@ -203,46 +364,87 @@ impl Moments {
         if !overlaps.is_empty() {
             return Err(MergeError::Overlap(overlaps));
         }
+        for (a, b) in self.folds.iter().zip(&other.folds) {
+            a.check_add(b)?;
+        }
+        let total = self.coverage.iterations() + other.coverage.iterations();
+        if total > u128::from(MAX_ITERATION_INDEX) {
+            return Err(overflow("iteration count"));
+        }
+        // The pooled folds (what the noise table adds) must fit as well.
+        if !counters_fit([&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+            return Err(overflow("pooled counts"));
+        }
         Ok(())
     }
 
     /// Adds `other`'s iterations: exact addition, refused (with nothing changed) if the
-    /// configurations differ or any iteration would be counted twice.
+    /// configurations differ, any iteration would be counted twice, or a counter or sum would
+    /// overflow.
     pub fn merge(&mut self, other: &Moments) -> Result<(), MergeError> {
         self.check_mergeable(other)?;
+        let mut coverage = self.coverage.clone();
+        coverage.union(&other.coverage);
+        coverage.check().map_err(|e| MergeError::Malformed(format!("merged coverage: {e}")))?;
         for (a, b) in self.folds.iter_mut().zip(&other.folds) {
             a.add(b);
         }
-        self.coverage.union(&other.coverage);
+        self.coverage = coverage;
         Ok(())
     }
 
-    /// Structural checks for moments read from outside (a file, a peer, a database row).
-    pub fn check_well_formed(&self) -> Result<(), MergeError> {
+    /// The cheap structural checks a merge needs: format, shapes, coverage, and coverage counts
+    /// that match the folds.
+    fn check_shape(&self) -> Result<(), MergeError> {
         if self.format_version != MOMENTS_FORMAT_VERSION {
             return Err(MergeError::Format { found: self.format_version, expected: MOMENTS_FORMAT_VERSION });
+        }
+        if self.cells == 0 || self.cells > MAX_CELLS {
+            return Err(MergeError::Malformed(format!("{} cells; a grid has 1 to {MAX_CELLS}", self.cells)));
         }
         if !self.folds.iter().all(|f| f.has_shape(self.cells)) {
             return Err(MergeError::Malformed(format!("array lengths do not match {} cells", self.cells)));
         }
-        if !self.coverage.is_well_formed() {
-            return Err(MergeError::Malformed("coverage ranges are not sorted and disjoint".into()));
+        self.coverage.check().map_err(|e| MergeError::Malformed(e.to_string()))?;
+        if self.coverage.iterations() > u128::from(MAX_ITERATION_INDEX) {
+            return Err(MergeError::Malformed("the coverage holds more than 2^62 iterations".into()));
         }
-        let (even, odd) = self.coverage.seeds().iter().flat_map(|s| &s.ranges).fold((0u64, 0u64), |(e, o), r| {
-            let len = r[1] - r[0];
-            let evens = len / 2 + u64::from(len % 2 == 1 && r[0] % 2 == 0);
-            (e + evens, o + len - evens)
-        });
-        if even != self.folds[0].iterations || odd != self.folds[1].iterations {
+        let (even, odd) = self.coverage.parity_counts();
+        if even != u128::from(self.folds[0].iterations) || odd != u128::from(self.folds[1].iterations) {
             return Err(MergeError::Malformed(format!(
                 "coverage has {even} even and {odd} odd iterations but the sums count {} and {}",
                 self.folds[0].iterations, self.folds[1].iterations
             )));
         }
+        // The two folds must pool without overflow (the noise table adds them).
+        self.folds[0].check_add(&self.folds[1]).map_err(|e| MergeError::Malformed(e.to_string()))
+    }
+
+    /// Every check for moments read from outside (a file, a peer, a database row): the structure
+    /// and that the sums agree with their counts (see the module documentation).
+    pub fn check_well_formed(&self) -> Result<(), MergeError> {
+        self.check_shape()?;
+        for (f, fold) in self.folds.iter().enumerate() {
+            fold.check_consistent(self.cells).map_err(|e| {
+                MergeError::Malformed(format!("{} iterations: {e}", if f == 0 { "even" } else { "odd" }))
+            })?;
+        }
         Ok(())
     }
 
-    /// Both folds added together.
+    /// Checks that every sum is finite and at most 2¹⁰⁰⁰ in magnitude, so that its canonical form
+    /// reads back (merges of documents check their result with this).
+    pub fn check_bounded(&self) -> Result<(), MergeError> {
+        for fold in &self.folds {
+            if fold.sums().any(|s| !(s.is_finite() && s.value().abs() <= MAX_MAGNITUDE)) {
+                return Err(overflow("a merged sum exceeds 2^1000"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Both folds added together (they always fit: moments from outside are checked for it, and
+    /// merges check the pooled totals).
     pub fn pooled(&self) -> FoldMoments {
         let mut all = self.folds[0].clone();
         all.add(&self.folds[1]);

@@ -44,8 +44,9 @@ pub struct MergesPerIteration {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RunReport {
     pub iterations: u64,
-    /// The quadrature value of L (R → 0).
-    pub reference_luminance: f64,
+    /// The quadrature value of L (R → 0); null when the quadrature did not converge within its
+    /// evaluation budget (extreme geometry).
+    pub reference_luminance: Option<f64>,
     pub noise_table: Vec<NoiseRow>,
     /// Weights of the `optimal` fit; empty when it failed (see `solve_error`).
     pub weights: Vec<WeightRow>,
@@ -56,7 +57,12 @@ pub struct RunReport {
 }
 
 /// Builds the report of `moments` with the given solver options.
-pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, reference_luminance: f64) -> RunReport {
+pub fn build_report(
+    moments: &Moments,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    reference_luminance: Option<f64>,
+) -> RunReport {
     let table = noise_table(moments, grid, solver);
     let (weights, solve_error) = match &table.optimal {
         Ok(fit) => (

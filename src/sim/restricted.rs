@@ -65,6 +65,7 @@
 //! the equivalence tests compare against.
 
 use std::f64::consts::{PI, TAU};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::Vector3;
 
@@ -217,6 +218,12 @@ impl RestrictedPlan {
         plan
     }
 
+    /// The expected number of plane-1 candidates of an iteration (it does not depend on the
+    /// cameras).
+    pub fn plane1_mass(&self) -> f64 {
+        self.plane1.iter().map(|&(mass, ..)| mass).sum()
+    }
+
     /// The plane-1 proposals for `layer`: (mass, kind) of each part.
     fn plane1_parts(&self, layer: &Layer, config: &SimConfig) -> Vec<(f64, Kind)> {
         let r = config.merge_radius;
@@ -263,7 +270,14 @@ struct Candidate {
     x1: Option<([f64; 2], f64)>,
 }
 
-/// Traces iteration `iteration` with the restricted engine and returns its tally.
+/// Candidates drawn between two looks at the stop flag: an iteration of a huge configuration
+/// (millions of candidates) stops within milliseconds of a cancel, and the paper's ~50 candidates
+/// never look at it.
+const CANCEL_CHECK_INTERVAL: u64 = 1024;
+
+/// Traces iteration `iteration` with the restricted engine and returns its tally, or `None` if
+/// `cancel` was set while it ran (the partial iteration is dropped whole).
+#[allow(clippy::too_many_arguments)]
 pub fn trace_restricted(
     config: &SimConfig,
     plan: &RestrictedPlan,
@@ -272,21 +286,39 @@ pub fn trace_restricted(
     iteration: u64,
     scratch: &mut ChunkScratch,
     buffers: &mut RestrictedScratch,
-) -> ChunkTally {
+    cancel: &AtomicBool,
+) -> Option<ChunkTally> {
     let mut rng = stream(seed, iteration, RESTRICTED_STREAM);
-    let it = Iteration { config, plan, cameras };
-    plane1_bundle(&it, &mut rng, scratch, buffers);
-    plane2_bundle(&it, &mut rng, scratch, buffers);
-    plane3_bundle(&it, &mut rng, scratch, buffers);
-    scratch.take()
+    let it = Iteration { config, plan, cameras, cancel };
+    let complete = plane1_bundle(&it, &mut rng, scratch, buffers)
+        && plane2_bundle(&it, &mut rng, scratch, buffers)
+        && plane3_bundle(&it, &mut rng, scratch, buffers);
+    // Taken either way: the scratch must be clean for the next iteration.
+    let tally = scratch.take();
+    complete.then_some(tally)
 }
 
-/// What the bundles of one iteration read: the configuration, the plan and the camera paths.
+/// The expected number of candidates the restricted engine draws in an iteration with these
+/// camera paths: the total proposal mass of its three bundles (what [`trace_restricted`] passes
+/// to the Poisson draws).
+pub fn expected_candidates(config: &SimConfig, plan: &RestrictedPlan, cameras: &CameraSet) -> f64 {
+    let mut buffers = RestrictedScratch::default();
+    let mut total = plan.plane1_mass();
+    for build in [build_plane2, build_plane3] {
+        build(config, plan, cameras, &mut buffers);
+        total += buffers.bundle.last().map_or(0.0, |&(c, ..)| c);
+    }
+    total
+}
+
+/// What the bundles of one iteration read: the configuration, the plan, the camera paths and the
+/// stop flag.
 #[derive(Clone, Copy)]
 struct Iteration<'a> {
     config: &'a SimConfig,
     plan: &'a RestrictedPlan,
     cameras: &'a CameraSet,
+    cancel: &'a AtomicBool,
 }
 
 /// The component of S whose bundle drew a candidate (S1's bundle needs no test: it is first).
@@ -324,31 +356,42 @@ impl Iteration<'_> {
 }
 
 /// Draws the bundle in `buffers.bundle`: a Poisson count for the total mass, then a pair per
-/// candidate in proportion to its mass.
+/// candidate in proportion to its mass. False if `cancel` was set meanwhile (looked at every
+/// [`CANCEL_CHECK_INTERVAL`] candidates, and while drawing a huge count).
 fn for_each_candidate(
     rng: &mut StreamRng,
     buffers: &RestrictedScratch,
+    cancel: &AtomicBool,
     mut draw: impl FnMut(&mut StreamRng, u32, u32, Kind),
-) {
-    let Some(&(total, ..)) = buffers.bundle.last() else { return };
-    let count = poisson(rng, total);
-    for _ in 0..count {
+) -> bool {
+    let Some(&(total, ..)) = buffers.bundle.last() else { return true };
+    let Some(count) = poisson_until(rng, total, cancel) else { return false };
+    for k in 0..count {
+        if k % CANCEL_CHECK_INTERVAL == CANCEL_CHECK_INTERVAL - 1 && cancel.load(Ordering::Relaxed) {
+            return false;
+        }
         let u = uniform(rng) * total;
         let i = buffers.bundle.partition_point(|&(c, ..)| c <= u).min(buffers.bundle.len() - 1);
         let (_, layer, camera, kind) = buffers.bundle[i];
         draw(rng, layer, camera, kind);
     }
+    true
 }
 
-fn plane1_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
-    let Iteration { config, plan, cameras } = *it;
+fn plane1_bundle(
+    it: &Iteration,
+    rng: &mut StreamRng,
+    scratch: &mut ChunkScratch,
+    buffers: &mut RestrictedScratch,
+) -> bool {
+    let Iteration { config, plan, cameras, cancel } = *it;
     buffers.bundle.clear();
     for &(mass, l, kind) in &plan.plane1 {
         buffers.push(mass, l, 0, kind);
     }
     let r = config.merge_radius;
     let (l2, l3) = (config.scene.l2, config.scene.l3);
-    for_each_candidate(rng, buffers, |rng, l, _, kind| {
+    for_each_candidate(rng, buffers, cancel, |rng, l, _, kind| {
         let layer = &plan.layers[l as usize];
         let candidate = match kind {
             Kind::Reverse => {
@@ -394,11 +437,11 @@ fn plane1_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch
         };
         // S1 is the first component: nothing to exclude.
         tally(config, cameras, &candidate, scratch);
-    });
+    })
 }
 
-fn plane2_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
-    let Iteration { config, plan, cameras } = *it;
+/// The plane-2 bundle: a (ring, camera) pair per camera vertex and ring, with its proposal.
+fn build_plane2(config: &SimConfig, plan: &RestrictedPlan, cameras: &CameraSet, buffers: &mut RestrictedScratch) {
     buffers.bundle.clear();
     for (l, layer) in plan.layers.iter().enumerate() {
         for (j, cam) in cameras.paths.iter().enumerate() {
@@ -406,9 +449,19 @@ fn plane2_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch
             buffers.push(mass, l, j, kind);
         }
     }
+}
+
+fn plane2_bundle(
+    it: &Iteration,
+    rng: &mut StreamRng,
+    scratch: &mut ChunkScratch,
+    buffers: &mut RestrictedScratch,
+) -> bool {
+    let Iteration { config, plan, cameras, cancel } = *it;
+    build_plane2(config, plan, cameras, buffers);
     let r = config.merge_radius;
     let l3 = config.scene.l3;
-    for_each_candidate(rng, buffers, |rng, l, j, kind| {
+    for_each_candidate(rng, buffers, cancel, |rng, l, j, kind| {
         let layer = &plan.layers[l as usize];
         let x2c = cameras.paths[j as usize].x2;
         let x2 = disc_point(rng, x2c, r);
@@ -431,11 +484,12 @@ fn plane2_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch
         if !it.in_earlier_component(&candidate, Component::Plane2(j)) {
             tally(config, cameras, &candidate, scratch);
         }
-    });
+    })
 }
 
-fn plane3_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch, buffers: &mut RestrictedScratch) {
-    let Iteration { config, plan, cameras } = *it;
+/// The plane-3 bundle: a (ring, camera) pair per camera vertex on plane 3 whose disc meets the
+/// ring.
+fn build_plane3(config: &SimConfig, plan: &RestrictedPlan, cameras: &CameraSet, buffers: &mut RestrictedScratch) {
     let r = config.merge_radius;
     buffers.bundle.clear();
     for (l, layer) in plan.layers.iter().enumerate() {
@@ -449,8 +503,19 @@ fn plane3_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch
             buffers.push(layer.nu * PI * r * r, l, j, Kind::Forward);
         }
     }
+}
+
+fn plane3_bundle(
+    it: &Iteration,
+    rng: &mut StreamRng,
+    scratch: &mut ChunkScratch,
+    buffers: &mut RestrictedScratch,
+) -> bool {
+    let Iteration { config, plan, cameras, cancel } = *it;
+    build_plane3(config, plan, cameras, buffers);
+    let r = config.merge_radius;
     let l3 = config.scene.l3;
-    for_each_candidate(rng, buffers, |rng, l, j, _| {
+    for_each_candidate(rng, buffers, cancel, |rng, l, j, _| {
         let layer = &plan.layers[l as usize];
         let x3c = cameras.paths[j as usize].x3.expect("only reached cameras are in the bundle");
         let x3 = disc_point(rng, x3c, r);
@@ -464,7 +529,7 @@ fn plane3_bundle(it: &Iteration, rng: &mut StreamRng, scratch: &mut ChunkScratch
         if !it.in_earlier_component(&candidate, Component::Plane3(j)) {
             tally(config, cameras, &candidate, scratch);
         }
-    });
+    })
 }
 
 /// Thinning of the forward proposals, whose λ̄ uses the density bound L3²/(π d_min⁴) of a Lambert
@@ -565,13 +630,25 @@ fn ring_point(rng: &mut StreamRng, ring: &Ring) -> [f64; 2] {
 
 /// A Poisson variate of mean `mean`: sums of inversion draws of mean ≤ 16 (a sum of independent
 /// Poisson variates is Poisson), so exp(−mean) never underflows and the search stays short.
-pub fn poisson(rng: &mut StreamRng, mut mean: f64) -> u64 {
+pub fn poisson(rng: &mut StreamRng, mean: f64) -> u64 {
+    poisson_until(rng, mean, &AtomicBool::new(false)).expect("never cancelled")
+}
+
+/// [`poisson`] that looks at `cancel` every 4,096 pieces (a mean of 10¹⁰ takes 6·10⁸ of them) and
+/// gives up with `None` once it is set. The draws are those of [`poisson`], so a run that is not
+/// cancelled is bit-identical.
+fn poisson_until(rng: &mut StreamRng, mut mean: f64, cancel: &AtomicBool) -> Option<u64> {
     let mut count = 0;
+    let mut pieces = 0u64;
     while mean > 16.0 {
         count += poisson_inversion(rng, 16.0);
         mean -= 16.0;
+        pieces += 1;
+        if pieces.is_multiple_of(4096) && cancel.load(Ordering::Relaxed) {
+            return None;
+        }
     }
-    count + poisson_inversion(rng, mean)
+    Some(count + poisson_inversion(rng, mean))
 }
 
 fn poisson_inversion(rng: &mut StreamRng, mean: f64) -> u64 {

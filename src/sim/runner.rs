@@ -10,8 +10,9 @@
 //! are merged — adding them one by one on the calling thread would be the serial bottleneck.
 //!
 //! Iterations are processed in batches; between batches the caller sees the moments (for progress
-//! and checkpoints) and may end the run there, and cancellation is checked before every chunk. A
-//! cancelled batch is dropped whole, so the moments only ever hold complete iterations.
+//! and checkpoints) and may end the run there, and cancellation is checked before every chunk (and,
+//! inside a restricted iteration, every 1,024 candidates). A cancelled batch is dropped whole, so the
+//! moments only ever hold complete iterations.
 
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -34,8 +35,12 @@ pub enum RunError {
     Moments(#[from] MergeError),
 }
 
+/// Most camera paths a brute-force batch holds at once (their sets are generated up front):
+/// N_B = 10⁶ with a batch of 256 iterations would otherwise hold 25 GB.
+const MAX_BATCH_CAMERAS: u64 = 1 << 20;
+
 /// Iterations per batch: enough (iteration, chunk) items to balance `threads` workers, few enough
-/// to report progress and honour cancellation promptly.
+/// to report progress and honour cancellation promptly, and few enough camera paths in memory.
 fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     if let Engine::Restricted(_) = config.engine {
         // Tens of microseconds per iteration: batches of 256 still report many times a second.
@@ -45,7 +50,8 @@ fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     let wanted = (4 * threads as u64).div_ceil(chunks);
     // Small iterations: batch more of them so per-batch overhead stays negligible.
     let light_per_batch_floor = (1u64 << 20).div_ceil(config.light_paths);
-    wanted.max(light_per_batch_floor).clamp(1, 256)
+    let memory_cap = (MAX_BATCH_CAMERAS / config.camera_paths.max(1)).max(1);
+    wanted.max(light_per_batch_floor).clamp(1, 256).min(memory_cap)
 }
 
 /// Runs iterations `range` of `seed`, adding each to `moments` in index order and calling
@@ -149,14 +155,14 @@ fn restricted_batch(
                     return None;
                 }
                 let cameras = CameraSet::generate(config, seed, s);
-                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers);
+                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers, cancel)?;
                 Some(IterationTally::from_chunks(s, k, norm, std::iter::once(&chunk)))
             },
         )
         .try_fold(
             || Moments::new(config),
             |mut moments, tally| {
-                moments.add_iteration(seed, &tally?).expect("a batch's iterations are distinct");
+                moments.add_iteration(seed, &tally?).expect("a batch's iterations are distinct and its counts small");
                 Some(moments)
             },
         )

@@ -231,7 +231,8 @@ pub fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
     }
 }
 
-fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+/// [`count`] for an optional field (use with `#[serde(default)]`).
+pub fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
     count(d).map(Some)
 }
 
@@ -421,7 +422,28 @@ fn validate_range(spec: &JobSpec) -> Result<(), SpecError> {
     Ok(())
 }
 
+/// Smallest flux level·(r_out² − r_in²) of an emitting ring: far below any real profile, far above
+/// the subnormals, whose reciprocals overflow (a subnormal flux once made the reference NaN).
+pub const MIN_RING_FLUX: f64 = 1e-200;
+
 fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
+    let f = "scene.illumination";
+    validate_profile(ill)?;
+    let profile = super::illumination::Illumination::from_spec(ill);
+    for ring in profile.rings() {
+        let flux = ring.level * (ring.r_out * ring.r_out - ring.r_in * ring.r_in);
+        check(flux >= MIN_RING_FLUX, f, || {
+            format!(
+                "the ring [{}, {}) with level {} emits a flux of {flux:e}; every emitting ring needs at least \
+                 {MIN_RING_FLUX:e} (level × (r_out² − r_in²))",
+                ring.r_in, ring.r_out, ring.level
+            )
+        })?;
+    }
+    Ok(())
+}
+
+fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
     let f = "scene.illumination";
     match *ill {
         IlluminationSpec::Spot { a, r_ls, contrast } => {

@@ -1,9 +1,21 @@
-//! Queries on the `jobs` and `checkpoints` tables.
+//! Queries on the `jobs`, `checkpoints` and `checkpoint_history` tables.
+//!
+//! Every write runs in a transaction whose commit is awaited, and goes through [`Store::track`]:
+//! an insert with `RETURNING` in autocommit mode once handed back a row whose commit had failed on
+//! a full disk (and so an id that was never stored).
 
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
 use super::{Store, StoreError};
+
+/// Rows a job's history may reach before it is thinned (to ~1,000, evenly spaced in iterations).
+pub const MAX_HISTORY_ROWS: i64 = 2000;
+
+/// Unix milliseconds now.
+pub(crate) fn now_ms() -> i64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
+}
 
 /// A job as stored.
 #[derive(Debug, Clone, PartialEq)]
@@ -15,12 +27,15 @@ pub struct JobRow {
     pub fingerprint: String,
     pub iterations_total: u64,
     pub iterations_done: u64,
-    pub reference_luminance: f64,
+    /// The quadrature reference; None when it did not converge.
+    pub reference_luminance: Option<f64>,
     /// JSON of the best strategy at the latest checkpoint.
     pub best: Option<String>,
     pub error: Option<String>,
     /// Holds statistics merged from other runs.
     pub merged: bool,
+    /// A cancel was acknowledged; the job must not run again.
+    pub cancel_requested: bool,
     pub created_at: i64,
     pub updated_at: i64,
 }
@@ -31,7 +46,7 @@ pub struct NewJob {
     pub spec: String,
     pub fingerprint: String,
     pub iterations_total: u64,
-    pub reference_luminance: f64,
+    pub reference_luminance: Option<f64>,
     pub idempotency_key: Option<String>,
     pub request_hash: Option<String>,
     pub now: i64,
@@ -68,7 +83,7 @@ pub struct Checkpoint {
 macro_rules! job_columns {
     () => {
         "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, error, \
-         merged, created_at, updated_at"
+         merged, cancel_requested, created_at, updated_at"
     };
 }
 
@@ -84,6 +99,7 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         best: row.try_get("best")?,
         error: row.try_get("error")?,
         merged: row.try_get::<i64, _>("merged")? != 0,
+        cancel_requested: row.try_get::<i64, _>("cancel_requested")? != 0,
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
     })
@@ -119,18 +135,60 @@ async fn upsert_checkpoint(
     .bind(now)
     .execute(&mut **tx)
     .await?;
+    thin_history(tx, id).await
+}
+
+/// Keeps a job's history bounded: past [`MAX_HISTORY_ROWS`] rows, only the first row of each of
+/// ~1,000 equal buckets of iterations (and the latest row) stay. A job checkpointed every
+/// iteration for 10⁶ iterations once kept 10⁶ rows that every history request loaded.
+async fn thin_history(tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>, id: i64) -> Result<(), StoreError> {
+    let rows: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
+        .bind(id)
+        .fetch_one(&mut **tx)
+        .await?;
+    if rows <= MAX_HISTORY_ROWS {
+        return Ok(());
+    }
+    sqlx::query(
+        "DELETE FROM checkpoint_history WHERE job_id = ?1 AND iterations IN ( \
+             SELECT iterations FROM ( \
+                 SELECT iterations, last, \
+                        ROW_NUMBER() OVER (PARTITION BY iterations / ((last + 999) / 1000) ORDER BY iterations) AS r \
+                 FROM (SELECT iterations, MAX(iterations) OVER () AS last FROM checkpoint_history WHERE job_id = ?1)) \
+             WHERE r > 1 AND iterations < last)",
+    )
+    .bind(id)
+    .execute(&mut **tx)
+    .await?;
     Ok(())
 }
 
 impl Store {
-    /// Inserts a queued job, honouring an idempotency key.
+    /// Inserts a queued job, honouring an idempotency key. The row is committed before its id is
+    /// returned.
     pub async fn insert_job(&self, job: &NewJob) -> Result<Inserted, StoreError> {
         if let Some(key) = &job.idempotency_key
             && let Some(found) = self.find_by_key(key, job.request_hash.as_deref()).await?
         {
             return Ok(found);
         }
-        let result = sqlx::query(concat!(
+        let result = self.track(self.insert_queued(job).await);
+        match result {
+            Ok(row) => Ok(Inserted::Created(row)),
+            // A concurrent request with the same key won the race: answer as a replay.
+            Err(StoreError::Database(sqlx::Error::Database(e)))
+                if e.is_unique_violation() && job.idempotency_key.is_some() =>
+            {
+                let key = job.idempotency_key.as_deref().unwrap_or_default();
+                Ok(self.find_by_key(key, job.request_hash.as_deref()).await?.unwrap_or(Inserted::KeyReused))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    async fn insert_queued(&self, job: &NewJob) -> Result<JobRow, StoreError> {
+        let mut tx = self.pool().begin().await?;
+        let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
              request_hash, created_at, updated_at) VALUES ('queued', ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
             job_columns!()
@@ -143,17 +201,11 @@ impl Store {
         .bind(&job.request_hash)
         .bind(job.now)
         .bind(job.now)
-        .fetch_one(self.pool())
-        .await;
-        match result {
-            Ok(row) => Ok(Inserted::Created(job_from_row(&row)?)),
-            // A concurrent request with the same key won the race: answer as a replay.
-            Err(sqlx::Error::Database(e)) if e.is_unique_violation() && job.idempotency_key.is_some() => {
-                let key = job.idempotency_key.as_deref().unwrap_or_default();
-                Ok(self.find_by_key(key, job.request_hash.as_deref()).await?.unwrap_or(Inserted::KeyReused))
-            }
-            Err(e) => Err(e.into()),
-        }
+        .fetch_one(&mut *tx)
+        .await?;
+        let row = job_from_row(&row)?;
+        tx.commit().await?;
+        Ok(row)
     }
 
     async fn find_by_key(&self, key: &str, hash: Option<&str>) -> Result<Option<Inserted>, StoreError> {
@@ -223,15 +275,27 @@ impl Store {
             .bind(now)
             .bind(id)
             .execute(self.pool())
-            .await?;
-        Ok(done.rows_affected() == 1)
+            .await;
+        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
     }
 
-    /// Sets a job's total iterations with its updated spec (and state), returning whether the job
-    /// exists.
+    /// Records that a cancel of the job was acknowledged (before the running job stops), so that
+    /// no restart runs it again.
+    pub async fn request_cancel(&self, id: i64, now: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ?")
+            .bind(now)
+            .bind(id)
+            .execute(self.pool())
+            .await;
+        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+    }
+
+    /// Sets a job's total iterations with its updated spec (and state), clearing any error and
+    /// cancel request, returning whether the job exists.
     pub async fn set_total(&self, id: i64, total: u64, spec: &str, state: &str, now: i64) -> Result<bool, StoreError> {
         let done = sqlx::query(
-            "UPDATE jobs SET iterations_total = ?, spec = ?, state = ?, error = NULL, updated_at = ? WHERE id = ?",
+            "UPDATE jobs SET iterations_total = ?, spec = ?, state = ?, error = NULL, cancel_requested = 0, \
+             updated_at = ? WHERE id = ?",
         )
         .bind(total as i64)
         .bind(spec)
@@ -239,18 +303,23 @@ impl Store {
         .bind(now)
         .bind(id)
         .execute(self.pool())
-        .await?;
-        Ok(done.rows_affected() == 1)
+        .await;
+        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
     }
 
     /// Deletes a job and its checkpoint, returning whether it existed.
     pub async fn delete_job(&self, id: i64) -> Result<bool, StoreError> {
-        let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.pool()).await?;
-        Ok(done.rows_affected() == 1)
+        let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.pool()).await;
+        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
     }
 
     /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
     pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+        let result = self.write_checkpoint_tx(id, checkpoint, now).await;
+        self.track(result)
+    }
+
+    async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
         let mut tx = self.pool().begin().await?;
         upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
         sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
@@ -265,27 +334,38 @@ impl Store {
     }
 
     /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
-    /// with `iterations_total = iterations_done` = the iterations now covered. One transaction.
-    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        let mut tx = self.pool().begin().await?;
-        upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
-        sqlx::query(
-            "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, updated_at = ?3 \
-             WHERE id = ?4",
-        )
-        .bind(checkpoint.iterations_done as i64)
-        .bind(&checkpoint.best)
-        .bind(now)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
-        Ok(())
+    /// with `iterations_total = iterations_done` = the iterations now covered, and its spec
+    /// (`spec`: iterations set to that total) says so. One transaction.
+    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
+        let result = async {
+            let mut tx = self.pool().begin().await?;
+            upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
+            sqlx::query(
+                "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
+                 updated_at = ?4 WHERE id = ?5",
+            )
+            .bind(checkpoint.iterations_done as i64)
+            .bind(&checkpoint.best)
+            .bind(spec)
+            .bind(now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+            tx.commit().await?;
+            Ok(())
+        }
+        .await;
+        self.track(result)
     }
 
     /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
     /// transaction.
     pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
+        let result = self.insert_study_tx(job, checkpoint).await;
+        self.track(result)
+    }
+
+    async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
         let mut tx = self.pool().begin().await?;
         let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \

@@ -9,6 +9,12 @@ use std::time::{Duration, Instant};
 use optimis::server::{RunningServer, ServerConfig, spawn};
 use serde_json::Value;
 
+/// An HTTP client for tests (rustls needs its crypto provider installed once per process).
+pub fn client() -> reqwest::Client {
+    optimis::jobs::peers::install_crypto_provider();
+    reqwest::Client::new()
+}
+
 /// A server for one test.
 pub struct TestServer {
     pub base: String,
@@ -28,6 +34,10 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
         checkpoint_interval: Duration::from_millis(300),
         limits: optimis::server::Limits::default(),
         token: None,
+        tls: None,
+        peers: Vec::new(),
+        peer_ca: None,
+        allowed_hosts: Vec::new(),
     }
 }
 
@@ -45,7 +55,7 @@ impl TestServer {
         let mut cfg = config(&dir);
         tweak(&mut cfg);
         let server = spawn(cfg).await.expect("server starts");
-        Self { base: format!("http://{}", server.addr), client: reqwest::Client::new(), server: Some(server), dir }
+        Self { base: format!("http://{}", server.addr), client: client(), server: Some(server), dir }
     }
 
     pub fn url(&self, path: &str) -> String {
@@ -56,8 +66,9 @@ impl TestServer {
         self.client.post(self.url(path)).json(body).send().await.unwrap()
     }
 
+    /// Posts `body` as it is, declared as JSON.
     pub async fn post_raw(&self, path: &str, body: &'static str) -> reqwest::Response {
-        self.client.post(self.url(path)).body(body).send().await.unwrap()
+        self.client.post(self.url(path)).header("content-type", "application/json").body(body).send().await.unwrap()
     }
 
     pub async fn get(&self, path: &str) -> reqwest::Response {
@@ -127,6 +138,15 @@ pub async fn assert_problem(response: reqwest::Response, status: u16) -> Value {
     assert!(!problem["title"].as_str().unwrap().is_empty());
     assert!(!problem["detail"].as_str().unwrap().is_empty());
     problem
+}
+
+/// The moments (as JSON) of an uninterrupted in-process run of `spec`'s iterations on two
+/// threads: what a job that was killed, stopped or split must end with, bit for bit.
+pub fn uninterrupted_moments(spec: &Value) -> Value {
+    let job = optimis::sim::spec::parse_job_spec(spec).unwrap().validate().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let moments = pool.install(|| optimis::sim::runner::run(&job.config, job.spec.seed, job.spec.iteration_range()));
+    serde_json::to_value(&moments).unwrap()
 }
 
 /// A small, fast job (a few ms per iteration).

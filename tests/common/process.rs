@@ -19,8 +19,14 @@ impl Process {
     }
 
     pub fn start_with(database: &str, extra: &[&str]) -> Self {
+        Self::start_on(database, 0, extra)
+    }
+
+    /// Starts the binary on 127.0.0.1:`port` (0: a free port) with `extra` flags.
+    pub fn start_on(database: &str, port: u16, extra: &[&str]) -> Self {
+        let bind = format!("127.0.0.1:{port}");
         let mut child = Command::new(env!("CARGO_BIN_EXE_optimis"))
-            .args(["serve", "--bind", "127.0.0.1:0", "--database", database, "--threads", "2", "--log-format", "json"])
+            .args(["serve", "--bind", &bind, "--database", database, "--threads", "2", "--log-format", "json"])
             .args(extra)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
@@ -52,6 +58,12 @@ impl Process {
         assert!(sent.success());
         self.child.wait().unwrap()
     }
+}
+
+/// A loopback port that was free a moment ago (for servers that must know each other's address
+/// before they start, such as peers on each other's allow-list).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 pub async fn get(client: &reqwest::Client, url: String) -> Value {

@@ -1,0 +1,439 @@
+//! What the job manager does with stored statistics: results and histories, re-solves, the moments
+//! export, merges into a finished job and studies (new jobs from several sources).
+//!
+//! Documents arrive as bytes and are parsed straight into typed values on the request pool
+//! ([`parse_merge_body`], [`parse_study_body`]), never through a generic JSON value and never on a
+//! tokio worker; peers are pulled through the allow-list of [`super::peers`]. A merge reserves its
+//! target under the lifecycle lock, then verifies and adds the statistics with the lock released,
+//! and takes the lock again only to write: no other transition waits for its computation, and
+//! extend and delete refuse the reserved job meanwhile. Everything a merge computes goes into a
+//! copy of the target's statistics, so a refused merge changes nothing.
+
+use futures_util::stream::{self, StreamExt, TryStreamExt};
+use serde::Deserialize;
+use serde_json::Value;
+
+use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS, thin};
+use super::driver;
+use super::error::JobError;
+use super::manager::{JobManager, check_budget, parse_stored_spec, resource_from_row, spec_json};
+use super::peers::CONCURRENT_PULLS;
+use super::resource::{JobResource, JobState, now_ms};
+use crate::sim::config::sha256_hex;
+use crate::sim::coverage::Coverage;
+use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
+use crate::sim::moments::Moments;
+use crate::sim::quadrature::reference_luminance;
+use crate::sim::report::{RunReport, build_report};
+use crate::sim::spec::{JobSpec, SolverOptions, SpecError, merge_patch, validate_solver};
+use crate::store::{Checkpoint, NewJob, StoreError};
+
+/// Most sources of one study.
+pub const MAX_STUDY_SOURCES: usize = 256;
+
+/// A merge source as sent: `{"from": URL}` or the fields of a moments document. Deserialised
+/// field by field (an untagged enum would first copy the whole document into a generic value).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SourceFields {
+    from: Option<String>,
+    kind: Option<String>,
+    format_version: Option<u32>,
+    fingerprint: Option<String>,
+    coverage: Option<Coverage>,
+    spec: Option<JobSpec>,
+    moments: Option<Moments>,
+    checksum: Option<String>,
+}
+
+/// Where merged statistics come from.
+pub enum Source {
+    /// A document in the request, verified.
+    Document(Box<MomentsDocument>),
+    /// The job at this URL on a peer server; `field` is the JSON path of the URL.
+    Peer { url: String, field: String },
+}
+
+impl SourceFields {
+    /// The source, with an inline document verified. `at` is the JSON path of the source.
+    fn into_source(self, at: &str) -> Result<Source, JobError> {
+        let field = |name: &str| if at.is_empty() { name.to_string() } else { format!("{at}.{name}") };
+        if let Some(url) = self.from {
+            let others = [
+                self.kind.is_some(),
+                self.format_version.is_some(),
+                self.fingerprint.is_some(),
+                self.coverage.is_some(),
+                self.spec.is_some(),
+                self.moments.is_some(),
+                self.checksum.is_some(),
+            ];
+            if others.iter().any(|&x| x) {
+                return Err(SpecError::new(at, "a peer source has exactly one field, `from`").into());
+            }
+            return Ok(Source::Peer { url, field: field("from") });
+        }
+        let missing = |name: &str| SpecError::new(field(name), "missing field of a moments document (or give `from`)");
+        let doc = MomentsDocument {
+            kind: self.kind.ok_or_else(|| missing("kind"))?,
+            format_version: self.format_version.ok_or_else(|| missing("format_version"))?,
+            fingerprint: self.fingerprint.ok_or_else(|| missing("fingerprint"))?,
+            coverage: self.coverage.ok_or_else(|| missing("coverage"))?,
+            spec: self.spec.ok_or_else(|| missing("spec"))?,
+            moments: self.moments.ok_or_else(|| missing("moments"))?,
+            checksum: self.checksum.ok_or_else(|| missing("checksum"))?,
+        };
+        doc.verify()?;
+        Ok(Source::Document(Box::new(doc)))
+    }
+}
+
+/// A JSON parse error: 400 for text that is not JSON, 422 naming the field for JSON of the wrong
+/// shape.
+fn parse_error(bytes: &[u8], message: String) -> JobError {
+    match serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+        Err(e) if e.is_syntax() || e.is_eof() => {
+            JobError::Malformed(format!("the request body is not valid JSON: {e}"))
+        }
+        _ => {
+            let (field, message) = match message.split_once(": ") {
+                Some((path, rest)) if !path.contains(' ') => (path.to_string(), rest.to_string()),
+                _ => (String::new(), message),
+            };
+            SpecError::new(field, message).into()
+        }
+    }
+}
+
+/// Parses the body of `POST /v1/jobs/{id}/merge` (CPU work: on the request pool).
+pub fn parse_merge_body(bytes: &[u8]) -> Result<Source, JobError> {
+    let fields: SourceFields = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
+    fields.into_source("")
+}
+
+/// The body of `POST /v1/studies`, parsed.
+pub struct StudyBody {
+    pub sources: Vec<Source>,
+    pub solver: Option<Value>,
+}
+
+/// Parses the body of `POST /v1/studies` (CPU work: on the request pool).
+pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Raw {
+        sources: Vec<SourceFields>,
+        solver: Option<Value>,
+    }
+    let raw: Raw = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
+    if !(1..=MAX_STUDY_SOURCES).contains(&raw.sources.len()) {
+        return Err(SpecError::new(
+            "sources",
+            format!("must list 1 to {MAX_STUDY_SOURCES} sources, got {}", raw.sources.len()),
+        )
+        .into());
+    }
+    let sources = raw
+        .sources
+        .into_iter()
+        .enumerate()
+        .map(|(i, s)| s.into_source(&format!("sources[{i}]")))
+        .collect::<Result<_, _>>()?;
+    Ok(StudyBody { sources, solver: raw.solver })
+}
+
+/// Solver options patched by `patch` (a JSON Merge Patch on `base`), validated; `prefix` names
+/// where the patch sits in the request for error messages ("" or "solver").
+fn patched_solver(base: &SolverOptions, patch: &Value, prefix: &str) -> Result<SolverOptions, JobError> {
+    if !patch.is_object() {
+        return Err(SpecError::new(prefix, "must be a JSON object of solver options").into());
+    }
+    let mut options = serde_json::to_value(base).map_err(|e| JobError::Internal(e.to_string()))?;
+    merge_patch(&mut options, patch);
+    let options: SolverOptions = serde_path_to_error::deserialize(&options).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        let field = match (prefix.is_empty(), path.is_empty()) {
+            (true, _) => path,
+            (false, true) => prefix.to_string(),
+            (false, false) => format!("{prefix}.{path}"),
+        };
+        SpecError::new(field, e.into_inner().to_string())
+    })?;
+    validate_solver(&options)?;
+    Ok(options)
+}
+
+impl JobManager {
+    async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
+        let resource = self.get(id).await?;
+        Ok((resource.state, resource.progress.iterations_total, resource.spec, resource.merged))
+    }
+
+    /// The latest checkpoint, its checksum verified (on the request pool): a corrupted checkpoint
+    /// is reported (409), never served or resumed from.
+    pub(super) async fn verified_checkpoint(&self, id: i64) -> Result<Checkpoint, JobError> {
+        let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        self.compute(move || {
+            let actual = sha256_hex(&checkpoint.moments);
+            if actual == checkpoint.checksum {
+                Ok(checkpoint)
+            } else {
+                Err(JobError::Store(StoreError::Corrupt {
+                    job: id,
+                    detail: format!("checkpoint checksum mismatch (stored {}, computed {actual})", checkpoint.checksum),
+                }))
+            }
+        })
+        .await?
+    }
+
+    /// The results of the latest checkpoint (whose statistics are verified first).
+    pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
+        let (state, total, _, _) = self.state_and_total(id).await?;
+        let checkpoint = self.verified_checkpoint(id).await?;
+        let done = checkpoint.iterations_done;
+        let report: RunReport = self
+            .compute(move || serde_json::from_str(&checkpoint.result))
+            .await?
+            .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
+        Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })
+    }
+
+    /// Each strategy's figures at every checkpoint (thinned to at most 1,000 points; the store
+    /// keeps at most ~2,000 per job).
+    pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
+        self.get(id).await?;
+        let rows = self.inner.store.load_history(id).await?;
+        let points = self
+            .compute(move || {
+                thin(rows, MAX_HISTORY_POINTS)
+                    .into_iter()
+                    .map(|(iterations, json)| {
+                        serde_json::from_str(&json)
+                            .map(|strategies| HistoryPoint { iterations, strategies })
+                            .map_err(|e| JobError::Internal(format!("stored history of job {id} is unreadable: {e}")))
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .await??;
+        Ok(JobHistory { job_id: id, points })
+    }
+
+    /// The latest checkpoint's moments, verified against their checksum (and, for a job's own
+    /// run, against the range it ran), decoded on the request pool.
+    async fn checkpoint_moments(
+        &self,
+        id: i64,
+        spec: &JobSpec,
+        merged: bool,
+    ) -> Result<(Moments, Checkpoint), JobError> {
+        let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let spec = spec.clone();
+        self.compute(move || {
+            let job = spec.validate()?;
+            let moments = driver::decode_checkpoint(id, &checkpoint, &job, !merged)?;
+            Ok((moments, checkpoint))
+        })
+        .await?
+    }
+
+    /// Re-solves the latest checkpoint with other solver options (a merge patch on the job's
+    /// `solver`), without running anything or storing anything.
+    pub async fn solve(&self, id: i64, patch: &Value) -> Result<JobResult, JobError> {
+        let (state, total, spec, merged) = self.state_and_total(id).await?;
+        let solver = patched_solver(&spec.solver, patch, "")?;
+        let reference = self.get(id).await?.reference_luminance;
+        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
+        let done = checkpoint.iterations_done;
+        let report = self
+            .compute(move || -> Result<RunReport, JobError> {
+                let job = spec.validate()?;
+                Ok(build_report(&moments, &job.config.cells, &solver, reference))
+            })
+            .await??;
+        let partial = !(state == JobState::Succeeded && done >= total);
+        Ok(JobResult { job_id: id, partial, state, report })
+    }
+
+    /// The latest checkpoint's moments as a portable, checksummed document. A merged job's spec
+    /// says how many iterations it holds (and no shard), so that its document verifies.
+    pub async fn moments(&self, id: i64) -> Result<MomentsDocument, JobError> {
+        let (_, _, spec, merged) = self.state_and_total(id).await?;
+        let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
+        self.compute(move || {
+            let spec = if merged { merged_spec(&spec, &moments) } else { spec };
+            MomentsDocument::new(spec, moments)
+        })
+        .await
+    }
+
+    /// The verified document of a source (pulled from its peer if it names one).
+    async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
+        match source {
+            Source::Document(doc) => Ok(*doc),
+            Source::Peer { url, field } => {
+                let bytes = self.inner.peers.pull(&url, &field).await?;
+                let doc = self.compute(move || MomentsDocument::from_json(&bytes)).await?;
+                doc.map_err(|e| JobError::Peer {
+                    field,
+                    message: format!("the peer {url} sent an unusable document: {e}"),
+                })
+            }
+        }
+    }
+
+    /// Checks, without a connection, that every peer source is allowed (so that a study with one
+    /// forbidden source pulls nothing).
+    fn check_peers(&self, sources: &[Source]) -> Result<(), JobError> {
+        for source in sources {
+            if let Source::Peer { url, field } = source {
+                self.inner.peers.resolve(url, field)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Merges a moments document (its bytes: a document, or `{"from": URL}` of a peer's job) into
+    /// a finished job's statistics and recomputes its results. Refused, with nothing changed, if
+    /// the job is active or taking another merge, the configuration differs, any iteration would be
+    /// counted twice, a sum would overflow, or the result exceeds the server's job budget.
+    pub async fn merge_into(&self, id: i64, body: bytes::Bytes) -> Result<JobResult, JobError> {
+        let source = self.compute(move || parse_merge_body(&body)).await??;
+        self.check_peers(std::slice::from_ref(&source))?;
+        let doc = self.fetch(source).await?;
+        // Reserve the job: a short critical section (state checks only).
+        let (row, _reservation) = {
+            let _guard = self.inner.lifecycle.lock().await;
+            if self.active(id).is_some() {
+                return Err(JobError::Conflict(format!(
+                    "job {id} is queued or running; merge into it once it has finished, or cancel it first"
+                )));
+            }
+            let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+            if !matches!(row.state.as_str(), "succeeded" | "cancelled") {
+                return Err(JobError::Conflict(format!(
+                    "job {id} is {}; only a succeeded or cancelled job takes merges",
+                    row.state
+                )));
+            }
+            let reservation = self.reserve_for_merge(id)?;
+            (row, reservation)
+        };
+        // Verify, merge and summarise with the lock released (the reservation keeps extend and
+        // delete away), on the request pool, into a copy of the target's statistics.
+        let checkpoint = self.inner.store.load_checkpoint(id).await?;
+        let policy = self.inner.policy.clone();
+        let (checkpoint, spec) = self
+            .compute(move || -> Result<(Checkpoint, String), JobError> {
+                let spec = parse_stored_spec(&row)?;
+                let job = spec.validate()?;
+                let mut moments = match checkpoint {
+                    Some(checkpoint) => driver::decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
+                    None => Moments::new(&job.config),
+                };
+                moments.merge(&doc.moments).map_err(DocumentError::from)?;
+                moments.check_bounded().map_err(DocumentError::from)?;
+                let spec = merged_spec(&spec, &moments);
+                check_budget(&policy, &spec, moments.iterations())?;
+                let checkpoint = driver::checkpoint_of(&moments, &job, row.reference_luminance)?;
+                Ok((checkpoint, spec_json(&spec)?))
+            })
+            .await??;
+        {
+            let _guard = self.inner.lifecycle.lock().await;
+            self.inner.store.write_merged(id, &checkpoint, &spec, now_ms()).await?;
+        }
+        self.result(id).await
+    }
+
+    /// Creates a finished job from several moments documents or peer jobs (a study, its body as
+    /// bytes): their statistics merged, their results computed. `solver` optionally patches the
+    /// solver options of the first source's spec. Peers are pulled at most
+    /// [`CONCURRENT_PULLS`] at a time and each document is merged as it arrives (exact sums: the
+    /// order does not change a bit), so memory holds a few documents, not all of them.
+    pub async fn create_study(&self, body: bytes::Bytes) -> Result<JobResource, JobError> {
+        if self.is_shutting_down() {
+            return Err(JobError::ShuttingDown);
+        }
+        let StudyBody { sources, solver } = self.compute(move || parse_study_body(&body)).await??;
+        self.check_peers(&sources)?;
+        let arrivals = stream::iter(sources.into_iter().enumerate())
+            .map(|(i, source)| async move { self.fetch(source).await.map(|doc| (i, doc)) })
+            .buffer_unordered(CONCURRENT_PULLS);
+        let mut first: Option<(usize, JobSpec)> = None;
+        let mut total: Option<Moments> = None;
+        let mut arrivals = std::pin::pin!(arrivals);
+        while let Some((i, doc)) = arrivals.try_next().await? {
+            if first.as_ref().is_none_or(|(j, _)| i < *j) {
+                first = Some((i, doc.spec.clone()));
+            }
+            total = Some(match total {
+                None => doc.moments,
+                Some(mut acc) => self
+                    .compute(move || {
+                        acc.merge(&doc.moments)?;
+                        Ok::<_, crate::sim::moments::MergeError>(acc)
+                    })
+                    .await?
+                    .map_err(DocumentError::from)?,
+            });
+        }
+        let (Some((_, base)), Some(moments)) = (first, total) else {
+            return Err(SpecError::new("sources", "must list at least one source").into());
+        };
+        let policy = self.inner.policy.clone();
+        let (new, checkpoint) = self
+            .compute(move || -> Result<(NewJob, Checkpoint), JobError> {
+                moments.check_bounded().map_err(DocumentError::from)?;
+                let mut spec = merged_spec(&base, &moments);
+                if let Some(patch) = &solver {
+                    spec.solver = patched_solver(&spec.solver, patch, "solver")?;
+                }
+                let job = spec.validate()?;
+                check_budget(&policy, &job.spec, moments.iterations())?;
+                let reference = reference_luminance(&job.config.scene).ok();
+                let checkpoint = driver::checkpoint_of(&moments, &job, reference)?;
+                let new = NewJob {
+                    spec: spec_json(&job.spec)?,
+                    fingerprint: job.config.fingerprint().to_string(),
+                    iterations_total: checkpoint.iterations_done,
+                    reference_luminance: reference,
+                    idempotency_key: None,
+                    request_hash: None,
+                    now: now_ms(),
+                };
+                Ok((new, checkpoint))
+            })
+            .await??;
+        let row = self.inner.store.insert_study(&new, &checkpoint).await?;
+        resource_from_row(&row)
+    }
+}
+
+fn no_checkpoint(id: i64) -> JobError {
+    JobError::Conflict(format!("job {id} has no checkpoint yet: results appear after its first checkpoint"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sources_are_parsed_field_by_field() {
+        let peer = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2"}"#).unwrap();
+        assert!(matches!(peer, Source::Peer { url, field } if url == "http://h:1/v1/jobs/2" && field == "from"));
+        let mixed = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2", "kind": "optimis-moments"}"#);
+        assert!(matches!(mixed, Err(JobError::Invalid(e)) if e.message.contains("exactly one field")));
+        assert!(matches!(parse_merge_body(b"{\"from\": "), Err(JobError::Malformed(_))));
+        assert!(matches!(parse_merge_body(b"[1, 2]"), Err(JobError::Invalid(_))));
+        let missing = parse_merge_body(br#"{"kind": "optimis-moments"}"#);
+        assert!(matches!(missing, Err(JobError::Invalid(e)) if e.field == "format_version"), "names the field");
+        let unknown = parse_merge_body(br#"{"fromm": 1}"#);
+        assert!(matches!(unknown, Err(JobError::Invalid(e)) if e.message.contains("fromm")));
+        let study = parse_study_body(br#"{"sources": [{"from": "http://h:1/v1/jobs/2"}, {"kind": "x"}]}"#);
+        assert!(matches!(study, Err(JobError::Invalid(e)) if e.field == "sources[1].format_version"));
+        let empty = parse_study_body(br#"{"sources": []}"#);
+        assert!(matches!(empty, Err(JobError::Invalid(e)) if e.field == "sources"));
+    }
+}

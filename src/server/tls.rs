@@ -1,0 +1,39 @@
+//! TLS for the server (`--tls-cert`, `--tls-key`): rustls with the ring provider, PEM files read
+//! once at start. With TLS, peers can pull from this server over https the way the README tells
+//! people to expose it, without a reverse proxy in between.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rustls::pki_types::pem::PemObject;
+use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+use tokio_rustls::TlsAcceptor;
+
+/// Why the certificate or key cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum TlsError {
+    #[error("--tls-cert {path}: {message}")]
+    Certificate { path: PathBuf, message: String },
+    #[error("--tls-key {path}: {message}")]
+    Key { path: PathBuf, message: String },
+    #[error("the certificate and key do not form a TLS configuration: {0}")]
+    Config(String),
+}
+
+/// An acceptor for the certificate chain in `cert` and the private key in `key` (PEM).
+pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
+    crate::jobs::peers::install_crypto_provider();
+    let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
+        .and_then(|certs| certs.collect::<Result<_, _>>())
+        .map_err(|e| TlsError::Certificate { path: cert.to_path_buf(), message: e.to_string() })?;
+    if chain.is_empty() {
+        return Err(TlsError::Certificate { path: cert.to_path_buf(), message: "holds no certificate".into() });
+    }
+    let key = PrivateKeyDer::from_pem_file(key)
+        .map_err(|e| TlsError::Key { path: key.to_path_buf(), message: e.to_string() })?;
+    let config = rustls::ServerConfig::builder()
+        .with_no_client_auth()
+        .with_single_cert(chain, key)
+        .map_err(|e| TlsError::Config(e.to_string()))?;
+    Ok(TlsAcceptor::from(Arc::new(config)))
+}
