@@ -115,3 +115,54 @@ fn a_reader_that_leaves_early_is_not_an_error() {
         assert!(!stderr.contains("panicked"), "optimis {args:?} panicked: {stderr}");
     }
 }
+
+/// Issue 11, item 1 on the command line: a poisoned document made `report` and `merge` loop
+/// forever. Now they fail at once, naming the file and the sum. (The hang guard is the CI timeout
+/// of the whole suite: a loop would never return.)
+#[test]
+fn poisoned_documents_fail_report_and_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = r#"{"light_paths": 20000, "camera_paths": 100, "merge_radius": 0.02, "iterations": 4, "seed": 8,
+        "cells": {"r2_edges": [0, 0.5], "r3_edges": [0, 0.01]}}"#;
+    std::fs::write(dir.path().join("job.json"), spec).unwrap();
+    ok(optimis(dir.path(), &["run", "--spec", "job.json", "--out", "good.json", "--json"], &[]));
+    let mut doc: Value = serde_json::from_slice(&std::fs::read(dir.path().join("good.json")).unwrap()).unwrap();
+    doc["moments"]["folds"][0]["sum_y"][0] = serde_json::json!([1.7976931348623157e308, 1.7976931348623157e308]);
+    std::fs::write(dir.path().join("poisoned.json"), doc.to_string()).unwrap();
+    for args in [&["report", "poisoned.json"][..], &["merge", "good.json", "poisoned.json", "--out", "m.json"][..]] {
+        let output = optimis(dir.path(), args, &[]);
+        assert!(!output.status.success(), "{args:?} must fail");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains("poisoned.json") && stderr.contains("2^1000"), "{args:?}: {stderr}");
+    }
+}
+
+/// Issue 11, item 14: a short token was reported as an "invalid job specification"; a token file
+/// readable by other users was accepted silently; and "listening" was logged before the database
+/// opened (a server that could not open it had already announced itself).
+#[test]
+fn serve_refuses_bad_secrets_and_announces_itself_only_when_ready() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = optimis(dir.path(), &["serve", "--bind", "127.0.0.1:0", "--token", "short"], &[]);
+    assert!(!short.status.success());
+    let stderr = String::from_utf8_lossy(&short.stderr);
+    assert!(stderr.contains("invalid configuration") && stderr.contains("--token"), "{stderr}");
+    assert!(!stderr.contains("job specification"), "{stderr}");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let file = dir.path().join("token");
+        std::fs::write(&file, "a-long-enough-token-for-the-test").unwrap();
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let open = optimis(dir.path(), &["serve", "--bind", "127.0.0.1:0", "--token-file", "token"], &[]);
+        assert!(!open.status.success());
+        let stderr = String::from_utf8_lossy(&open.stderr);
+        assert!(stderr.contains("chmod 600"), "{stderr}");
+    }
+    let database = format!("sqlite://{}/missing/dir/x.db", dir.path().display());
+    let unopenable = optimis(dir.path(), &["serve", "--bind", "127.0.0.1:0", "--database", &database], &[]);
+    assert!(!unopenable.status.success());
+    let stderr = String::from_utf8_lossy(&unopenable.stderr);
+    assert!(!stderr.contains("optimis listening"), "announced before the database opened: {stderr}");
+    assert!(stderr.contains("database"), "{stderr}");
+}

@@ -86,3 +86,34 @@ async fn sigterm_checkpoints_running_jobs_before_exiting() {
     assert!(matches!(resumed["state"].as_str(), Some("queued" | "running")), "{resumed}");
     second.kill();
 }
+
+/// Issue 11, item 10: a cancel followed by SIGTERM (or SIGKILL) ran the job again after the
+/// restart — the shutdown overwrote the cancel, which lived only in memory. The cancel is stored
+/// when it is acknowledged, and wins over a shutdown.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cancel_survives_a_shutdown_and_a_kill() {
+    let client = common::client();
+    let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 100_000, "seed": 5 });
+    for stop in ["term", "kill"] {
+        let dir = tempfile::tempdir().unwrap();
+        let database = format!("sqlite://{}", dir.path().join("cancel.db").display());
+        let first = Process::start(&database);
+        let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();
+        let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
+        wait_for(&client, &first.base, id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 2).await;
+        let cancel = client.post(format!("{}/v1/jobs/{id}/cancel", first.base)).send().await.unwrap();
+        assert_eq!(cancel.status(), 202);
+        if stop == "term" {
+            assert!(first.terminate().success());
+        } else {
+            first.kill();
+        }
+        let second = Process::start(&database);
+        let job = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+        assert_eq!(job["state"], "cancelled", "after SIG{}: {job}", stop.to_uppercase());
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        let later = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+        assert_eq!(later["progress"]["iterations_done"], job["progress"]["iterations_done"], "it does not run again");
+        second.kill();
+    }
+}

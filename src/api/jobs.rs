@@ -39,8 +39,8 @@ pub struct JobSubmission {
     preset: Option<String>,
     #[schema(nullable = false)]
     scene: Option<ScenePatch>,
-    /// Merge radius R, in (0, min(l2, l3)).
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
+    /// Merge radius R, in [1e-9, min(l2, l3)).
+    #[schema(minimum = 1e-9, maximum = 1e6, nullable = false)]
     merge_radius: Option<f64>,
     /// N_F: light paths per iteration, in [1, 10^12].
     #[schema(minimum = 1, maximum = 1_000_000_000_000u64, nullable = false)]
@@ -75,12 +75,12 @@ pub struct JobSubmission {
 #[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct ScenePatch {
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
+    #[schema(minimum = 1e-9, maximum = 1e6, nullable = false)]
     l2: Option<f64>,
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
+    #[schema(minimum = 1e-9, maximum = 1e6, nullable = false)]
     l3: Option<f64>,
-    /// Lobe width β in degrees, in (0, 45].
-    #[schema(exclusive_minimum = 0.0, maximum = 45.0, nullable = false)]
+    /// Lobe width β in degrees, in [1e-6, 45].
+    #[schema(minimum = 1e-6, maximum = 45.0, nullable = false)]
     beta_deg: Option<f64>,
     #[schema(nullable = false)]
     illumination: Option<IlluminationPatch>,
@@ -94,9 +94,9 @@ pub struct IlluminationPatch {
     /// `spot`, `uniform` or `rings`.
     #[schema(pattern = "^(spot|uniform|rings)$", nullable = false)]
     kind: Option<String>,
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
+    #[schema(minimum = 1e-9, maximum = 1e6, nullable = false)]
     a: Option<f64>,
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6, nullable = false)]
+    #[schema(minimum = 1e-9, maximum = 1e6, nullable = false)]
     r_ls: Option<f64>,
     #[schema(exclusive_minimum = 0.0, maximum = 1e12, nullable = false)]
     contrast: Option<f64>,

@@ -155,6 +155,9 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         match outcome {
             Ok(_) => {}
             Err(RunError::Cancelled) => return stopped(inner, job),
+            Err(RunError::Moments(e @ crate::sim::moments::MergeError::Overflow(_))) => {
+                return Err(JobError::Simulation(e.to_string()));
+            }
             Err(e @ RunError::Moments(_)) => return Err(JobError::Internal(e.to_string())),
         }
     }

@@ -40,6 +40,10 @@ pub enum JobError {
     /// The database failed (HTTP 500, or 503 if it was only busy).
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// A running job's simulation could not go on (its statistics would leave the representable
+    /// range); recorded as the job's error.
+    #[error("the simulation stopped: {0}")]
+    Simulation(String),
     /// A bug or an impossible state (HTTP 500).
     #[error("internal error: {0}")]
     Internal(String),

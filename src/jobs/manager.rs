@@ -239,8 +239,14 @@ fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobErr
     if total.is_finite() && total <= policy.max_iteration_work {
         return Ok(());
     }
-    let field =
-        if work.light_paths >= crate::sim::cost::MERGE_WEIGHT * work.merges { "light_paths" } else { "merge_radius" };
+    // The brute force traces N_F paths; the restricted engine's candidates and every engine's merges
+    // grow with the merge discs (R²).
+    let traced_dominates = work.light_paths >= crate::sim::cost::MERGE_WEIGHT * work.merges;
+    let field = if job.spec.engine == crate::sim::spec::EngineName::Brute && traced_dominates {
+        "light_paths"
+    } else {
+        "merge_radius"
+    };
     Err(SpecError::new(
         field,
         format!(

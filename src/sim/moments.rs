@@ -32,6 +32,9 @@ use super::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use super::spec::MAX_CELLS;
 use super::tally::{IterationTally, PathStrategy};
 
+/// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
+pub const MAX_TALLY_VALUE: f64 = 1e70;
+
 /// Longest moment vector: n = 2K + 1 for the largest grid.
 const MAX_DIMENSION: usize = 2 * MAX_CELLS + 1;
 /// Longest packed ΣYYᵀ.
@@ -124,6 +127,17 @@ impl FoldMoments {
 
     fn add_iteration(&mut self, cells: usize, tally: &IterationTally) -> Result<(), MergeError> {
         let n = 2 * cells + 1;
+        // Products of up to four values enter the sums (ΣYYᵀ, Σ C⁴): beyond 10⁷⁰ they would leave
+        // the doubles. No valid scene comes near (its values are below 10⁴⁰), so this only stops a
+        // configuration the validation did not foresee, as an error instead of a poisoned sum.
+        let representable = |v: f64| v.is_finite() && v.abs() <= MAX_TALLY_VALUE;
+        if !(tally.cell_values.iter().all(|&v| representable(v)) && tally.strategies.iter().all(|&v| representable(v)))
+        {
+            return Err(MergeError::Overflow(format!(
+                "iteration {} produced a contribution beyond {MAX_TALLY_VALUE:e} (an extreme scene)",
+                tally.iteration
+            )));
+        }
         // Counters first, checked, so that an overflow leaves the fold unchanged.
         let mut merges = self.merges;
         let mut merges_sq = self.merges_sq;

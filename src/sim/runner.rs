@@ -84,7 +84,7 @@ pub fn run_iterations(
                 }
             }
             Some(plan) => {
-                let batch = restricted_batch(config, plan, seed, start..end, cancel).ok_or(RunError::Cancelled)?;
+                let batch = restricted_batch(config, plan, seed, start..end, cancel)?;
                 moments.merge(&batch)?;
             }
         }
@@ -134,14 +134,14 @@ fn brute_batch(config: &SimConfig, seed: u64, batch: Range<u64>, cancel: &Atomic
 /// The restricted engine's iterations `batch` as moments of their own. An iteration takes tens of
 /// microseconds, so adding it to the moments (exact sums) would be a serial bottleneck: each
 /// worker adds its iterations to moments of its own and those are merged. The sums are exact, so
-/// the grouping does not change a bit. None if cancelled.
+/// the grouping does not change a bit. `Cancelled` if cancelled.
 fn restricted_batch(
     config: &SimConfig,
     plan: &RestrictedPlan,
     seed: u64,
     batch: Range<u64>,
     cancel: &AtomicBool,
-) -> Option<Moments> {
+) -> Result<Moments, RunError> {
     let (k, norm) = (config.cells.len(), tally_norm(config));
     // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value.
     (0..(batch.end - batch.start) as usize)
@@ -152,25 +152,26 @@ fn restricted_batch(
             |(scratch, buffers), i| {
                 let s = batch.start + i as u64;
                 if cancel.load(Ordering::Relaxed) {
-                    return None;
+                    return Err(RunError::Cancelled);
                 }
                 let cameras = CameraSet::generate(config, seed, s);
-                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers, cancel)?;
-                Some(IterationTally::from_chunks(s, k, norm, std::iter::once(&chunk)))
+                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers, cancel)
+                    .ok_or(RunError::Cancelled)?;
+                Ok(IterationTally::from_chunks(s, k, norm, std::iter::once(&chunk)))
             },
         )
         .try_fold(
             || Moments::new(config),
-            |mut moments, tally| {
-                moments.add_iteration(seed, &tally?).expect("a batch's iterations are distinct and its counts small");
-                Some(moments)
+            |mut moments, tally: Result<IterationTally, RunError>| {
+                moments.add_iteration(seed, &tally?)?;
+                Ok(moments)
             },
         )
         .try_reduce(
             || Moments::new(config),
             |mut a, b| {
-                a.merge(&b).expect("pieces of one batch cover distinct iterations");
-                Some(a)
+                a.merge(&b)?;
+                Ok(a)
             },
         )
 }

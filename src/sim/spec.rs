@@ -164,7 +164,7 @@ pub enum IlluminationSpec {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct RingSpec {
-    #[cfg_attr(feature = "server", schema(exclusive_minimum = 0.0, maximum = 1e6))]
+    #[cfg_attr(feature = "server", schema(minimum = 1e-9, maximum = 1e6))]
     pub outer_radius: f64,
     #[cfg_attr(feature = "server", schema(minimum = 0.0, maximum = 1e12))]
     pub level: f64,
@@ -360,25 +360,39 @@ fn in_open_closed(x: f64, lo: f64, hi: f64) -> bool {
 /// squares and products stay finite.
 pub const MAX_LENGTH: f64 = 1e6;
 
+/// Smallest length accepted (plane distances, radii, the merge radius): far below any sensible
+/// scene (the paper's lengths are of order 1), far above where the merge kernel 1/(πR²) and its
+/// squares in the moments overflow.
+pub const MIN_LENGTH: f64 = 1e-9;
+
+/// Smallest lobe width β in degrees: the lobe's density grows as 1/β², and below this its
+/// contributions' fourth powers (the noise table's standard errors) leave the doubles.
+pub const MIN_BETA_DEG: f64 = 1e-6;
+
+/// `x` is finite and in [lo, hi].
+fn in_closed(x: f64, lo: f64, hi: f64) -> bool {
+    x.is_finite() && x >= lo && x <= hi
+}
+
 impl JobSpec {
     /// Checks every value and builds the simulation configuration. The one place values are
     /// validated: everything downstream trusts a [`ValidJob`].
     pub fn validate(&self) -> Result<ValidJob, SpecError> {
         let s = &self.scene;
         for (name, v) in [("scene.l2", s.l2), ("scene.l3", s.l3)] {
-            check(in_open_closed(v, 0.0, MAX_LENGTH), name, || {
-                format!("must be a distance in (0, {MAX_LENGTH:e}], got {v}")
+            check(in_closed(v, MIN_LENGTH, MAX_LENGTH), name, || {
+                format!("must be a distance in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {v}")
             })?;
         }
-        check(in_open_closed(s.beta_deg, 0.0, 45.0), "scene.beta_deg", || {
-            format!("must be in (0, 45] degrees, got {}", s.beta_deg)
+        check(in_closed(s.beta_deg, MIN_BETA_DEG, 45.0), "scene.beta_deg", || {
+            format!("must be in [{MIN_BETA_DEG:e}, 45] degrees, got {}", s.beta_deg)
         })?;
         validate_illumination(&s.illumination)?;
         let max_r = s.l2.min(s.l3);
         check(
-            self.merge_radius.is_finite() && self.merge_radius > 0.0 && self.merge_radius < max_r,
+            self.merge_radius.is_finite() && self.merge_radius >= MIN_LENGTH && self.merge_radius < max_r,
             "merge_radius",
-            || format!("must be in (0, min(l2, l3) = {max_r}), got {}", self.merge_radius),
+            || format!("must be in [{MIN_LENGTH:e}, min(l2, l3) = {max_r}), got {}", self.merge_radius),
         )?;
         check((1..=1_000_000_000_000).contains(&self.light_paths), "light_paths", || {
             format!("must be in [1, 10^12], got {}", self.light_paths)
@@ -447,8 +461,8 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
     let f = "scene.illumination";
     match *ill {
         IlluminationSpec::Spot { a, r_ls, contrast } => {
-            check(in_open_closed(a, 0.0, MAX_LENGTH), &format!("{f}.a"), || {
-                format!("must be a radius in (0, {MAX_LENGTH:e}], got {a}")
+            check(in_closed(a, MIN_LENGTH, MAX_LENGTH), &format!("{f}.a"), || {
+                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {a}")
             })?;
             check(in_open_closed(r_ls, a, MAX_LENGTH), &format!("{f}.r_ls"), || {
                 format!("must be a radius in (a = {a}, {MAX_LENGTH:e}], got {r_ls}")
@@ -458,8 +472,8 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
             })
         }
         IlluminationSpec::Uniform { r_ls } => {
-            check(in_open_closed(r_ls, 0.0, MAX_LENGTH), &format!("{f}.r_ls"), || {
-                format!("must be a radius in (0, {MAX_LENGTH:e}], got {r_ls}")
+            check(in_closed(r_ls, MIN_LENGTH, MAX_LENGTH), &format!("{f}.r_ls"), || {
+                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {r_ls}")
             })
         }
         IlluminationSpec::Rings { ref rings } => {
@@ -470,9 +484,11 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
             let mut flux = 0.0;
             for (i, ring) in rings.iter().enumerate() {
                 let field = format!("{f}.rings[{i}]");
-                check(in_open_closed(ring.outer_radius, inner, MAX_LENGTH), &format!("{field}.outer_radius"), || {
+                let ok = in_open_closed(ring.outer_radius, inner, MAX_LENGTH) && ring.outer_radius >= MIN_LENGTH;
+                check(ok, &format!("{field}.outer_radius"), || {
                     format!(
-                        "must be in ({inner}, {MAX_LENGTH:e}] (radii strictly increasing), got {}",
+                        "must be in ({inner}, {MAX_LENGTH:e}] and at least {MIN_LENGTH:e} (radii strictly increasing), \
+                         got {}",
                         ring.outer_radius
                     )
                 })?;
@@ -622,6 +638,14 @@ mod tests {
             (json!({ "merge_radius": 2 }), "merge_radius"),
             (json!({ "scene": { "beta_deg": 50 } }), "scene.beta_deg"),
             (json!({ "scene": { "beta_deg": 0 } }), "scene.beta_deg"),
+            (json!({ "scene": { "beta_deg": 1e-9 } }), "scene.beta_deg"),
+            (json!({ "scene": { "l2": 1e-12 } }), "scene.l2"),
+            (json!({ "merge_radius": 1e-10 }), "merge_radius"),
+            (
+                json!({ "scene": { "illumination": { "kind": "rings", "rings": [
+                { "outer_radius": 1, "level": 1e-320 } ] } } }),
+                "scene.illumination",
+            ),
             (json!({ "scene": { "l2": 0 } }), "scene.l2"),
             (json!({ "scene": { "illumination": { "a": -0.1 } } }), "scene.illumination.a"),
             (json!({ "scene": { "illumination": { "r_ls": 0.01 } } }), "scene.illumination.r_ls"),
@@ -652,7 +676,7 @@ mod tests {
             assert!(!e.message.is_empty());
         }
         let e = invalid(json!({ "scene": { "beta_deg": 50 } }));
-        assert!(e.message.contains("(0, 45]"), "the message states the range: {e}");
+        assert!(e.message.contains("[1e-6, 45]"), "the message states the range: {e}");
     }
 
     #[test]

@@ -106,7 +106,7 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
 }
 
 async fn upsert_checkpoint(
-    tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>,
+    tx: &mut sqlx::SqliteConnection,
     id: i64,
     checkpoint: &Checkpoint,
     now: i64,
@@ -123,7 +123,7 @@ async fn upsert_checkpoint(
     .bind(&checkpoint.checksum)
     .bind(&checkpoint.result)
     .bind(now)
-    .execute(&mut **tx)
+    .execute(&mut *tx)
     .await?;
     sqlx::query(
         "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
@@ -133,7 +133,7 @@ async fn upsert_checkpoint(
     .bind(checkpoint.iterations_done as i64)
     .bind(&checkpoint.history)
     .bind(now)
-    .execute(&mut **tx)
+    .execute(&mut *tx)
     .await?;
     thin_history(tx, id).await
 }
@@ -141,10 +141,10 @@ async fn upsert_checkpoint(
 /// Keeps a job's history bounded: past [`MAX_HISTORY_ROWS`] rows, only the first row of each of
 /// ~1,000 equal buckets of iterations (and the latest row) stay. A job checkpointed every
 /// iteration for 10⁶ iterations once kept 10⁶ rows that every history request loaded.
-async fn thin_history(tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>, id: i64) -> Result<(), StoreError> {
+async fn thin_history(tx: &mut sqlx::SqliteConnection, id: i64) -> Result<(), StoreError> {
     let rows: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
         .bind(id)
-        .fetch_one(&mut **tx)
+        .fetch_one(&mut *tx)
         .await?;
     if rows <= MAX_HISTORY_ROWS {
         return Ok(());
@@ -158,7 +158,7 @@ async fn thin_history(tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>, id: i64) -> 
              WHERE r > 1 AND iterations < last)",
     )
     .bind(id)
-    .execute(&mut **tx)
+    .execute(&mut *tx)
     .await?;
     Ok(())
 }
@@ -187,25 +187,25 @@ impl Store {
     }
 
     async fn insert_queued(&self, job: &NewJob) -> Result<JobRow, StoreError> {
-        let mut tx = self.pool().begin().await?;
-        let row = sqlx::query(concat!(
-            "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
+        self.transaction(async |tx| {
+            let row = sqlx::query(concat!(
+                "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
              request_hash, created_at, updated_at) VALUES ('queued', ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
-            job_columns!()
-        ))
-        .bind(&job.spec)
-        .bind(&job.fingerprint)
-        .bind(job.iterations_total as i64)
-        .bind(job.reference_luminance)
-        .bind(&job.idempotency_key)
-        .bind(&job.request_hash)
-        .bind(job.now)
-        .bind(job.now)
-        .fetch_one(&mut *tx)
-        .await?;
-        let row = job_from_row(&row)?;
-        tx.commit().await?;
-        Ok(row)
+                job_columns!()
+            ))
+            .bind(&job.spec)
+            .bind(&job.fingerprint)
+            .bind(job.iterations_total as i64)
+            .bind(job.reference_luminance)
+            .bind(&job.idempotency_key)
+            .bind(&job.request_hash)
+            .bind(job.now)
+            .bind(job.now)
+            .fetch_one(&mut *tx)
+            .await?;
+            Ok(job_from_row(&row)?)
+        })
+        .await
     }
 
     async fn find_by_key(&self, key: &str, hash: Option<&str>) -> Result<Option<Inserted>, StoreError> {
@@ -320,17 +320,18 @@ impl Store {
     }
 
     async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        let mut tx = self.pool().begin().await?;
-        upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
-        sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
-            .bind(checkpoint.iterations_done as i64)
-            .bind(&checkpoint.best)
-            .bind(now)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
-        tx.commit().await?;
-        Ok(())
+        self.transaction(async |tx| {
+            upsert_checkpoint(tx, id, checkpoint, now).await?;
+            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
+                .bind(checkpoint.iterations_done as i64)
+                .bind(&checkpoint.best)
+                .bind(now)
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+            Ok(())
+        })
+        .await
     }
 
     /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
@@ -338,21 +339,22 @@ impl Store {
     /// (`spec`: iterations set to that total) says so. One transaction.
     pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
         let result = async {
-            let mut tx = self.pool().begin().await?;
-            upsert_checkpoint(&mut tx, id, checkpoint, now).await?;
-            sqlx::query(
-                "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
-                 updated_at = ?4 WHERE id = ?5",
-            )
-            .bind(checkpoint.iterations_done as i64)
-            .bind(&checkpoint.best)
-            .bind(spec)
-            .bind(now)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
-            tx.commit().await?;
-            Ok(())
+            self.transaction(async |tx| {
+                upsert_checkpoint(tx, id, checkpoint, now).await?;
+                sqlx::query(
+                    "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
+                     updated_at = ?4 WHERE id = ?5",
+                )
+                .bind(checkpoint.iterations_done as i64)
+                .bind(&checkpoint.best)
+                .bind(spec)
+                .bind(now)
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+                Ok(())
+            })
+            .await
         }
         .await;
         self.track(result)
@@ -366,8 +368,8 @@ impl Store {
     }
 
     async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
-        let mut tx = self.pool().begin().await?;
-        let row = sqlx::query(concat!(
+        self.transaction(async |tx| {
+            let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
              merged, created_at, updated_at) VALUES ('succeeded', ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
             job_columns!()
@@ -382,10 +384,11 @@ impl Store {
         .bind(job.now)
         .fetch_one(&mut *tx)
         .await?;
-        let id: i64 = row.try_get("id")?;
-        upsert_checkpoint(&mut tx, id, checkpoint, job.now).await?;
-        tx.commit().await?;
-        Ok(job_from_row(&row)?)
+            let id: i64 = row.try_get("id")?;
+            upsert_checkpoint(tx, id, checkpoint, job.now).await?;
+            Ok(job_from_row(&row)?)
+        })
+        .await
     }
 
     /// A job's latest checkpoint, if any.

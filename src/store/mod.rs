@@ -156,6 +156,28 @@ impl Store {
         Ok(())
     }
 
+    /// Runs `steps` as one write transaction (`BEGIN IMMEDIATE` … `COMMIT`) on one connection. If a
+    /// step or the commit fails, the transaction is rolled back before the connection goes back to
+    /// the pool: sqlx's `Transaction` defers a rollback to the connection's next use, and a
+    /// commit refused on a full disk left its write lock held meanwhile, so that every other writer
+    /// waited out the busy timeout.
+    pub(crate) async fn transaction<T>(
+        &self,
+        steps: impl AsyncFnOnce(&mut sqlx::SqliteConnection) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let mut conn = self.pool.acquire().await?;
+        sqlx::query("BEGIN IMMEDIATE").execute(&mut *conn).await?;
+        let result = match steps(&mut conn).await {
+            Ok(value) => sqlx::query("COMMIT").execute(&mut *conn).await.map(|_| value).map_err(StoreError::from),
+            Err(e) => Err(e),
+        };
+        if result.is_err() {
+            // SQLite may have rolled back already (after SQLITE_FULL); that error is moot.
+            let _ = sqlx::query("ROLLBACK").execute(&mut *conn).await;
+        }
+        result
+    }
+
     /// Records the outcome of a write for [`Store::ready`].
     fn track<T>(&self, result: Result<T, StoreError>) -> Result<T, StoreError> {
         match &result {

@@ -58,6 +58,11 @@ impl TestServer {
         Self { base: format!("http://{}", server.addr), client: client(), server: Some(server), dir }
     }
 
+    /// The server's store (for fault injection).
+    pub fn store(&self) -> optimis::store::Store {
+        self.server.as_ref().expect("the server runs").jobs.store().clone()
+    }
+
     pub fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

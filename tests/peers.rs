@@ -1,0 +1,271 @@
+//! Pulls from peers (issue 11, item 6): only allowed peers are ever contacted; their answers are
+//! bounded in size, never echoed, and redirects are not followed; and two servers with tokens
+//! exchange a study over https, bit-identical to a single run.
+//!
+//! The hostile peers are raw TCP servers of the test's own on loopback ports.
+
+mod common;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Duration;
+
+use common::process::{Process, free_port, get, wait_for};
+use common::{TestServer, assert_problem};
+use serde_json::{Value, json};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpListener;
+
+/// A fake peer on loopback that answers every connection with `head` followed by `body_chunk`
+/// repeated `repeats` times (or until the client goes away). Counts the bytes it could send and
+/// whether anyone connected.
+struct FakePeer {
+    base: String,
+    sent: Arc<AtomicUsize>,
+    contacted: Arc<AtomicBool>,
+}
+
+async fn fake_peer(head: String, body_chunk: Vec<u8>, repeats: usize) -> FakePeer {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    let sent = Arc::new(AtomicUsize::new(0));
+    let contacted = Arc::new(AtomicBool::new(false));
+    let (s, c) = (sent.clone(), contacted.clone());
+    tokio::spawn(async move {
+        while let Ok((mut stream, _)) = listener.accept().await {
+            c.store(true, Ordering::SeqCst);
+            let (head, chunk, s) = (head.clone(), body_chunk.clone(), s.clone());
+            tokio::spawn(async move {
+                let mut request = [0u8; 4096];
+                let _ = stream.read(&mut request).await;
+                if stream.write_all(head.as_bytes()).await.is_err() {
+                    return;
+                }
+                for _ in 0..repeats {
+                    match stream.write_all(&chunk).await {
+                        Ok(()) => s.fetch_add(chunk.len(), Ordering::SeqCst),
+                        Err(_) => return,
+                    };
+                }
+            });
+        }
+    });
+    FakePeer { base, sent, contacted }
+}
+
+/// A loopback listener that records whether anyone connected.
+async fn bystander() -> (u16, Arc<AtomicBool>) {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let contacted = Arc::new(AtomicBool::new(false));
+    let c = contacted.clone();
+    tokio::spawn(async move {
+        while listener.accept().await.is_ok() {
+            c.store(true, Ordering::SeqCst);
+        }
+    });
+    (port, contacted)
+}
+
+fn allow(peers: &[&str]) -> Vec<optimis::jobs::peers::Peer> {
+    peers.iter().map(|p| optimis::jobs::peers::Peer::parse(p).unwrap()).collect()
+}
+
+/// A peer answering 500 with an endless body (a 3 GiB one once took the server to 6.3 GB): at most
+/// a few KB of it are read, none of it is echoed. A redirect is not followed anywhere.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn peer_errors_are_read_a_little_never_echoed_and_redirects_not_followed() {
+    let secret = b"SECRET-TOKEN-OF-AN-INTERNAL-SERVICE ".repeat(1000);
+    let error = fake_peer(
+        "HTTP/1.1 500 Internal Server Error\r\nContent-Type: text/plain\r\nContent-Length: 3221225472\r\n\r\n".into(),
+        secret,
+        100_000,
+    )
+    .await;
+    let (hidden_port, hidden_contacted) = bystander().await;
+    let redirect = fake_peer(
+        format!("HTTP/1.1 302 Found\r\nLocation: http://127.0.0.1:{hidden_port}/admin\r\nContent-Length: 0\r\n\r\n"),
+        Vec::new(),
+        0,
+    )
+    .await;
+    let (error_base, redirect_base) = (error.base.clone(), redirect.base.clone());
+    let server = TestServer::start_with(move |c| c.peers = allow(&[&error_base, &redirect_base])).await;
+    let target = server.submit(&json!({ "iterations": 4, "light_paths": 100_000 })).await;
+    server.wait_for_state(target, "succeeded").await;
+    let merge = |from: String| {
+        let server = &server;
+        async move { server.post(&format!("/v1/jobs/{target}/merge"), &json!({ "from": from })).await }
+    };
+
+    let problem = assert_problem(merge(format!("{}/v1/jobs/1", error.base)).await, 422).await;
+    assert!(error.contacted.load(Ordering::SeqCst), "the allowed peer was asked");
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.contains("500") && !detail.contains("SECRET"), "{detail}");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let sent = error.sent.load(Ordering::SeqCst);
+    assert!(sent < 32 << 20, "the error body was read on: {sent} bytes went out");
+
+    let problem = assert_problem(merge(format!("{}/v1/jobs/1", redirect.base)).await, 422).await;
+    assert!(problem["detail"].as_str().unwrap().contains("redirects are not followed"), "{problem}");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert!(!hidden_contacted.load(Ordering::SeqCst), "the redirect target was contacted");
+    server.stop().await;
+}
+
+/// A 2xx body beyond the document limit is refused, declared (Content-Length) or not (chunked).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn peer_documents_are_capped_by_the_document_limit() {
+    let declared = fake_peer(
+        "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 104857600\r\n\r\n".into(),
+        vec![b' '; 65536],
+        1600,
+    )
+    .await;
+    let chunked = fake_peer(
+        "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n".into(),
+        format!("10000\r\n{}\r\n", " ".repeat(65536)).into_bytes(),
+        1600,
+    )
+    .await;
+    let (a, b) = (declared.base.clone(), chunked.base.clone());
+    let server = TestServer::start_with(move |c| {
+        c.peers = allow(&[&a, &b]);
+        c.limits.document_bytes = 1 << 20;
+    })
+    .await;
+    for peer in [&declared, &chunked] {
+        let response =
+            server.post("/v1/studies", &json!({ "sources": [{ "from": format!("{}/v1/jobs/3", peer.base) }] })).await;
+        let problem = assert_problem(response, 422).await;
+        assert!(problem["detail"].as_str().unwrap().contains("document limit"), "{problem}");
+        assert!(peer.sent.load(Ordering::SeqCst) < 32 << 20);
+    }
+    server.stop().await;
+}
+
+/// A URL that is not under an allowed peer is refused (403, saying how to allow it) before any
+/// connection: the server cannot be used to probe other hosts, ports or paths.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn only_allowed_peers_are_contacted() {
+    let (port, contacted) = bystander().await;
+    let allowed = format!("http://127.0.0.1:{port}/optimis");
+    let server = TestServer::start_with(move |c| c.peers = allow(&[&allowed])).await;
+    for url in [
+        format!("http://127.0.0.1:{port}/v1/jobs/1"), // outside the allowed prefix
+        format!("http://localhost:{port}/optimis/v1/jobs/1"), // another host name
+        format!("https://127.0.0.1:{port}/optimis/v1/jobs/1"), // another scheme
+        format!("http://127.0.0.1:{}/v1/jobs/1", free_port()), // another port
+    ] {
+        let problem =
+            assert_problem(server.post("/v1/studies", &json!({ "sources": [{ "from": url }] })).await, 403).await;
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(detail.contains("not an allowed peer") && detail.contains("--peer"), "{detail}");
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert!(!contacted.load(Ordering::SeqCst), "a refused URL was contacted");
+    server.stop().await;
+}
+
+/// Writes `text` to `path`, readable by its owner only.
+fn secret_file(path: &std::path::Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    }
+}
+
+/// The acceptance test of item 6: two servers that require tokens, both serving https with a
+/// certificate made here, exchange a study. Server A pulls shard 0 from itself and shard 1 from B,
+/// presenting each peer's token and trusting the certificate through --peer-ca; the merged
+/// moments are bit-identical to one run of the whole study.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_servers_with_tokens_exchange_a_study_over_https() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name);
+    let certified = rcgen::generate_simple_self_signed(vec!["localhost".to_string()]).unwrap();
+    std::fs::write(path("cert.pem"), certified.cert.pem()).unwrap();
+    secret_file(&path("key.pem"), &certified.signing_key.serialize_pem());
+    let (token_a, token_b) = ("token-of-server-a-0123456789", "token-of-server-b-0123456789");
+    secret_file(&path("a.token"), token_a);
+    secret_file(&path("b.token"), token_b);
+    let (pa, pb) = (free_port(), free_port());
+    let (base_a, base_b) = (format!("https://localhost:{pa}"), format!("https://localhost:{pb}"));
+    let db = |name: &str| format!("sqlite://{}", path(name).display());
+    let tls = |token: &str| {
+        vec![
+            "--tls-cert".to_string(),
+            path("cert.pem").display().to_string(),
+            "--tls-key".to_string(),
+            path("key.pem").display().to_string(),
+            "--token-file".to_string(),
+            path(token).display().to_string(),
+            "--checkpoint-seconds".to_string(),
+            "0.5".to_string(),
+        ]
+    };
+    let b_flags = tls("b.token");
+    let mut a_flags = tls("a.token");
+    a_flags.extend([
+        "--peer".to_string(),
+        format!("{base_a},token-file={}", path("a.token").display()),
+        "--peer".to_string(),
+        format!("{base_b},token-file={}", path("b.token").display()),
+        "--peer-ca".to_string(),
+        path("cert.pem").display().to_string(),
+    ]);
+    let b = Process::start_on(&db("b.db"), pb, &b_flags.iter().map(String::as_str).collect::<Vec<_>>());
+    let a = Process::start_on(&db("a.db"), pa, &a_flags.iter().map(String::as_str).collect::<Vec<_>>());
+
+    optimis::jobs::peers::install_crypto_provider();
+    let ca = reqwest::Certificate::from_pem(certified.cert.pem().as_bytes()).unwrap();
+    let https = reqwest::Client::builder().tls_certs_only([ca]).build().unwrap();
+    let with = |token: &str| {
+        let mut headers = reqwest::header::HeaderMap::new();
+        headers.insert("authorization", format!("Bearer {token}").parse().unwrap());
+        reqwest::Client::builder()
+            .tls_certs_only([reqwest::Certificate::from_pem(certified.cert.pem().as_bytes()).unwrap()])
+            .default_headers(headers)
+            .build()
+            .unwrap()
+    };
+    let (client_a, client_b) = (with(token_a), with(token_b));
+    // Without its token a server refuses; plain http is not served.
+    assert_eq!(https.get(format!("{base_a}/v1/jobs")).send().await.unwrap().status(), 401);
+    assert!(common::client().get(format!("http://localhost:{pa}/healthz")).send().await.is_err());
+
+    let study = |shard: Option<(u64, u64)>| {
+        let mut spec =
+            json!({ "light_paths": 100_000, "camera_paths": 300, "merge_radius": 0.02, "iterations": 30, "seed": 21 });
+        if let Some((index, count)) = shard {
+            spec["shard"] = json!({ "index": index, "count": count });
+        }
+        spec
+    };
+    let submit = |client: &reqwest::Client, base: &str, spec: Value| {
+        let (client, url) = (client.clone(), format!("{base}/v1/jobs"));
+        async move {
+            let response = client.post(url).json(&spec).send().await.unwrap();
+            assert_eq!(response.status(), 202);
+            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
+        }
+    };
+    let shard0 = submit(&client_a, &base_a, study(Some((0, 2)))).await;
+    let shard1 = submit(&client_b, &base_b, study(Some((1, 2)))).await;
+    let whole = submit(&client_a, &base_a, study(None)).await;
+    for (client, base, id) in [(&client_a, &base_a, shard0), (&client_b, &base_b, shard1), (&client_a, &base_a, whole)]
+    {
+        wait_for(client, base, id, |j| j["state"] == "succeeded").await;
+    }
+    let sources = json!({ "sources": [{ "from": format!("{base_a}/v1/jobs/{shard0}") }, { "from": format!("{base_b}/v1/jobs/{shard1}") }] });
+    let response = client_a.post(format!("{base_a}/v1/studies")).json(&sources).send().await.unwrap();
+    assert_eq!(response.status(), 201, "{}", response.text().await.unwrap());
+    let merged = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
+    let merged_moments = get(&client_a, format!("{base_a}/v1/jobs/{merged}/moments")).await;
+    let whole_moments = get(&client_a, format!("{base_a}/v1/jobs/{whole}/moments")).await;
+    assert_eq!(merged_moments["moments"], whole_moments["moments"], "bit-identical to the single run");
+    a.kill();
+    b.kill();
+}
