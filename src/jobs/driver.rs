@@ -289,6 +289,8 @@ fn write_checkpoint(
         return Ok(false);
     }
     inner.metrics.observe_checkpoint(started.elapsed());
+    // The bytes just written are the ones hashed: results may be served without re-hashing them.
+    inner.remember_verified(job.id, &checkpoint.checksum);
     job.view.send_modify(|r| {
         r.progress.iterations_checkpointed = checkpoint.iterations_done;
         r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);

@@ -134,6 +134,10 @@ pub(crate) struct Inner {
     pub(super) lifecycle: tokio::sync::Mutex<()>,
     /// Jobs a merge is changing; std Mutex, held for set operations only.
     merging: Mutex<HashSet<i64>>,
+    /// The checkpoint checksum of each job whose stored moments were last verified against it
+    /// (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
+    /// checkpoint changed since. std Mutex, map operations only.
+    pub(super) verified: Mutex<HashMap<i64, String>>,
     /// Wakes the scheduler: a job was queued or a worker became free.
     wake: Notify,
     running: AtomicUsize,
@@ -287,6 +291,7 @@ impl JobManager {
             queue: Mutex::new(VecDeque::new()),
             lifecycle: tokio::sync::Mutex::new(()),
             merging: Mutex::new(HashSet::new()),
+            verified: Mutex::new(HashMap::new()),
             wake: Notify::new(),
             running: AtomicUsize::new(0),
             driver_ended: Notify::new(),
@@ -784,6 +789,15 @@ impl Inner {
             Some(job) => self.end(&job, JobState::Failed, Some(reason)).await,
             None => self.store.set_state(id, "failed", Some(reason), now_ms()).await.map(|_| ()).map_err(Into::into),
         }
+    }
+
+    /// Records that job `id`'s stored moments match `checksum` (see `verified`).
+    pub(crate) fn remember_verified(&self, id: i64, checksum: &str) {
+        let mut verified = self.verified.lock().expect("verified map");
+        if verified.len() >= super::statistics::MAX_VERIFIED {
+            verified.clear();
+        }
+        verified.insert(id, checksum.to_string());
     }
 
     /// Whether the server is stopping.

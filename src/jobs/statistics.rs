@@ -28,6 +28,9 @@ use crate::sim::report::{RunReport, build_report};
 use crate::sim::spec::{JobSpec, SolverOptions, SpecError, merge_patch, validate_solver};
 use crate::store::{Checkpoint, NewJob, StoreError};
 
+/// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
+pub(super) const MAX_VERIFIED: usize = 100_000;
+
 /// Most sources of one study.
 pub const MAX_STUDY_SOURCES: usize = 256;
 
@@ -174,27 +177,41 @@ impl JobManager {
     /// is reported (409), never served or resumed from.
     pub(super) async fn verified_checkpoint(&self, id: i64) -> Result<Checkpoint, JobError> {
         let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        self.compute(move || {
-            let actual = sha256_hex(&checkpoint.moments);
-            if actual == checkpoint.checksum {
-                Ok(checkpoint)
-            } else {
-                Err(JobError::Store(StoreError::Corrupt {
-                    job: id,
-                    detail: format!("checkpoint checksum mismatch (stored {}, computed {actual})", checkpoint.checksum),
-                }))
-            }
-        })
-        .await?
+        let checkpoint = self
+            .compute(move || {
+                let actual = sha256_hex(&checkpoint.moments);
+                if actual == checkpoint.checksum {
+                    Ok(checkpoint)
+                } else {
+                    Err(JobError::Store(StoreError::Corrupt {
+                        job: id,
+                        detail: format!(
+                            "checkpoint checksum mismatch (stored {}, computed {actual})",
+                            checkpoint.checksum
+                        ),
+                    }))
+                }
+            })
+            .await??;
+        self.inner.remember_verified(id, &checkpoint.checksum);
+        Ok(checkpoint)
     }
 
-    /// The results of the latest checkpoint (whose statistics are verified first).
+    /// The results of the latest checkpoint. Its moments are verified against their checksum the
+    /// first time this checkpoint is served (a corrupted checkpoint answers 409, not a stale
+    /// result); later requests read the result alone, as a dashboard polls it many times a second.
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
         let (state, total, _, _) = self.state_and_total(id).await?;
-        let checkpoint = self.verified_checkpoint(id).await?;
-        let done = checkpoint.iterations_done;
+        let (done, json, checksum) = self.inner.store.load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let known = self.inner.verified.lock().expect("verified map").get(&id) == Some(&checksum);
+        let (done, json) = if known {
+            (done, json)
+        } else {
+            let checkpoint = self.verified_checkpoint(id).await?;
+            (checkpoint.iterations_done, checkpoint.result)
+        };
         let report: RunReport = self
-            .compute(move || serde_json::from_str(&checkpoint.result))
+            .compute(move || serde_json::from_str(&json))
             .await?
             .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
         Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })

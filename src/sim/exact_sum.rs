@@ -38,6 +38,9 @@ pub const MAX_PARTS: usize = 40;
 /// without overflow.
 pub const MAX_MAGNITUDE: f64 = f64::from_bits((1023 + 1000) << 52);
 
+/// Largest part magnitude (2¹⁰¹⁵) for which [`ExactSum::can_add`] guarantees an exact addition.
+const MERGE_PART_LIMIT: f64 = f64::from_bits((1023 + 1015) << 52);
+
 /// Why a list of parts is not an acceptable sum.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum SumError {
@@ -162,14 +165,19 @@ impl ExactSum {
         self.parts.iter().all(|p| p.is_finite()) && self.value().is_finite()
     }
 
-    /// Whether `self` and `other` are finite with magnitudes at most [`MAX_MAGNITUDE`], so that
-    /// adding them is exact and cannot overflow.
+    /// Whether adding `self` and `other` is certainly exact and free of overflow: the largest part
+    /// of each is finite and at most 2¹⁰¹⁵ in magnitude. One comparison per sum, for the merges of
+    /// every batch.
     ///
-    /// The parts of an expansion do not overlap, so the largest is the sum to within an ulp and
-    /// every part is at most |S|·(1 + 2⁻⁵²): all intermediate values of the addition stay below
-    /// 2·2¹⁰⁰⁰·(1 + 2⁻⁵²) ≪ f64::MAX.
+    /// [`ExactSum::add`] keeps the parts in increasing magnitude, non-overlapping, so the last is
+    /// the largest and the others sum to less than it: every intermediate value of the addition is
+    /// below 2·2·2¹⁰¹⁵ = 2¹⁰¹⁷ ≪ f64::MAX. An addition that overflowed leaves its infinite or NaN
+    /// result as the last part, so a poisoned sum fails the test too. (Sums read from outside are
+    /// far below: |S| ≤ 2¹⁰⁰⁰.)
     pub fn can_add(&self, other: &ExactSum) -> bool {
-        self.is_bounded() && other.is_bounded()
+        // NaN fails the comparison, as it must.
+        let small = |s: &ExactSum| s.parts.last().is_none_or(|p| p.abs() <= MERGE_PART_LIMIT);
+        small(self) && small(other)
     }
 
     /// Finite, with a magnitude of at most [`MAX_MAGNITUDE`].

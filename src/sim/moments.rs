@@ -283,7 +283,7 @@ impl FoldMoments {
 }
 
 /// Whether the counters of `folds` added together fit their types.
-fn counters_fit(folds: [&FoldMoments; 4]) -> bool {
+fn counters_fit(folds: &[&FoldMoments]) -> bool {
     let fits = |total: u128| total <= u128::from(u64::MAX);
     (0..3).all(|m| {
         fits(folds.iter().map(|f| u128::from(f.merges[m])).sum())
@@ -386,7 +386,7 @@ impl Moments {
             return Err(overflow("iteration count"));
         }
         // The pooled folds (what the noise table adds) must fit as well.
-        if !counters_fit([&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
             return Err(overflow("pooled counts"));
         }
         Ok(())
@@ -404,6 +404,33 @@ impl Moments {
             a.add(b);
         }
         self.coverage = coverage;
+        Ok(())
+    }
+
+    /// Adds a batch of iterations this process ran itself (the runner's pieces and batches):
+    /// [`Moments::merge`] without the per-sum overflow test, which such moments cannot fail —
+    /// [`FoldMoments::add_iteration`] keeps every value within 10⁷⁰, so no sum over at most 2⁶²
+    /// iterations (fourth powers included) comes near 2¹⁰¹⁵. Overlaps and counters are still
+    /// checked; nothing changes on a refusal.
+    pub(crate) fn absorb(&mut self, other: &Moments) -> Result<(), MergeError> {
+        if other.fingerprint != self.fingerprint || other.cells != self.cells {
+            return Err(MergeError::Fingerprint {
+                found: other.fingerprint.clone(),
+                expected: self.fingerprint.clone(),
+            });
+        }
+        let overlaps = self.coverage.overlaps(&other.coverage);
+        if !overlaps.is_empty() {
+            return Err(MergeError::Overlap(overlaps));
+        }
+        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+            return Err(overflow("pooled counts"));
+        }
+        debug_assert!(self.folds.iter().zip(&other.folds).all(|(a, b)| a.check_add(b).is_ok()));
+        for (a, b) in self.folds.iter_mut().zip(&other.folds) {
+            a.add(b);
+        }
+        self.coverage.union(&other.coverage);
         Ok(())
     }
 
@@ -430,8 +457,12 @@ impl Moments {
                 self.folds[0].iterations, self.folds[1].iterations
             )));
         }
-        // The two folds must pool without overflow (the noise table adds them).
-        self.folds[0].check_add(&self.folds[1]).map_err(|e| MergeError::Malformed(e.to_string()))
+        // The two folds' counters must pool without overflow (the noise table adds them; their sums
+        // pool safely: moments from outside are below 2^1000, merged ones are checked).
+        if !counters_fit(&[&self.folds[0], &self.folds[1]]) {
+            return Err(MergeError::Malformed("the two folds' counts overflow when pooled".into()));
+        }
+        Ok(())
     }
 
     /// Every check for moments read from outside (a file, a peer, a database row): the structure

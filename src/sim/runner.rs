@@ -85,7 +85,7 @@ pub fn run_iterations(
             }
             Some(plan) => {
                 let batch = restricted_batch(config, plan, seed, start..end, cancel)?;
-                moments.merge(&batch)?;
+                moments.absorb(&batch)?;
             }
         }
         start = end;
@@ -170,7 +170,7 @@ fn restricted_batch(
         .try_reduce(
             || Moments::new(config),
             |mut a, b| {
-                a.merge(&b)?;
+                a.absorb(&b)?;
                 Ok(a)
             },
         )

@@ -440,13 +440,16 @@ impl Store {
     }
 
     /// A job's latest result document, without the moments.
-    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String)>, StoreError> {
-        let row = sqlx::query("SELECT iterations_done, result FROM checkpoints WHERE job_id = ?")
+    /// (iterations done, result JSON, the moments' checksum) of a job's latest checkpoint.
+    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String, String)>, StoreError> {
+        let row = sqlx::query("SELECT iterations_done, result, checksum FROM checkpoints WHERE job_id = ?")
             .bind(id)
             .fetch_optional(self.pool())
             .await?;
-        row.map(|row| Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?)))
-            .transpose()
-            .map_err(|e: sqlx::Error| e.into())
+        row.map(|row| {
+            Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?, row.try_get("checksum")?))
+        })
+        .transpose()
+        .map_err(|e: sqlx::Error| e.into())
     }
 }
