@@ -254,7 +254,7 @@ fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobErr
     Err(SpecError::new(
         field,
         format!(
-            "one iteration is expected to cost {total:.3e} light-path equivalents ({:.3e} light paths traced, {:.3e} \
+            "one iteration is expected to cost {total:.3e} light-path equivalents ({:.3e} light paths drawn, {:.3e} \
              merges) — beyond this server's per-iteration limit of {:.3e} (--max-iteration-work); reduce merge_radius, \
              light_paths or camera_paths",
             work.light_paths, work.merges, policy.max_iteration_work
