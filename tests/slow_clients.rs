@@ -1,6 +1,8 @@
 //! Slow and idle clients (issue 11, item 9): connections that send nothing, half a request head or
 //! half a body are closed after the documented timeouts, and a flood of idle connections cannot
 //! take more than `--max-connections` slots — the server answers again as soon as they time out.
+//! (A client that stops *reading* is cut off by the send timeout; the kernel's send buffers hold
+//! megabytes on loopback, so that is tested on a pipe, in `server::listener`.)
 //! Timeouts are shortened for the test; hang guards of half a minute catch a connection that is
 //! never closed.
 
@@ -16,7 +18,7 @@ async fn server() -> TestServer {
     TestServer::start_with(|c| {
         c.limits.header_timeout = Duration::from_millis(500);
         c.limits.body_timeout = Duration::from_millis(500);
-        c.limits.idle_timeout = Duration::from_secs(2);
+        c.limits.send_timeout = Duration::from_secs(2);
         c.limits.max_connections = 20;
     })
     .await

@@ -376,8 +376,10 @@ pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<S
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<MomentsDocument>, ApiError> {
-    Ok(Json(state.jobs.moments(id).await?))
+pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
+    // Serialised on the job layer's request pool (a document can be megabytes), sent as is.
+    let bytes = state.jobs.moments_json(id).await?;
+    Ok(([(header::CONTENT_TYPE, HeaderValue::from_static("application/json"))], bytes).into_response())
 }
 
 /// Each strategy's luminance and RMS at every checkpoint (at most 1,000 points, evenly thinned).

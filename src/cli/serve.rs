@@ -70,9 +70,10 @@ pub struct ServeArgs {
     /// Seconds for a whole request body to arrive.
     #[arg(long, default_value_t = 60.0, value_parser = positive_seconds)]
     pub body_timeout: f64,
-    /// Seconds after which a connection on which nothing moves is closed.
-    #[arg(long, default_value_t = 120.0, value_parser = positive_seconds)]
-    pub idle_timeout: f64,
+    /// Seconds a response may wait for the client to read it; a client that stops reading (an
+    /// abandoned event stream) is disconnected.
+    #[arg(long, default_value_t = 60.0, value_parser = positive_seconds)]
+    pub send_timeout: f64,
     /// Serve https with this PEM certificate chain (with --tls-key).
     #[arg(long, value_name = "FILE", requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -204,7 +205,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
             max_connections: args.max_connections as usize,
             header_timeout: Duration::from_secs_f64(args.header_timeout),
             body_timeout: Duration::from_secs_f64(args.body_timeout),
-            idle_timeout: Duration::from_secs_f64(args.idle_timeout),
+            send_timeout: Duration::from_secs_f64(args.send_timeout),
         },
         token,
         tls: args.tls_cert.zip(args.tls_key).map(|(cert, key)| TlsFiles { cert, key }),

@@ -557,6 +557,13 @@ impl JobManager {
     /// (resuming a cancelled job to its original target is `total` = its `iterations_total`). A
     /// succeeded or cancelled job is queued again; a queued or running one just runs longer.
     pub async fn extend(&self, id: i64, more: Option<u64>, total: Option<u64>) -> Result<JobResource, JobError> {
+        // A finished job resumes from its checkpoint: refuse now, with nothing changed, if it is
+        // corrupted rather than queue a job that can only fail. Verified before the lifecycle
+        // lock (hashing the moments is work); only a merge could change the checkpoint meanwhile,
+        // and it writes a verified one.
+        if self.active(id).is_none() && self.inner.store.load_result(id).await?.is_some() {
+            self.verified_checkpoint(id).await?;
+        }
         let _guard = self.inner.lifecycle.lock().await;
         self.refuse_while_merging(id)?;
         let now = now_ms();
@@ -594,9 +601,6 @@ impl JobManager {
         refuse_shard_extension(id, &spec)?;
         check_budget(&self.inner.policy, &spec, new_total)?;
         self.check_queue()?;
-        // A job resumes from its checkpoint: refuse now (nothing changed) if it is corrupted,
-        // rather than queueing a job that can only fail.
-        self.verified_checkpoint(id).await?;
         spec.iterations = new_total;
         let job = spec.validate()?;
         self.inner.store.set_total(id, new_total, &spec_json(&spec)?, "queued", now).await?;

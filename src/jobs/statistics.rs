@@ -273,14 +273,15 @@ impl JobManager {
         Ok(JobResult { job_id: id, partial, state, report })
     }
 
-    /// The latest checkpoint's moments as a portable, checksummed document. A merged job's spec
-    /// says how many iterations it holds (and no shard), so that its document verifies.
-    pub async fn moments(&self, id: i64) -> Result<MomentsDocument, JobError> {
+    /// The latest checkpoint's moments as a portable, checksummed document (its canonical JSON
+    /// text, made on the request pool). A merged job's spec says how many iterations it holds (and
+    /// no shard), so that its document verifies.
+    pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
         let (_, _, spec, merged) = self.state_and_total(id).await?;
         let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
         self.compute(move || {
             let spec = if merged { merged_spec(&spec, &moments) } else { spec };
-            MomentsDocument::new(spec, moments)
+            MomentsDocument::new(spec, moments).to_json()
         })
         .await
     }

@@ -6,9 +6,9 @@
 //!   in the kernel's backlog and cost no file descriptor) until one closes;
 //! * a TLS handshake and the request head must arrive within `header_timeout` (hyper's
 //!   `header_read_timeout`, which also closes keep-alive connections idle for that long);
-//! * a connection on which no byte moves in either direction for `idle_timeout` is closed
-//!   ([`IdleTimeout`]): a client that stops reading a response cannot hold it for ever (event
-//!   streams send a keep-alive comment every 15 s, so they never go idle);
+//! * a response that cannot be sent for `send_timeout` — the client stopped reading it — closes
+//!   the connection ([`SendTimeout`]): a client cannot hold a connection by never reading an event
+//!   stream. Only a stalled send counts, so a request that computes for a while is not cut off;
 //! * request bodies are bounded in time by the extractors (`--body-timeout`), in size by the body
 //!   limits;
 //! * on shutdown, connections finish their current request and close
@@ -28,7 +28,7 @@ use hyper_util::service::TowerToHyperService;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
-use tokio::time::{Instant, Sleep};
+use tokio::time::Sleep;
 use tokio_rustls::TlsAcceptor;
 
 /// Longest wait for open connections to finish after a shutdown began.
@@ -39,7 +39,7 @@ pub const GRACE: Duration = Duration::from_secs(10);
 pub struct ConnectionLimits {
     pub max_connections: usize,
     pub header_timeout: Duration,
-    pub idle_timeout: Duration,
+    pub send_timeout: Duration,
 }
 
 /// Serves `app` on `listener` until `shutdown` resolves, then lets open connections finish (for at
@@ -77,7 +77,7 @@ pub async fn serve(
         let watcher = graceful.watcher();
         tokio::spawn(async move {
             let _permit = permit;
-            let io = IdleTimeout::new(stream, limits.idle_timeout);
+            let io = SendTimeout::new(stream, limits.send_timeout);
             match tls {
                 None => serve_connection(io, app, watcher, limits).await,
                 Some(acceptor) => match tokio::time::timeout(limits.header_timeout, acceptor.accept(io)).await {
@@ -107,66 +107,62 @@ where
     }
 }
 
-/// A stream that fails with `TimedOut` once no byte has moved in either direction for `idle`
-/// while the connection waits on it.
-pub struct IdleTimeout<IO> {
+/// A stream whose writes fail with `TimedOut` once a write has waited `limit` without progress
+/// (the peer's receive window stayed full: it stopped reading). Reads are passed through: how long
+/// a client may take to send is bounded elsewhere (the header and body timeouts), and a request
+/// that computes before it answers sends nothing meanwhile without being stalled.
+pub struct SendTimeout<IO> {
     io: IO,
-    idle: Duration,
-    deadline: Pin<Box<Sleep>>,
+    limit: Duration,
+    /// Armed when a write first returns `Pending`, disarmed by any progress.
+    stalled_since: Option<Pin<Box<Sleep>>>,
 }
 
-impl<IO> IdleTimeout<IO> {
-    pub fn new(io: IO, idle: Duration) -> Self {
-        Self { io, idle, deadline: Box::pin(tokio::time::sleep(idle)) }
+impl<IO> SendTimeout<IO> {
+    pub fn new(io: IO, limit: Duration) -> Self {
+        Self { io, limit, stalled_since: None }
     }
 
+    /// A write made progress (or completed): the stall clock stops.
     fn progressed(&mut self) {
-        self.deadline.as_mut().reset(Instant::now() + self.idle);
+        self.stalled_since = None;
     }
 
-    /// `Pending` while the deadline is ahead, the timeout error once it has passed.
-    fn check(&mut self, cx: &mut Context<'_>) -> Poll<io::Error> {
-        match self.deadline.as_mut().poll(cx) {
-            Poll::Ready(()) => Poll::Ready(io::Error::new(io::ErrorKind::TimedOut, "connection idle")),
+    /// A write is pending: start the stall clock (once) and see whether it has run out.
+    fn stalled(&mut self, cx: &mut Context<'_>) -> Poll<io::Error> {
+        let limit = self.limit;
+        let deadline = self.stalled_since.get_or_insert_with(|| Box::pin(tokio::time::sleep(limit)));
+        match deadline.as_mut().poll(cx) {
+            Poll::Ready(()) => Poll::Ready(io::Error::new(io::ErrorKind::TimedOut, "the client stopped reading")),
             Poll::Pending => Poll::Pending,
         }
     }
 }
 
-impl<IO: AsyncRead + Unpin> AsyncRead for IdleTimeout<IO> {
+impl<IO: AsyncRead + Unpin> AsyncRead for SendTimeout<IO> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
-        let before = buf.filled().len();
-        match Pin::new(&mut self.io).poll_read(cx, buf) {
-            Poll::Ready(Ok(())) => {
-                if buf.filled().len() > before {
-                    self.progressed();
-                }
-                Poll::Ready(Ok(()))
-            }
-            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => self.check(cx).map(Err),
-        }
+        Pin::new(&mut self.io).poll_read(cx, buf)
     }
 }
 
-impl<IO: AsyncWrite + Unpin> AsyncWrite for IdleTimeout<IO> {
+impl<IO: AsyncWrite + Unpin> AsyncWrite for SendTimeout<IO> {
     fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         match Pin::new(&mut self.io).poll_write(cx, buf) {
-            Poll::Ready(Ok(n)) => {
-                if n > 0 {
-                    self.progressed();
-                }
-                Poll::Ready(Ok(n))
+            Poll::Pending => self.stalled(cx).map(Err),
+            done => {
+                self.progressed();
+                done
             }
-            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => self.check(cx).map(Err),
         }
     }
 
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         match Pin::new(&mut self.io).poll_flush(cx) {
-            Poll::Pending => self.check(cx).map(Err),
-            other => other,
+            Poll::Pending => self.stalled(cx).map(Err),
+            done => {
+                self.progressed();
+                done
+            }
         }
     }
 
@@ -180,14 +176,11 @@ impl<IO: AsyncWrite + Unpin> AsyncWrite for IdleTimeout<IO> {
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
         match Pin::new(&mut self.io).poll_write_vectored(cx, bufs) {
-            Poll::Ready(Ok(n)) => {
-                if n > 0 {
-                    self.progressed();
-                }
-                Poll::Ready(Ok(n))
+            Poll::Pending => self.stalled(cx).map(Err),
+            done => {
+                self.progressed();
+                done
             }
-            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => self.check(cx).map(Err),
         }
     }
 
@@ -202,20 +195,29 @@ mod tests {
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
     #[tokio::test(start_paused = true)]
-    async fn an_idle_stream_times_out_and_a_busy_one_does_not() {
-        let (client, server) = tokio::io::duplex(64);
-        let mut server = IdleTimeout::new(server, Duration::from_secs(60));
-        let mut client = client;
-        // Bytes every 30 s keep it alive past the 60 s limit.
-        for _ in 0..4 {
-            client.write_all(b"x").await.unwrap();
-            let mut byte = [0u8];
-            server.read_exact(&mut byte).await.unwrap();
-            tokio::time::advance(Duration::from_secs(30)).await;
-        }
-        // Then nothing moves: the read fails once 60 s have passed (virtual time).
+    async fn a_send_to_a_reader_that_stopped_times_out_and_waiting_to_read_does_not() {
+        let (mut client, server) = tokio::io::duplex(1024);
+        let mut server = SendTimeout::new(server, Duration::from_secs(60));
+        // The client sends nothing for ten minutes (virtual time): a read just waits.
         let mut byte = [0u8];
-        let err = server.read_exact(&mut byte).await.unwrap_err();
+        let read = tokio::time::timeout(Duration::from_secs(600), server.read_exact(&mut byte)).await;
+        assert!(read.is_err(), "reads never time out here");
+        // A reader that keeps up: 3 KiB through a 1 KiB pipe, read 30 s apart.
+        let writer = async {
+            server.write_all(&[7u8; 3072]).await.unwrap();
+            server
+        };
+        let reader = async {
+            let mut sink = [0u8; 1024];
+            for _ in 0..3 {
+                tokio::time::sleep(Duration::from_secs(30)).await;
+                client.read_exact(&mut sink).await.unwrap();
+            }
+            client
+        };
+        let (mut server, _client) = tokio::join!(writer, reader);
+        // A reader that stopped: the pipe fills, and the write fails 60 s later.
+        let err = server.write_all(&[7u8; 4096]).await.unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::TimedOut);
     }
 }

@@ -80,8 +80,8 @@ pub struct Limits {
     pub header_timeout: Duration,
     /// A whole request body must arrive within this.
     pub body_timeout: Duration,
-    /// A connection on which nothing moves for this long is closed.
-    pub idle_timeout: Duration,
+    /// A response the client does not read for this long closes its connection.
+    pub send_timeout: Duration,
 }
 
 impl Default for Limits {
@@ -98,7 +98,7 @@ impl Default for Limits {
             max_connections: 512,
             header_timeout: Duration::from_secs(10),
             body_timeout: Duration::from_secs(60),
-            idle_timeout: Duration::from_secs(120),
+            send_timeout: Duration::from_secs(60),
         }
     }
 }
@@ -224,7 +224,7 @@ async fn run_app(
     let limits = ConnectionLimits {
         max_connections: config.limits.max_connections,
         header_timeout: config.limits.header_timeout,
-        idle_timeout: config.limits.idle_timeout,
+        send_timeout: config.limits.send_timeout,
     };
     listener::serve(listener, router, tls, limits, graceful).await;
     jobs.shutdown().await;
