@@ -7,7 +7,7 @@ use std::time::Duration;
 use clap::{Args, ValueEnum};
 
 use super::{CliError, cores};
-use crate::jobs::peers::{Peer, read_secret};
+use crate::jobs::peers::{Peer, check_owner_only, read_secret};
 use crate::server::{BearerToken, Limits, ServerConfig, TlsFiles, serve, termination_signal};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -134,27 +134,6 @@ fn token(args: &ServeArgs) -> Result<Option<BearerToken>, CliError> {
     }
 }
 
-/// Refuses a secret file that users other than its owner can read.
-fn check_private(path: &std::path::Path) -> Result<(), CliError> {
-    let metadata = std::fs::metadata(path).map_err(|source| CliError::Read { path: path.to_path_buf(), source })?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let mode = metadata.permissions().mode();
-        if mode & 0o077 != 0 {
-            return Err(CliError::Config(format!(
-                "{} is readable by other users (mode {:o}); chmod 600 {}",
-                path.display(),
-                mode & 0o777,
-                path.display()
-            )));
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = metadata;
-    Ok(())
-}
-
 fn positive_seconds(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 && x <= 86_400.0 => Ok(x),
@@ -184,7 +163,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::Config(e.to_string()))?;
     if let Some(key) = &args.tls_key {
         // The key is a secret like the token: refuse one that other users can read.
-        check_private(key)?;
+        check_owner_only(key).map_err(|e| CliError::Config(format!("--tls-key: {e}")))?;
     }
     let config = ServerConfig {
         bind: args.bind,

@@ -112,11 +112,10 @@ impl Peer {
     }
 }
 
-/// Reads a secret from a file that only its owner may read (a group- or world-readable secret is
-/// refused, as ssh does): the trimmed first line, at least 16 visible ASCII characters.
-pub fn read_secret(path: &Path) -> Result<String, PeerConfigError> {
-    let read = |source| PeerConfigError::Read { path: path.to_path_buf(), source };
-    let metadata = std::fs::metadata(path).map_err(read)?;
+/// Refuses a secret file (a token, a TLS key) that users other than its owner can read.
+pub fn check_owner_only(path: &Path) -> Result<(), PeerConfigError> {
+    let metadata =
+        std::fs::metadata(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
@@ -132,7 +131,15 @@ pub fn read_secret(path: &Path) -> Result<String, PeerConfigError> {
     }
     #[cfg(not(unix))]
     let _ = metadata;
-    let text = std::fs::read_to_string(path).map_err(read)?;
+    Ok(())
+}
+
+/// Reads a secret from a file that only its owner may read (a group- or world-readable secret is
+/// refused, as ssh does): the trimmed first line, at least 16 visible ASCII characters.
+pub fn read_secret(path: &Path) -> Result<String, PeerConfigError> {
+    check_owner_only(path)?;
+    let text =
+        std::fs::read_to_string(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
     let token = text.trim().to_string();
     if token.len() < 16 || !token.chars().all(|c| c.is_ascii_graphic()) {
         return Err(PeerConfigError::Insecure(format!(

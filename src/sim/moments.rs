@@ -368,16 +368,7 @@ impl Moments {
     /// in the two folds pooled).
     pub fn check_mergeable(&self, other: &Moments) -> Result<(), MergeError> {
         other.check_shape()?;
-        if other.fingerprint != self.fingerprint || other.cells != self.cells {
-            return Err(MergeError::Fingerprint {
-                found: other.fingerprint.clone(),
-                expected: self.fingerprint.clone(),
-            });
-        }
-        let overlaps = self.coverage.overlaps(&other.coverage);
-        if !overlaps.is_empty() {
-            return Err(MergeError::Overlap(overlaps));
-        }
+        self.check_same_configuration_and_new(other)?;
         for (a, b) in self.folds.iter().zip(&other.folds) {
             a.check_add(b)?;
         }
@@ -413,6 +404,21 @@ impl Moments {
     /// iterations (fourth powers included) comes near 2¹⁰¹⁵. Overlaps and counters are still
     /// checked; nothing changes on a refusal.
     pub(crate) fn absorb(&mut self, other: &Moments) -> Result<(), MergeError> {
+        self.check_same_configuration_and_new(other)?;
+        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+            return Err(overflow("pooled counts"));
+        }
+        debug_assert!(self.folds.iter().zip(&other.folds).all(|(a, b)| a.check_add(b).is_ok()));
+        for (a, b) in self.folds.iter_mut().zip(&other.folds) {
+            a.add(b);
+        }
+        self.coverage.union(&other.coverage);
+        Ok(())
+    }
+
+    /// What every merge needs: the same configuration, and no iteration of `other` counted here
+    /// already.
+    fn check_same_configuration_and_new(&self, other: &Moments) -> Result<(), MergeError> {
         if other.fingerprint != self.fingerprint || other.cells != self.cells {
             return Err(MergeError::Fingerprint {
                 found: other.fingerprint.clone(),
@@ -423,14 +429,6 @@ impl Moments {
         if !overlaps.is_empty() {
             return Err(MergeError::Overlap(overlaps));
         }
-        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
-            return Err(overflow("pooled counts"));
-        }
-        debug_assert!(self.folds.iter().zip(&other.folds).all(|(a, b)| a.check_add(b).is_ok()));
-        for (a, b) in self.folds.iter_mut().zip(&other.folds) {
-            a.add(b);
-        }
-        self.coverage.union(&other.coverage);
         Ok(())
     }
 
