@@ -10,10 +10,10 @@
 //! (`sim::expectation`). The small-scale version of this comparison is the test suite's
 //! tests/engines.rs; this is the documented long run (docs/results.md).
 
-use optimis::sim::config::Engine;
-use optimis::sim::equivalence::{compare, measure};
-use optimis::sim::expectation::merges;
-use optimis::sim::restricted::Proposals;
+use optimis::sim::checks::equivalence::{compare, measure};
+use optimis::sim::checks::expectation::merges;
+use optimis::sim::model::config::Engine;
+use optimis::sim::model::config::Proposals;
 use optimis::sim::spec::parse_job_spec;
 
 fn main() {

@@ -7,9 +7,9 @@
 //! Arguments: preset (default paper-table1), engine (`restricted` or `brute`, default restricted),
 //! iterations (default 10⁵); seed 1.
 
-use optimis::sim::config::Engine;
-use optimis::sim::expectation::merges;
-use optimis::sim::restricted::Proposals;
+use optimis::sim::checks::expectation::merges;
+use optimis::sim::model::config::Engine;
+use optimis::sim::model::config::Proposals;
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
 

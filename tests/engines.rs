@@ -11,10 +11,10 @@
 //! their error honestly where a bootstrap would understate it, while the shared cameras cancel
 //! instead of inflating the error.
 
-use optimis::sim::config::Engine;
-use optimis::sim::equivalence::{Figures, compare, measure};
-use optimis::sim::expectation::merges;
-use optimis::sim::restricted::Proposals;
+use optimis::sim::checks::equivalence::{Figures, compare, measure};
+use optimis::sim::checks::expectation::merges;
+use optimis::sim::model::config::Engine;
+use optimis::sim::model::config::Proposals;
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
 use serde_json::json;

@@ -11,8 +11,8 @@ use std::time::Duration;
 use common::{TestServer, assert_problem};
 use futures_util::StreamExt;
 use optimis::sim::document::MomentsDocument;
-use optimis::sim::exact_sum::ExactSum;
-use optimis::sim::moments::packed_index;
+use optimis::sim::math::exact_sum::ExactSum;
+use optimis::sim::stats::moments::packed_index;
 use serde_json::{Value, json};
 
 /// Fails the test if `f` does not complete within a minute (a freeze, not a slow machine).
@@ -332,7 +332,7 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
     let problem = assert_problem(server.post("/v1/studies", &json!({ "sources": [negative] })).await, 422).await;
     assert!(problem["detail"].as_str().unwrap().contains("contradict"), "{problem}");
     let wrapped = forge(&doc, |d| {
-        let huge: optimis::sim::coverage::Coverage = serde_json::from_value(json!([
+        let huge: optimis::sim::stats::coverage::Coverage = serde_json::from_value(json!([
             { "seed": 1, "ranges": [[0u64, 1u64 << 63]] }, { "seed": 2, "ranges": [[0u64, 1u64 << 63]] },
             { "seed": 3, "ranges": [[0u64, 1u64 << 63]] }, { "seed": 4, "ranges": [[0u64, 1u64 << 63]] }]))
         .unwrap();
@@ -342,7 +342,10 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
     assert_problem(server.post(&format!("/v1/jobs/{target}/merge"), &wrapped).await, 422).await;
     let empty = forge(&doc, |d| {
         let spec = d.spec.clone();
-        *d = MomentsDocument::new(spec.clone(), optimis::sim::moments::Moments::new(&spec.validate().unwrap().config));
+        *d = MomentsDocument::new(
+            spec.clone(),
+            optimis::sim::stats::moments::Moments::new(&spec.validate().unwrap().config),
+        );
     });
     let problem = assert_problem(server.post("/v1/studies", &json!({ "sources": [empty] })).await, 422).await;
     assert!(problem["detail"].as_str().unwrap().contains("no iterations"), "{problem}");

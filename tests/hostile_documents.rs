@@ -9,9 +9,9 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use optimis::sim::document::{MomentsDocument, merge_documents};
-use optimis::sim::moments::Moments;
 use optimis::sim::runner::run;
 use optimis::sim::spec::parse_job_spec;
+use optimis::sim::stats::moments::Moments;
 use proptest::prelude::*;
 use serde_json::{Value, json};
 

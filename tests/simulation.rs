@@ -1,6 +1,6 @@
 //! Statistical and determinism tests of the simulation core, end to end (no server, no database).
 //!
-//! Means are checked against the independent quadrature of `sim::quadrature` within 4 standard
+//! Means are checked against the independent quadrature of `sim::checks::quadrature` within 4 standard
 //! errors. Test scenes scale N_F, N_B and R up from the paper's so that the rare events that
 //! dominate some estimators (a camera path landing in the bright spot, a spot light path merging
 //! at plane 2 in line with the pixel) happen often enough (≥ 100 times) for the standard errors to
@@ -19,13 +19,13 @@
 
 use std::sync::atomic::AtomicBool;
 
-use optimis::sim::config::SimConfig;
-use optimis::sim::moments::{MergeError, Moments};
-use optimis::sim::noise::noise_table;
-use optimis::sim::quadrature::reference_luminance;
+use optimis::sim::checks::quadrature::reference_luminance;
+use optimis::sim::model::config::SimConfig;
 use optimis::sim::runner::{run, run_iterations};
-use optimis::sim::solver::{YStats, fit};
+use optimis::sim::solve::noise::noise_table;
+use optimis::sim::solve::solver::{YStats, fit};
 use optimis::sim::spec::{ValidJob, parse_job_spec};
+use optimis::sim::stats::moments::{MergeError, Moments};
 use proptest::prelude::*;
 use serde_json::{Value, json};
 

@@ -11,8 +11,8 @@ use utoipa::ToSchema;
 
 use crate::jobs::JobError;
 use crate::sim::document::DocumentError;
-use crate::sim::moments::MergeError;
 use crate::sim::spec::SpecError;
+use crate::sim::stats::moments::MergeError;
 use crate::store::StoreError;
 
 /// Media type of every error body.

@@ -15,8 +15,8 @@ use super::extract::{JobId, JsonBody, typed};
 use crate::jobs::documents::{JobHistory, JobList, JobResult};
 use crate::jobs::resource::{JobResource, JobState};
 use crate::sim::document::MomentsDocument;
-use crate::sim::spec::{FixedWeights, RingSpec};
-
+use crate::sim::model::params::RingSpec;
+use crate::sim::solve::options::FixedWeights;
 /// Longest accepted `Idempotency-Key`.
 const MAX_KEY_LEN: usize = 255;
 
@@ -143,13 +143,13 @@ pub struct ExtendRequest {
     /// (`iterations_done`) once it succeeded or was cancelled. At least 1; the new total may not
     /// exceed 10^9.
     #[schema(minimum = 1, maximum = 1_000_000_000)]
-    #[serde(default, deserialize_with = "crate::sim::spec::optional_count")]
+    #[serde(default, deserialize_with = "crate::sim::model::params::optional_count")]
     pub iterations: Option<u64>,
     /// The new target instead: run until the job holds this many iterations (resume a cancelled
     /// job to its original target with `total` = its `iterations_total`). Above the iterations it
     /// holds, at most 10^9.
     #[schema(minimum = 1, maximum = 1_000_000_000)]
-    #[serde(default, deserialize_with = "crate::sim::spec::optional_count")]
+    #[serde(default, deserialize_with = "crate::sim::model::params::optional_count")]
     pub total: Option<u64>,
 }
 

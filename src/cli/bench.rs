@@ -9,11 +9,11 @@ use clap::{Args, ValueEnum};
 use serde_json::{Value, json};
 
 use super::{CliError, cores, thread_pool};
-use crate::sim::config::{Engine, SimConfig};
-use crate::sim::moments::Moments;
-use crate::sim::restricted::Proposals;
+use crate::sim::model::config::Proposals;
+use crate::sim::model::config::{Engine, SimConfig};
 use crate::sim::runner::run_iterations;
 use crate::sim::spec::parse_job_spec;
+use crate::sim::stats::moments::Moments;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BenchEngine {

@@ -8,11 +8,12 @@ use serde_json::Value;
 
 use super::run::write_atomically;
 use super::{CliError, table};
+use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{MomentsDocument, merge_documents};
-use crate::sim::quadrature::reference_luminance;
-use crate::sim::report::build_report;
-use crate::sim::spec::{SolverOptions, SpecError, merge_patch, validate_solver};
-
+use crate::sim::solve::options::SolverOptions;
+use crate::sim::solve::options::validate_solver;
+use crate::sim::solve::report::build_report;
+use crate::sim::spec::{SpecError, merge_patch};
 #[derive(Debug, Args)]
 pub struct MergeArgs {
     /// Moments documents (from `optimis run --out` or `GET /v1/jobs/{id}/moments`).

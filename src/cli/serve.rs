@@ -49,7 +49,7 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = crate::server::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
     pub max_iteration_work: f64,
     /// Most cells of a job's weight grid.
-    #[arg(long, default_value_t = crate::sim::spec::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::spec::MAX_CELLS as u64))]
+    #[arg(long, default_value_t = crate::sim::model::cells::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::model::cells::MAX_CELLS as u64))]
     pub max_cells: u64,
     /// Most jobs waiting in the queue (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]

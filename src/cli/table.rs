@@ -2,7 +2,7 @@
 
 use std::io::{self, Write};
 
-use crate::sim::report::RunReport;
+use crate::sim::solve::report::RunReport;
 use crate::sim::spec::JobSpec;
 
 fn num(x: Option<f64>, scale: f64, width: usize, precision: usize) -> String {

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::resource::{JobResource, JobState};
-use crate::sim::report::RunReport;
+use crate::sim::solve::report::RunReport;
 
 /// A job's results: the noise table and weights of the core's report, from the latest checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]

@@ -21,13 +21,13 @@ use super::documents::StrategyPoint;
 use super::error::JobError;
 use super::manager::{ActiveJob, Inner, StopReason, best_strategy};
 use super::resource::{now_ms, rfc3339};
-use crate::sim::config::sha256_hex;
-use crate::sim::coverage::Coverage;
-use crate::sim::moments::Moments;
-use crate::sim::noise::path_rows;
-use crate::sim::report::build_report;
+use crate::sim::math::digest::sha256_hex;
 use crate::sim::runner::{RunError, run_iterations};
+use crate::sim::solve::noise::path_rows;
+use crate::sim::solve::report::build_report;
 use crate::sim::spec::ValidJob;
+use crate::sim::stats::coverage::Coverage;
+use crate::sim::stats::moments::Moments;
 use crate::store::{Checkpoint, StoreError};
 
 /// How often progress is published to the job's watchers.
@@ -155,7 +155,7 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         match outcome {
             Ok(_) => {}
             Err(RunError::Cancelled) => return stopped(inner, job),
-            Err(RunError::Moments(e @ crate::sim::moments::MergeError::Overflow(_))) => {
+            Err(RunError::Moments(e @ crate::sim::stats::moments::MergeError::Overflow(_))) => {
                 return Err(JobError::Simulation(e.to_string()));
             }
             Err(e @ RunError::Moments(_)) => return Err(JobError::Internal(e.to_string())),

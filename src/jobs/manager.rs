@@ -17,8 +17,8 @@
 //! rayon pool (see `driver`), and one-off computations a request waits for (validation with the
 //! reference luminance and the iteration's expected work, verification of documents, re-solves)
 //! go to a small second rayon pool through a oneshot channel, so that they never queue behind a
-//! running job's chunks. Each of them is bounded (see `sim::quadrature`, `sim::cost`,
-//! `sim::exact_sum`).
+//! running job's chunks. Each of them is bounded (see `sim::checks::quadrature`, `sim::engines::cost`,
+//! `sim::math::exact_sum`).
 //!
 //! The statistics operations (results, re-solves, merges, studies) live in `statistics`.
 
@@ -37,9 +37,9 @@ use super::error::JobError;
 use super::peers::Peers;
 use super::resource::{BestStrategy, JobResource, JobState, Progress, now_ms, rfc3339};
 use crate::metrics::{JobSample, Metrics};
-use crate::sim::config::sha256_hex;
-use crate::sim::cost::iteration_work;
-use crate::sim::quadrature::reference_luminance;
+use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::engines::cost::iteration_work;
+use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::{JobSpec, SpecError, ValidJob, parse_job_spec};
 use crate::store::{Inserted, JobRow, NewJob, Store, StoreError};
 
@@ -54,7 +54,7 @@ pub struct RunPolicy {
     pub checkpoint_interval: Duration,
     /// Largest N_F · N_B · iterations of one job.
     pub job_budget: f64,
-    /// Largest expected work of one iteration, in light-path equivalents (`sim::cost`).
+    /// Largest expected work of one iteration, in light-path equivalents (`sim::engines::cost`).
     pub max_iteration_work: f64,
     /// Most cells of a job's grid.
     pub max_cells: usize,
@@ -197,7 +197,7 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
 /// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample
 /// `optimal` and `optimal_cv` rows are evaluated on the data they were fitted to, so they are left
 /// out (`optimal_holdout` stays).
-pub(crate) fn best_strategy(rows: &[crate::sim::noise::NoiseRow]) -> Option<BestStrategy> {
+pub(crate) fn best_strategy(rows: &[crate::sim::solve::noise::NoiseRow]) -> Option<BestStrategy> {
     rows.iter()
         .filter(|r| r.strategy != "optimal" && r.strategy != "optimal_cv")
         .filter_map(|r| match (r.luminance, r.rms_percent) {
@@ -245,7 +245,7 @@ fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobErr
     }
     // The brute force traces N_F paths; the restricted engine's candidates and every engine's merges
     // grow with the merge discs (R²).
-    let traced_dominates = work.light_paths >= crate::sim::cost::MERGE_WEIGHT * work.merges;
+    let traced_dominates = work.light_paths >= crate::sim::engines::cost::MERGE_WEIGHT * work.merges;
     let field = if job.spec.engine == crate::sim::spec::EngineName::Brute && traced_dominates {
         "light_paths"
     } else {

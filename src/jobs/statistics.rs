@@ -19,13 +19,15 @@ use super::error::JobError;
 use super::manager::{JobManager, check_budget, parse_stored_spec, resource_from_row, spec_json};
 use super::peers::CONCURRENT_PULLS;
 use super::resource::{JobResource, JobState, now_ms};
-use crate::sim::config::sha256_hex;
-use crate::sim::coverage::Coverage;
+use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
-use crate::sim::moments::Moments;
-use crate::sim::quadrature::reference_luminance;
-use crate::sim::report::{RunReport, build_report};
-use crate::sim::spec::{JobSpec, SolverOptions, SpecError, merge_patch, validate_solver};
+use crate::sim::math::digest::sha256_hex;
+use crate::sim::solve::options::SolverOptions;
+use crate::sim::solve::options::validate_solver;
+use crate::sim::solve::report::{RunReport, build_report};
+use crate::sim::spec::{JobSpec, SpecError, merge_patch};
+use crate::sim::stats::coverage::Coverage;
+use crate::sim::stats::moments::Moments;
 use crate::store::{Checkpoint, NewJob, StoreError};
 
 /// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
@@ -391,7 +393,7 @@ impl JobManager {
                 Some(mut acc) => self
                     .compute(move || {
                         acc.merge(&doc.moments)?;
-                        Ok::<_, crate::sim::moments::MergeError>(acc)
+                        Ok::<_, crate::sim::stats::moments::MergeError>(acc)
                     })
                     .await?
                     .map_err(DocumentError::from)?,

@@ -63,7 +63,7 @@ pub struct Limits {
     pub document_bytes: usize,
     /// Largest N_F · N_B · iterations of one job (the number of light–camera path pairs).
     pub job_budget: f64,
-    /// Largest expected work of one iteration, in light-path equivalents (`sim::cost`).
+    /// Largest expected work of one iteration, in light-path equivalents (`sim::engines::cost`).
     pub max_iteration_work: f64,
     /// Most cells of a job's grid.
     pub max_cells: usize,
@@ -91,7 +91,7 @@ impl Default for Limits {
             document_bytes: crate::api::DEFAULT_DOCUMENT_LIMIT,
             job_budget: 1e16,
             max_iteration_work: DEFAULT_MAX_ITERATION_WORK,
-            max_cells: crate::sim::spec::MAX_CELLS,
+            max_cells: crate::sim::model::cells::MAX_CELLS,
             max_queued_jobs: 1000,
             max_event_streams: 256,
             max_document_requests: 2,

@@ -23,10 +23,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::config::sha256_hex;
-use super::coverage::Coverage;
-use super::moments::{MergeError, Moments};
 use super::spec::JobSpec;
+use crate::sim::math::digest::sha256_hex;
+use crate::sim::stats::coverage::Coverage;
+use crate::sim::stats::moments::{MergeError, Moments};
 
 /// The `kind` of every moments document.
 pub const DOCUMENT_KIND: &str = "optimis-moments";
@@ -181,7 +181,7 @@ impl MomentsDocument {
     }
 
     /// Parses and verifies a document from JSON text: straight into the typed document (every list
-    /// bounded, see [`crate::sim::moments`]), so memory stays within a few times the text's size.
+    /// bounded, see [`crate::sim::stats::moments`]), so memory stays within a few times the text's size.
     pub fn from_json(bytes: &[u8]) -> Result<Self, DocumentError> {
         let doc: Self = parse_json(bytes).map_err(DocumentError::Unreadable)?;
         doc.verify()?;
@@ -229,7 +229,7 @@ pub fn merged_spec(base: &JobSpec, moments: &Moments) -> JobSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::exact_sum::ExactSum;
+    use crate::sim::math::exact_sum::ExactSum;
     use crate::sim::runner::run;
     use crate::sim::spec::parse_job_spec;
     use serde_json::json;
@@ -350,7 +350,7 @@ mod tests {
         let n = 2 * a.moments.cells + 1;
         let huge = |mut doc: MomentsDocument| {
             // An off-diagonal entry of ΣYYᵀ: no Cauchy–Schwarz check applies to it.
-            doc.moments.folds[0].sum_yy[crate::sim::moments::packed_index(n, 0, 1)] =
+            doc.moments.folds[0].sum_yy[crate::sim::stats::moments::packed_index(n, 0, 1)] =
                 ExactSum::from_parts(&[1e301]).unwrap();
             MomentsDocument::from_json(&reseal(doc).to_json()).unwrap()
         };

@@ -19,12 +19,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
-use super::camera::CameraSet;
-use super::config::{Engine, SimConfig};
-use super::light::trace_chunk;
-use super::moments::{MergeError, Moments};
-use super::restricted::{RestrictedPlan, RestrictedScratch, trace_restricted};
-use super::tally::{ChunkScratch, ChunkTally, IterationTally};
+use crate::sim::engines::brute::trace_chunk;
+use crate::sim::engines::camera::CameraSet;
+use crate::sim::engines::restricted::{RestrictedPlan, RestrictedScratch, trace_restricted};
+use crate::sim::engines::tally::{ChunkScratch, ChunkTally, IterationTally};
+use crate::sim::model::config::{Engine, SimConfig};
+use crate::sim::stats::moments::{MergeError, Moments};
 
 /// Why a run stopped early.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

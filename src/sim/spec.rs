@@ -12,39 +12,20 @@
 
 use std::sync::Arc;
 
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use super::cells::CellGrid;
-use super::config::{Engine, SimConfig};
-use super::restricted::Proposals;
-use super::scene::Scene;
+use crate::sim::model::config::{Engine, Proposals, SimConfig};
+pub use crate::sim::model::params::SpecError;
+use crate::sim::model::params::{
+    CellSpec, MIN_LENGTH, SceneSpec, check, count, optional_count, validate_cells, validate_scene,
+};
+use crate::sim::model::scene::Scene;
+use crate::sim::solve::options::{SolverOptions, validate_solver};
+use crate::sim::stats::coverage::MAX_ITERATION_INDEX;
 
 /// The preset used when a document names none.
 pub const DEFAULT_PRESET: &str = "paper-table1";
-
-/// Most cells a grid may have: the moments hold a dense (2K+1)² matrix per fold.
-pub const MAX_CELLS: usize = 256;
-
-/// Most λ values a cross-validation grid may try.
-pub const MAX_CV_LAMBDAS: usize = 32;
-
-/// A rejected field: which one (a JSON path such as `scene.illumination.a`) and why, with the
-/// allowed range.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{field}: {message}")]
-pub struct SpecError {
-    /// JSON path of the offending field (`""` for the document itself).
-    pub field: String,
-    /// What is wrong and what is allowed.
-    pub message: String,
-}
-
-impl SpecError {
-    pub fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
-        Self { field: field.into(), message: message.into() }
-    }
-}
 
 /// A fully resolved job specification (preset applied). Field names are the JSON API.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -132,116 +113,6 @@ impl JobSpec {
     }
 }
 
-/// The three planes and the light.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct SceneSpec {
-    /// Distance from plane 1 (z = 0) to plane 2.
-    pub l2: f64,
-    /// Distance from plane 2 to plane 3.
-    pub l3: f64,
-    /// Width β of the plane-2 transmission lobe, in degrees.
-    pub beta_deg: f64,
-    pub illumination: IlluminationSpec,
-}
-
-/// The radial illumination profile I(r) of plane 3 (normalised to total flux 1 by the model).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum IlluminationSpec {
-    /// The paper's profile: `contrast` for r ≤ a, 1 for a < r < r_ls, 0 beyond.
-    Spot { a: f64, r_ls: f64, contrast: f64 },
-    /// 1 for r < r_ls, 0 beyond.
-    Uniform { r_ls: f64 },
-    /// Piecewise constant: `level` up to `outer_radius`, ring after ring, 0 beyond the last.
-    Rings { rings: Vec<RingSpec> },
-}
-
-/// One ring of a `rings` profile.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct RingSpec {
-    #[cfg_attr(feature = "server", schema(minimum = 1e-9, maximum = 1e6))]
-    pub outer_radius: f64,
-    #[cfg_attr(feature = "server", schema(minimum = 0.0, maximum = 1e12))]
-    pub level: f64,
-}
-
-/// The cell grid of the tabulated weights over the join path's (r2, r3, φ).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct CellSpec {
-    /// Cell edges on r2, starting at 0; the last edge opens a tail cell to infinity.
-    pub r2_edges: Vec<f64>,
-    /// Cell edges on r3, starting at 0; the last edge opens a tail cell to infinity.
-    pub r3_edges: Vec<f64>,
-    /// Number of equal φ bins on [0, π].
-    #[serde(deserialize_with = "count_u32")]
-    pub phi_bins: u32,
-}
-
-/// How the optimal weights are fitted.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct SolverOptions {
-    /// Weights held fixed in every cell (the paper: w0 = 0).
-    pub fixed: FixedWeights,
-    /// Gradient penalty λ ≥ 0 between neighbouring cells (dimensionless; see the solver).
-    pub lambda: f64,
-    /// The λ grid searched by the `optimal_cv` strategy.
-    pub cv_lambdas: Vec<f64>,
-}
-
-/// Per-component fixed weights; `None` means fitted.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct FixedWeights {
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w0: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w1: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub w2: Option<f64>,
-}
-
-impl FixedWeights {
-    /// The fixed value of component m (0, 1, 2).
-    pub fn get(&self, m: usize) -> Option<f64> {
-        [self.w0, self.w1, self.w2][m]
-    }
-}
-
-/// Accepts integers and integral floats (`1e7`) for counts: users write both, and JSON Schema
-/// counts `1.0` as an integer.
-pub fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
-    use serde::de::Error;
-    let v = Value::deserialize(d)?;
-    if let Some(n) = v.as_u64() {
-        return Ok(n);
-    }
-    match v.as_f64() {
-        Some(x) if x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0 => Ok(x as u64),
-        _ => Err(D::Error::custom(format!("expected a non-negative integer, got {v}"))),
-    }
-}
-
-/// [`count`] for an optional field (use with `#[serde(default)]`).
-pub fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
-    count(d).map(Some)
-}
-
-fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
-    use serde::de::Error;
-    let n = count(d)?;
-    u32::try_from(n).map_err(|_| D::Error::custom(format!("expected at most {}, got {n}", u32::MAX)))
-}
-
 /// The names of the presets.
 pub const PRESETS: &[&str] = &["paper-table1", "uniform-illumination"];
 
@@ -258,7 +129,7 @@ pub fn preset(name: &str) -> Option<Value> {
         },
         "merge_radius": 0.003,
         // The restricted engine: the same estimates thousands of times faster (see
-        // `sim::restricted`; tests/engines.rs checks the equivalence with the brute force).
+        // `sim::engines::restricted`; tests/engines.rs checks the equivalence with the brute force).
         "engine": "restricted",
         "light_paths": 10_000_000u64,
         "camera_paths": 100,
@@ -347,47 +218,12 @@ pub struct ValidJob {
     pub config: Arc<SimConfig>,
 }
 
-fn check(ok: bool, field: &str, message: impl FnOnce() -> String) -> Result<(), SpecError> {
-    if ok { Ok(()) } else { Err(SpecError::new(field, message())) }
-}
-
-/// `x` is finite and in (lo, hi].
-fn in_open_closed(x: f64, lo: f64, hi: f64) -> bool {
-    x.is_finite() && x > lo && x <= hi
-}
-
-/// Largest length accepted anywhere in a scene: far beyond any sensible scene, small enough that
-/// squares and products stay finite.
-pub const MAX_LENGTH: f64 = 1e6;
-
-/// Smallest length accepted (plane distances, radii, the merge radius): far below any sensible
-/// scene (the paper's lengths are of order 1), far above where the merge kernel 1/(πR²) and its
-/// squares in the moments overflow.
-pub const MIN_LENGTH: f64 = 1e-9;
-
-/// Smallest lobe width β in degrees: the lobe's density grows as 1/β², and below this its
-/// contributions' fourth powers (the noise table's standard errors) leave the doubles.
-pub const MIN_BETA_DEG: f64 = 1e-6;
-
-/// `x` is finite and in [lo, hi].
-fn in_closed(x: f64, lo: f64, hi: f64) -> bool {
-    x.is_finite() && x >= lo && x <= hi
-}
-
 impl JobSpec {
     /// Checks every value and builds the simulation configuration. The one place values are
     /// validated: everything downstream trusts a [`ValidJob`].
     pub fn validate(&self) -> Result<ValidJob, SpecError> {
         let s = &self.scene;
-        for (name, v) in [("scene.l2", s.l2), ("scene.l3", s.l3)] {
-            check(in_closed(v, MIN_LENGTH, MAX_LENGTH), name, || {
-                format!("must be a distance in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {v}")
-            })?;
-        }
-        check(in_closed(s.beta_deg, MIN_BETA_DEG, 45.0), "scene.beta_deg", || {
-            format!("must be in [{MIN_BETA_DEG:e}, 45] degrees, got {}", s.beta_deg)
-        })?;
-        validate_illumination(&s.illumination)?;
+        validate_scene(s)?;
         let max_r = s.l2.min(s.l3);
         check(
             self.merge_radius.is_finite() && self.merge_radius >= MIN_LENGTH && self.merge_radius < max_r,
@@ -413,9 +249,6 @@ impl JobSpec {
     }
 }
 
-/// Largest iteration index a job may reach (keeps index arithmetic far from overflow).
-pub const MAX_ITERATION_INDEX: u64 = 1 << 62;
-
 fn validate_range(spec: &JobSpec) -> Result<(), SpecError> {
     if let Some(Shard { index, count }) = spec.shard {
         check(spec.first_iteration.is_none(), "first_iteration", || {
@@ -436,141 +269,11 @@ fn validate_range(spec: &JobSpec) -> Result<(), SpecError> {
     Ok(())
 }
 
-/// Smallest flux level·(r_out² − r_in²) of an emitting ring: far below any real profile, far above
-/// the subnormals, whose reciprocals overflow (a subnormal flux once made the reference NaN).
-pub const MIN_RING_FLUX: f64 = 1e-200;
-
-fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
-    let f = "scene.illumination";
-    validate_profile(ill)?;
-    let profile = super::illumination::Illumination::from_spec(ill);
-    for ring in profile.rings() {
-        let flux = ring.level * (ring.r_out * ring.r_out - ring.r_in * ring.r_in);
-        check(flux >= MIN_RING_FLUX, f, || {
-            format!(
-                "the ring [{}, {}) with level {} emits a flux of {flux:e}; every emitting ring needs at least \
-                 {MIN_RING_FLUX:e} (level × (r_out² − r_in²))",
-                ring.r_in, ring.r_out, ring.level
-            )
-        })?;
-    }
-    Ok(())
-}
-
-fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
-    let f = "scene.illumination";
-    match *ill {
-        IlluminationSpec::Spot { a, r_ls, contrast } => {
-            check(in_closed(a, MIN_LENGTH, MAX_LENGTH), &format!("{f}.a"), || {
-                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {a}")
-            })?;
-            check(in_open_closed(r_ls, a, MAX_LENGTH), &format!("{f}.r_ls"), || {
-                format!("must be a radius in (a = {a}, {MAX_LENGTH:e}], got {r_ls}")
-            })?;
-            check(in_open_closed(contrast, 0.0, 1e12), &format!("{f}.contrast"), || {
-                format!("must be in (0, 1e12], got {contrast}")
-            })
-        }
-        IlluminationSpec::Uniform { r_ls } => {
-            check(in_closed(r_ls, MIN_LENGTH, MAX_LENGTH), &format!("{f}.r_ls"), || {
-                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {r_ls}")
-            })
-        }
-        IlluminationSpec::Rings { ref rings } => {
-            check((1..=64).contains(&rings.len()), &format!("{f}.rings"), || {
-                format!("must list 1 to 64 rings, got {}", rings.len())
-            })?;
-            let mut inner = 0.0;
-            let mut flux = 0.0;
-            for (i, ring) in rings.iter().enumerate() {
-                let field = format!("{f}.rings[{i}]");
-                let ok = in_open_closed(ring.outer_radius, inner, MAX_LENGTH) && ring.outer_radius >= MIN_LENGTH;
-                check(ok, &format!("{field}.outer_radius"), || {
-                    format!(
-                        "must be in ({inner}, {MAX_LENGTH:e}] and at least {MIN_LENGTH:e} (radii strictly increasing), \
-                         got {}",
-                        ring.outer_radius
-                    )
-                })?;
-                check(ring.level.is_finite() && (0.0..=1e12).contains(&ring.level), &format!("{field}.level"), || {
-                    format!("must be in [0, 1e12], got {}", ring.level)
-                })?;
-                flux += ring.level * (ring.outer_radius.powi(2) - inner * inner);
-                inner = ring.outer_radius;
-            }
-            check(flux > 0.0, &format!("{f}.rings"), || "must emit some light: every level is 0".to_string())
-        }
-    }
-}
-
-fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
-    check(!edges.is_empty() && edges[0] == 0.0, field, || {
-        format!("must start at 0 (the first cell begins at r = 0), got {edges:?}")
-    })?;
-    for (i, pair) in edges.windows(2).enumerate() {
-        check(
-            pair[1].is_finite() && pair[1] > pair[0] && pair[1] <= MAX_LENGTH,
-            &format!("{field}[{}]", i + 1),
-            || {
-                format!(
-                    "edges must be finite and strictly increasing (≤ {MAX_LENGTH:e}), got {} after {}",
-                    pair[1], pair[0]
-                )
-            },
-        )?;
-    }
-    Ok(())
-}
-
-fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
-    validate_edges(&cells.r2_edges, "cells.r2_edges")?;
-    validate_edges(&cells.r3_edges, "cells.r3_edges")?;
-    check((1..=360).contains(&cells.phi_bins), "cells.phi_bins", || {
-        format!("must be in [1, 360], got {}", cells.phi_bins)
-    })?;
-    let total = cells.r2_edges.len() * cells.r3_edges.len() * cells.phi_bins as usize;
-    check(total <= MAX_CELLS, "cells", || {
-        format!(
-            "{} r2 cells × {} r3 cells × {} φ bins = {total} cells; at most {MAX_CELLS} are allowed",
-            cells.r2_edges.len(),
-            cells.r3_edges.len(),
-            cells.phi_bins
-        )
-    })?;
-    Ok(CellGrid::new(cells.r2_edges.clone(), cells.r3_edges.clone(), cells.phi_bins))
-}
-
-/// Checks solver options (also used alone when a stored job is re-solved with new options).
-pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
-    for (m, w) in [solver.fixed.w0, solver.fixed.w1, solver.fixed.w2].into_iter().enumerate() {
-        if let Some(w) = w {
-            check(w.is_finite() && w.abs() <= 1e6, &format!("solver.fixed.w{m}"), || {
-                format!("must be a finite weight with |w| ≤ 1e6, got {w}")
-            })?;
-        }
-    }
-    if let (Some(a), Some(b), Some(c)) = (solver.fixed.w0, solver.fixed.w1, solver.fixed.w2) {
-        check((a + b + c - 1.0).abs() <= 1e-9, "solver.fixed", || {
-            format!("w0 + w1 + w2 must equal 1 when all three are fixed, got {}", a + b + c)
-        })?;
-    }
-    check(solver.lambda.is_finite() && (0.0..=1e12).contains(&solver.lambda), "solver.lambda", || {
-        format!("must be in [0, 1e12], got {}", solver.lambda)
-    })?;
-    check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
-        format!("must list 1 to {MAX_CV_LAMBDAS} values, got {}", solver.cv_lambdas.len())
-    })?;
-    for (i, &l) in solver.cv_lambdas.iter().enumerate() {
-        check(l.is_finite() && (0.0..=1e12).contains(&l), &format!("solver.cv_lambdas[{i}]"), || {
-            format!("must be in [0, 1e12], got {l}")
-        })?;
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::model::params::IlluminationSpec;
+    use crate::sim::solve::options::FixedWeights;
 
     fn parse(doc: Value) -> Result<JobSpec, SpecError> {
         parse_job_spec(&doc)

@@ -11,9 +11,10 @@
 
 use std::f64::consts::PI;
 
-use super::fastmath::sincos_turn;
-use super::rng::{StreamRng, symmetric_pair, uniform, unit52};
-use super::spec::IlluminationSpec;
+use super::params::IlluminationSpec;
+use crate::sim::math::fastmath::sincos_turn;
+use crate::sim::math::rng::{StreamRng, uniform, unit52};
+use crate::sim::math::sampling::unit_disc_point;
 
 /// One annulus of constant level.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -281,23 +282,10 @@ impl RingSampler {
     }
 }
 
-/// A point uniform in the open unit disc minus its centre, by rejection from the square (accepted
-/// with probability π/4), with its squared radius.
-#[inline(always)]
-pub fn unit_disc_point(rng: &mut StreamRng) -> (f64, f64, f64) {
-    loop {
-        let (u, v) = symmetric_pair(rng);
-        let rho2 = u * u + v * v;
-        if rho2 < 1.0 && rho2 > 0.0 {
-            return (u, v, rho2);
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::rng::stream;
+    use crate::sim::math::rng::stream;
 
     fn paper() -> Illumination {
         Illumination::from_spec(&IlluminationSpec::Spot { a: 0.02, r_ls: 20.0, contrast: 1e6 / 300.0 })
@@ -373,7 +361,7 @@ mod tests {
     #[test]
     fn block_sampling_follows_the_profile() {
         let ill = paper();
-        let mut rng = crate::sim::rng::LaneRng::new(12, 0, 0);
+        let mut rng = crate::sim::math::rng::LaneRng::new(12, 0, 0);
         let mut bits = [[0u64; 128]; 2];
         let mut out = [[0.0; 128]; 2];
         let (mut n, mut in_spot, mut in_band, mut sum_r2, mut sum_cos, mut sum_sin) = (0u32, 0u32, 0u32, 0.0, 0.0, 0.0);
@@ -414,7 +402,7 @@ mod tests {
     /// points of each ring are uniform in its area (the share in its inner half-area is ½).
     #[test]
     fn block_sampling_of_many_rings() {
-        use crate::sim::spec::RingSpec;
+        use crate::sim::model::params::RingSpec;
         let specs: [&[(f64, f64)]; 4] = [
             &[(1.5, 1.0)],
             &[(1.0, 2.0), (2.0, 0.0), (2.1, 5.0)],
@@ -425,7 +413,7 @@ mod tests {
             let rings = spec.iter().map(|&(outer_radius, level)| RingSpec { outer_radius, level }).collect();
             let ill = Illumination::from_spec(&IlluminationSpec::Rings { rings });
             let emitting = ill.rings().to_vec();
-            let mut rng = crate::sim::rng::LaneRng::new(3, 1, seed as u64);
+            let mut rng = crate::sim::math::rng::LaneRng::new(3, 1, seed as u64);
             let mut bits = [[0u64; 64]; 2];
             let mut out = [[0.0; 64]; 2];
             let (mut counts, mut inner) = (vec![0u32; emitting.len()], vec![0u32; emitting.len()]);
@@ -460,8 +448,8 @@ mod tests {
     fn zero_level_rings_never_emit() {
         let ill = Illumination::from_spec(&IlluminationSpec::Rings {
             rings: vec![
-                crate::sim::spec::RingSpec { outer_radius: 1.0, level: 0.0 },
-                crate::sim::spec::RingSpec { outer_radius: 2.0, level: 3.0 },
+                crate::sim::model::params::RingSpec { outer_radius: 1.0, level: 0.0 },
+                crate::sim::model::params::RingSpec { outer_radius: 2.0, level: 3.0 },
             ],
         });
         let mut rng = stream(1, 2, 3);

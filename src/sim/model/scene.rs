@@ -11,7 +11,9 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 
 use super::illumination::Illumination;
-use super::spec::SceneSpec;
+use super::params::SceneSpec;
+use crate::sim::math::rng::{StreamRng, uniform, uniform_open0};
+use crate::sim::math::sampling::deflect;
 
 /// The plane-2 transmission lobe.
 ///
@@ -19,7 +21,7 @@ use super::spec::SceneSpec;
 /// between the incident and the scattered direction of travel, γ the angle between the scattered
 /// direction and the normal.
 ///
-/// Sampling (see [`super::sampling::sample_lobe`]) draws ϑ = β·√(−2 ln u) and a uniform azimuth
+/// Sampling (see [`crate::sim::model::scene::sample_lobe`]) draws ϑ = β·√(−2 ln u) and a uniform azimuth
 /// around the incident direction: ϑ has the Rayleigh density (ϑ/β²)·exp(−ϑ²/2β²), so the exact
 /// solid-angle pdf of the sampled direction is `pdf_w(ϑ) = g(ϑ)·ϑ/sin ϑ`. A particle scattered this
 /// way carries the throughput f2·cos γ / pdf_w = sin ϑ/ϑ (≈ 1 − ϑ²/6): we keep this exact factor
@@ -56,6 +58,21 @@ impl Lobe {
     pub fn pdf_w(&self, theta: f64) -> f64 {
         self.g(theta) * theta_over_sin(theta)
     }
+}
+
+/// The largest deflection the lobe sampler can return, in units of β: the smallest uniform is
+/// 2⁻⁵³, so ϑ ≤ β·√(−2 ln 2⁻⁵³) = β·√(106 ln 2) ≈ 8.57β. Beyond it the sampled density is zero
+/// (the missing mass is 2⁻⁵³). The light-path loop uses this bound to skip lobe sampling for paths
+/// that cannot reach the pixel's merge disc.
+pub const LOBE_MAX_SIGMAS: f64 = 8.571_674_5;
+
+/// Deflects the unit direction `axis` by the plane-2 lobe: ϑ = β·√(−2 ln u₁), azimuth 2πu₂.
+/// Returns the new unit direction and ϑ.
+#[inline]
+pub fn sample_lobe(lobe: &Lobe, axis: &Vector3<f64>, rng: &mut StreamRng) -> (Vector3<f64>, f64) {
+    let theta = lobe.beta * (-2.0 * libm::log(uniform_open0(rng))).sqrt();
+    let psi = std::f64::consts::TAU * uniform(rng);
+    (deflect(axis, theta, psi), theta)
 }
 
 /// ϑ / sin ϑ, continuous at 0 (where it is 1).
@@ -108,6 +125,80 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::math::rng::stream;
+    use crate::sim::math::sampling::orthonormal_basis;
+
+    /// Mean and standard error of f over n samples.
+    fn mean_se(n: usize, mut f: impl FnMut() -> f64) -> (f64, f64) {
+        let (mut s1, mut s2) = (0.0, 0.0);
+        for _ in 0..n {
+            let x = f();
+            s1 += x;
+            s2 += x * x;
+        }
+        let m = s1 / n as f64;
+        (m, ((s2 / n as f64 - m * m) / n as f64).sqrt())
+    }
+
+    fn assert_close(what: &str, (m, se): (f64, f64), exact: f64) {
+        assert!((m - exact).abs() < 4.0 * se, "{what}: {m} ± {se} vs exact {exact}");
+    }
+
+    #[test]
+    fn lobe_bound_matches_the_smallest_uniform() {
+        let exact = (-2.0 * (2f64.powi(-53)).ln()).sqrt();
+        assert!(LOBE_MAX_SIGMAS >= exact && LOBE_MAX_SIGMAS - exact < 1e-6);
+    }
+
+    /// The lobe: ϑ is Rayleigh(β): E[ϑ²] = 2β², E[ϑ] = β√(π/2); the azimuth is uniform; and the
+    /// returned direction really is at angle ϑ from the axis, for an oblique axis.
+    #[test]
+    fn lobe_deflections_are_gaussian_on_the_sphere() {
+        let beta = 3f64.to_radians();
+        let lobe = Lobe::new(beta);
+        let axis = Vector3::new(0.3, -0.5, -0.8).normalize();
+        let (t, b) = orthonormal_basis(&axis);
+        let n = 1_000_000;
+        let mut rng = stream(6, 1, 2);
+        let draws: Vec<(Vector3<f64>, f64)> = (0..n).map(|_| sample_lobe(&lobe, &axis, &mut rng)).collect();
+        for (d, theta) in draws.iter().take(10_000) {
+            assert!((d.norm() - 1.0).abs() < 1e-12);
+            assert!((angle_between(d, &axis) - theta).abs() < 1e-9);
+        }
+        let mut it = draws.iter();
+        assert_close("E[ϑ²]", mean_se(n, || it.next().unwrap().1.powi(2)), 2.0 * beta * beta);
+        let mut it = draws.iter();
+        assert_close("E[ϑ]", mean_se(n, || it.next().unwrap().1), beta * (std::f64::consts::PI / 2.0).sqrt());
+        // Azimuth: the deflection's components along t and b have mean zero and equal spread.
+        let mut it = draws.iter();
+        assert_close(
+            "E[cos ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                d.dot(&t) / th.sin()
+            }),
+            0.0,
+        );
+        let mut it = draws.iter();
+        assert_close(
+            "E[sin ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                d.dot(&b) / th.sin()
+            }),
+            0.0,
+        );
+        let mut it = draws.iter();
+        assert_close(
+            "E[cos 2ψ]",
+            mean_se(n, || {
+                let (d, th) = it.next().unwrap();
+                let (c, s) = (d.dot(&t) / th.sin(), d.dot(&b) / th.sin());
+                c * c - s * s
+            }),
+            0.0,
+        );
+    }
 
     #[test]
     fn lobe_is_normalised_on_the_sphere() {

@@ -10,8 +10,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::heuristics::{balance, power, technique_densities};
-use super::scene::Scene;
+use crate::sim::model::heuristics::{balance, power, technique_densities};
+use crate::sim::model::scene::Scene;
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

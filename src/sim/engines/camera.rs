@@ -8,15 +8,16 @@
 //! Importance (camera energy): E_c(x1c) = E_c(x2c) = 1 (the cosine pdf cancels plane 1's BDF and
 //! the cosine of the pixel's measurement). At x3c: f2·cos θ_in / pdf_w(ω) = (cos θ_in / cos γ_out)
 //! · (sin ϑ/ϑ), where cos γ_out = cos θ1 of the first segment and cos θ_in that of the second
-//! (see [`super::scene::Lobe`] for the exact pdf).
+//! (see [`crate::sim::model::scene::Lobe`] for the exact pdf).
 
 use nalgebra::Vector3;
 
-use super::config::SimConfig;
 use super::grid::MergeGrid;
-use super::rng::{CAMERA_STREAM, stream};
-use super::sampling::{cosine_direction, sample_lobe};
-use super::scene::theta_over_sin;
+use crate::sim::math::rng::{CAMERA_STREAM, stream};
+use crate::sim::math::sampling::cosine_direction;
+use crate::sim::model::config::SimConfig;
+use crate::sim::model::scene::sample_lobe;
+use crate::sim::model::scene::theta_over_sin;
 
 /// One camera path's vertices and what merging with them needs.
 #[derive(Debug, Clone, Copy)]

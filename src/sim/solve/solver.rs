@@ -21,9 +21,9 @@
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
-use super::cells::CellGrid;
-use super::moments::{FoldMoments, packed_index};
-use super::spec::FixedWeights;
+use super::options::FixedWeights;
+use crate::sim::model::cells::CellGrid;
+use crate::sim::stats::moments::{FoldMoments, packed_index};
 
 /// Second-order sums of Y over a set of iterations, as plain doubles.
 #[derive(Debug, Clone)]
@@ -361,7 +361,7 @@ fn fill_empty_cells(cells: &mut [CellWeights], grid: &CellGrid) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::rng::{stream, uniform};
+    use crate::sim::math::rng::{stream, uniform};
 
     /// Synthetic statistics from explicit per-iteration vectors Y_s.
     fn stats_from(ys: &[DVector<f64>], samples: Vec<u64>) -> YStats {

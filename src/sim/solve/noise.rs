@@ -17,11 +17,11 @@
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-use super::cells::CellGrid;
-use super::moments::{FoldMoments, Moments};
 use super::solver::{Fit, SolveError, YStats, fit};
-use super::spec::SolverOptions;
-use super::tally::PathStrategy;
+use crate::sim::engines::tally::PathStrategy;
+use crate::sim::model::cells::CellGrid;
+use crate::sim::solve::options::SolverOptions;
+use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// One row of the noise table. Keys are stable (dashboards depend on them); a value that cannot be
 /// computed is null, with the reason in `error`.
@@ -254,7 +254,7 @@ mod tests {
     /// independent replications (exponential data: RMS = 100%, heavy enough to matter).
     #[test]
     fn rms_standard_error_matches_replications() {
-        use crate::sim::rng::{stream, uniform_open0};
+        use crate::sim::math::rng::{stream, uniform_open0};
         let (reps, m) = (400, 2000);
         let mut rms_values = Vec::new();
         let mut ses = Vec::new();

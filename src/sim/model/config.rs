@@ -7,13 +7,21 @@
 //! the iteration count, not the solver options.
 
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 
 use super::cells::CellGrid;
-use super::restricted::Proposals;
-use super::rng::GENERATOR_ID;
+use super::params::{CellSpec, SceneSpec};
 use super::scene::Scene;
-use super::spec::{CellSpec, SceneSpec};
+use crate::sim::math::digest::sha256_hex;
+use crate::sim::math::rng::GENERATOR_ID;
+
+/// Which proposals the restricted engine uses (both draw the same process exactly).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Proposals {
+    /// The tighter valid proposal of every (component, ring) pair.
+    Auto,
+    /// Reverse proposals only (plane-3 components are always drawn directly).
+    Reverse,
+}
 
 /// Version of the moments layout; part of the fingerprint.
 pub const MOMENTS_FORMAT_VERSION: u32 = 1;
@@ -25,9 +33,9 @@ pub const LIGHT_CHUNK: u64 = 1 << 16;
 /// How an iteration's light paths are drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Engine {
-    /// All N_F light paths, streamed ([`super::light`]): the reference.
+    /// All N_F light paths, streamed ([`crate::sim::engines::brute`]): the reference.
     Brute,
-    /// Only the paths that can merge, as a Poisson process ([`super::restricted`]).
+    /// Only the paths that can merge, as a Poisson process ([`crate::sim::engines::restricted`]).
     Restricted(Proposals),
 }
 
@@ -71,11 +79,6 @@ struct FingerprintInput<'a> {
     light_paths: u64,
     camera_paths: u64,
     cells: CellSpec,
-}
-
-/// Lower-case hex of SHA-256.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
 }
 
 impl SimConfig {

@@ -17,7 +17,7 @@
 //! # Moments read from outside
 //!
 //! Documents and checkpoints are parsed straight into these types with every list bounded by what
-//! the largest grid needs ([`crate::sim::spec::MAX_CELLS`]), so a hostile body cannot make the
+//! the largest grid needs ([`crate::sim::model::cells::MAX_CELLS`]), so a hostile body cannot make the
 //! parser allocate beyond a few times its size. [`Moments::check_well_formed`] then checks what a
 //! parser cannot: the shapes, the coverage, and that the sums agree with their counts (no sum over
 //! zero iterations, no negative sum of squares, events per cell adding up to events per plane).
@@ -26,11 +26,11 @@
 
 use serde::{Deserialize, Deserializer, Serialize};
 
-use super::config::{MOMENTS_FORMAT_VERSION, SimConfig};
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
-use super::exact_sum::{ExactSum, MAX_MAGNITUDE};
-use super::spec::MAX_CELLS;
-use super::tally::{IterationTally, PathStrategy};
+use crate::sim::engines::tally::{IterationTally, PathStrategy};
+use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
+use crate::sim::model::cells::MAX_CELLS;
+use crate::sim::model::config::{MOMENTS_FORMAT_VERSION, SimConfig};
 
 /// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
 pub const MAX_TALLY_VALUE: f64 = 1e70;

@@ -6,13 +6,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::cells::CellGrid;
-use super::coverage::Coverage;
-use super::moments::Moments;
 use super::noise::{MergeRate, NoiseRow, merge_rates, noise_table};
 use super::solver::CellStatus;
-use super::spec::SolverOptions;
-
+use crate::sim::model::cells::CellGrid;
+use crate::sim::solve::options::SolverOptions;
+use crate::sim::stats::coverage::Coverage;
+use crate::sim::stats::moments::Moments;
 /// One cell of the weights table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]

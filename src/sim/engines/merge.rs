@@ -16,9 +16,9 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 
 use super::camera::CameraSet;
-use super::config::SimConfig;
-use super::scene::{angle_between, theta_over_sin};
 use super::tally::{ChunkScratch, strategy_weights};
+use crate::sim::model::config::SimConfig;
+use crate::sim::model::scene::{angle_between, theta_over_sin};
 
 /// K = 1/(πR²).
 #[inline]

@@ -6,6 +6,9 @@
 //! cell k covers [e_k, e_{k+1}) and the last covers [e_last, ∞) (the tail cell). φ has equal bins.
 //! Cells are numbered α = (i2·n3 + i3)·nφ + iφ.
 
+/// Most cells a grid may have: the moments hold a dense (2K+1)² matrix per fold.
+pub const MAX_CELLS: usize = 256;
+
 use std::f64::consts::PI;
 
 use serde::Serialize;

@@ -16,10 +16,10 @@
 
 use std::ops::Range;
 
-use super::config::SimConfig;
-use super::moments::Moments;
-use super::noise::{merge_rates, path_rows};
-use super::runner::run;
+use crate::sim::model::config::SimConfig;
+use crate::sim::runner::run;
+use crate::sim::solve::noise::{merge_rates, path_rows};
+use crate::sim::stats::moments::Moments;
 
 /// A mean and its standard error.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,7 +94,7 @@ pub fn measure(config: &SimConfig, seed: u64, first: u64, blocks: u64, block_len
     let merges = merge_rates(&total).map(|r| Estimate { mean: r.mean, stderr: r.stderr });
     let strategies = (0..per_block[0].len())
         .map(|s| {
-            let values = |f: fn(&super::noise::NoiseRow) -> Option<f64>| -> Vec<f64> {
+            let values = |f: fn(&crate::sim::solve::noise::NoiseRow) -> Option<f64>| -> Vec<f64> {
                 per_block.iter().map(|rows| f(&rows[s]).unwrap_or(f64::NAN)).collect()
             };
             (

@@ -157,7 +157,7 @@ impl MergeGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::rng::{stream, uniform};
+    use crate::sim::math::rng::{stream, uniform};
 
     /// The grid must propose every vertex within R of a query (brute force is the reference).
     #[test]

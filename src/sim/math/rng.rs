@@ -210,7 +210,7 @@ pub fn uniform(rng: &mut StreamRng) -> f64 {
 /// A uniform in (0, 1] with 53 random bits: safe to take the logarithm of.
 ///
 /// Its smallest value is 2⁻⁵³, which bounds every inverse-CDF tail drawn from it (see
-/// [`crate::sim::sampling::LOBE_MAX_SIGMAS`]).
+/// [`crate::sim::model::scene::LOBE_MAX_SIGMAS`]).
 #[inline(always)]
 pub fn uniform_open0(rng: &mut StreamRng) -> f64 {
     ((rng.next_u64() >> 11) + 1) as f64 * TWO_POW_M53

@@ -51,8 +51,8 @@ pub fn power(p: [f64; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::spec::{IlluminationSpec, SceneSpec};
-
+    use crate::sim::model::params::IlluminationSpec;
+    use crate::sim::model::params::SceneSpec;
     fn scene() -> Scene {
         Scene::from_spec(&SceneSpec {
             l2: 1.0,

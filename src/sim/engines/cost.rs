@@ -11,7 +11,7 @@
 //!   W = traced light paths + [`MERGE_WEIGHT`]·E[merge events] + N_B.
 //!
 //! E[merge events] is N_F·Σ_j P(the light vertex falls within R of camera vertex j) at planes 2 and
-//! 3 (the closed forms of [`super::expectation`]; both engines share it by Campbell's theorem). It
+//! 3 (the closed forms of [`crate::sim::checks::expectation`]; both engines share it by Campbell's theorem). It
 //! depends on the camera paths, so it is averaged over a pilot of camera paths drawn from a stream
 //! of its own (never a job's): at most [`PILOT_CAMERAS`] of them, so the estimate costs
 //! milliseconds even for N_B = 10⁶.
@@ -19,9 +19,10 @@
 use std::f64::consts::PI;
 
 use super::camera::CameraSet;
-use super::config::{Engine, SimConfig};
-use super::expectation::{arrival_density, start_probability_in_disc};
 use super::restricted::{RestrictedPlan, expected_candidates};
+use crate::sim::model::config::{Engine, SimConfig};
+use crate::sim::model::densities::arrival_density;
+use crate::sim::model::densities::start_probability_in_disc;
 
 /// Light-path equivalents of one merge event (see the module documentation).
 pub const MERGE_WEIGHT: f64 = 50.0;

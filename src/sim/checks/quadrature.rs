@@ -34,7 +34,7 @@ use std::f64::consts::PI;
 
 use nalgebra::Vector3;
 
-use super::scene::Scene;
+use crate::sim::model::scene::Scene;
 
 /// Relative tolerance of the reference.
 const TOLERANCE: f64 = 1e-10;
@@ -304,8 +304,8 @@ fn adaptive_gk_within(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64, budget: 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::spec::{IlluminationSpec, SceneSpec};
-
+    use crate::sim::model::params::IlluminationSpec;
+    use crate::sim::model::params::SceneSpec;
     fn scene(beta_deg: f64, illumination: IlluminationSpec) -> Scene {
         Scene::from_spec(&SceneSpec { l2: 1.0, l3: 3.0, beta_deg, illumination })
     }

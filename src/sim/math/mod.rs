@@ -1,0 +1,16 @@
+//! Numbers and draws that know nothing of the scene: the random streams, the vectorisable sine and
+//! cosine, exact sums, Poisson variates, pure samplers, and SHA-256.
+//!
+//! * [`rng`] — the stream of each (seed, iteration, chunk), scalar and multi-lane;
+//! * [`fastmath`] — branch-free sine and cosine the hot loop can vectorise, with tested bounds;
+//! * [`exact_sum`] — exact, order-independent sums of doubles (bounded when read from outside);
+//! * [`poisson`] — Poisson variates that can be interrupted;
+//! * [`sampling`] — points of the unit disc, cosine directions, rotations about an axis;
+//! * [`digest`] — SHA-256 as hex.
+
+pub mod digest;
+pub mod exact_sum;
+pub mod fastmath;
+pub mod poisson;
+pub mod rng;
+pub mod sampling;

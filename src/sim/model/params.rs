@@ -1,0 +1,246 @@
+//! The plain parameter types of the model — the scene, the light's profile, the cell grid — as the
+//! JSON documents spell them, and their validation: every range a scene value must lie in is
+//! checked here, once, naming the field and the range ([`SpecError`]).
+
+use serde::{Deserialize, Deserializer, Serialize};
+use serde_json::Value;
+
+use super::cells::{CellGrid, MAX_CELLS};
+
+/// A rejected field: which one (a JSON path such as `scene.illumination.a`) and why, with the
+/// allowed range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct SpecError {
+    /// JSON path of the offending field (`""` for the document itself).
+    pub field: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl SpecError {
+    pub fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self { field: field.into(), message: message.into() }
+    }
+}
+
+/// The three planes and the light.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// Distance from plane 1 (z = 0) to plane 2.
+    pub l2: f64,
+    /// Distance from plane 2 to plane 3.
+    pub l3: f64,
+    /// Width β of the plane-2 transmission lobe, in degrees.
+    pub beta_deg: f64,
+    pub illumination: IlluminationSpec,
+}
+
+/// The radial illumination profile I(r) of plane 3 (normalised to total flux 1 by the model).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum IlluminationSpec {
+    /// The paper's profile: `contrast` for r ≤ a, 1 for a < r < r_ls, 0 beyond.
+    Spot { a: f64, r_ls: f64, contrast: f64 },
+    /// 1 for r < r_ls, 0 beyond.
+    Uniform { r_ls: f64 },
+    /// Piecewise constant: `level` up to `outer_radius`, ring after ring, 0 beyond the last.
+    Rings { rings: Vec<RingSpec> },
+}
+
+/// One ring of a `rings` profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct RingSpec {
+    #[cfg_attr(feature = "server", schema(minimum = 1e-9, maximum = 1e6))]
+    pub outer_radius: f64,
+    #[cfg_attr(feature = "server", schema(minimum = 0.0, maximum = 1e12))]
+    pub level: f64,
+}
+
+/// The cell grid of the tabulated weights over the join path's (r2, r3, φ).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct CellSpec {
+    /// Cell edges on r2, starting at 0; the last edge opens a tail cell to infinity.
+    pub r2_edges: Vec<f64>,
+    /// Cell edges on r3, starting at 0; the last edge opens a tail cell to infinity.
+    pub r3_edges: Vec<f64>,
+    /// Number of equal φ bins on [0, π].
+    #[serde(deserialize_with = "count_u32")]
+    pub phi_bins: u32,
+}
+
+/// Accepts integers and integral floats (`1e7`) for counts: users write both, and JSON Schema
+/// counts `1.0` as an integer.
+pub fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+    use serde::de::Error;
+    let v = Value::deserialize(d)?;
+    if let Some(n) = v.as_u64() {
+        return Ok(n);
+    }
+    match v.as_f64() {
+        Some(x) if x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0 => Ok(x as u64),
+        _ => Err(D::Error::custom(format!("expected a non-negative integer, got {v}"))),
+    }
+}
+
+/// [`count`] for an optional field (use with `#[serde(default)]`).
+pub fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    count(d).map(Some)
+}
+
+pub fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    use serde::de::Error;
+    let n = count(d)?;
+    u32::try_from(n).map_err(|_| D::Error::custom(format!("expected at most {}, got {n}", u32::MAX)))
+}
+
+pub(crate) fn check(ok: bool, field: &str, message: impl FnOnce() -> String) -> Result<(), SpecError> {
+    if ok { Ok(()) } else { Err(SpecError::new(field, message())) }
+}
+
+/// `x` is finite and in (lo, hi].
+pub(crate) fn in_open_closed(x: f64, lo: f64, hi: f64) -> bool {
+    x.is_finite() && x > lo && x <= hi
+}
+
+/// Largest length accepted anywhere in a scene: far beyond any sensible scene, small enough that
+/// squares and products stay finite.
+pub const MAX_LENGTH: f64 = 1e6;
+
+/// Smallest length accepted (plane distances, radii, the merge radius): far below any sensible
+/// scene (the paper's lengths are of order 1), far above where the merge kernel 1/(πR²) and its
+/// squares in the moments overflow.
+pub const MIN_LENGTH: f64 = 1e-9;
+
+/// Smallest lobe width β in degrees: the lobe's density grows as 1/β², and below this its
+/// contributions' fourth powers (the noise table's standard errors) leave the doubles.
+pub const MIN_BETA_DEG: f64 = 1e-6;
+
+/// `x` is finite and in [lo, hi].
+pub(crate) fn in_closed(x: f64, lo: f64, hi: f64) -> bool {
+    x.is_finite() && x >= lo && x <= hi
+}
+
+/// Checks the scene: plane distances, lobe width and light profile.
+pub fn validate_scene(s: &SceneSpec) -> Result<(), SpecError> {
+    for (name, v) in [("scene.l2", s.l2), ("scene.l3", s.l3)] {
+        check(in_closed(v, MIN_LENGTH, MAX_LENGTH), name, || {
+            format!("must be a distance in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {v}")
+        })?;
+    }
+    check(in_closed(s.beta_deg, MIN_BETA_DEG, 45.0), "scene.beta_deg", || {
+        format!("must be in [{MIN_BETA_DEG:e}, 45] degrees, got {}", s.beta_deg)
+    })?;
+    validate_illumination(&s.illumination)
+}
+
+/// Smallest flux level·(r_out² − r_in²) of an emitting ring: far below any real profile, far above
+/// the subnormals, whose reciprocals overflow (a subnormal flux once made the reference NaN).
+pub const MIN_RING_FLUX: f64 = 1e-200;
+
+fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
+    let f = "scene.illumination";
+    validate_profile(ill)?;
+    let profile = super::illumination::Illumination::from_spec(ill);
+    for ring in profile.rings() {
+        let flux = ring.level * (ring.r_out * ring.r_out - ring.r_in * ring.r_in);
+        check(flux >= MIN_RING_FLUX, f, || {
+            format!(
+                "the ring [{}, {}) with level {} emits a flux of {flux:e}; every emitting ring needs at least \
+                 {MIN_RING_FLUX:e} (level × (r_out² − r_in²))",
+                ring.r_in, ring.r_out, ring.level
+            )
+        })?;
+    }
+    Ok(())
+}
+
+fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
+    let f = "scene.illumination";
+    match *ill {
+        IlluminationSpec::Spot { a, r_ls, contrast } => {
+            check(in_closed(a, MIN_LENGTH, MAX_LENGTH), &format!("{f}.a"), || {
+                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {a}")
+            })?;
+            check(in_open_closed(r_ls, a, MAX_LENGTH), &format!("{f}.r_ls"), || {
+                format!("must be a radius in (a = {a}, {MAX_LENGTH:e}], got {r_ls}")
+            })?;
+            check(in_open_closed(contrast, 0.0, 1e12), &format!("{f}.contrast"), || {
+                format!("must be in (0, 1e12], got {contrast}")
+            })
+        }
+        IlluminationSpec::Uniform { r_ls } => {
+            check(in_closed(r_ls, MIN_LENGTH, MAX_LENGTH), &format!("{f}.r_ls"), || {
+                format!("must be a radius in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {r_ls}")
+            })
+        }
+        IlluminationSpec::Rings { ref rings } => {
+            check((1..=64).contains(&rings.len()), &format!("{f}.rings"), || {
+                format!("must list 1 to 64 rings, got {}", rings.len())
+            })?;
+            let mut inner = 0.0;
+            let mut flux = 0.0;
+            for (i, ring) in rings.iter().enumerate() {
+                let field = format!("{f}.rings[{i}]");
+                let ok = in_open_closed(ring.outer_radius, inner, MAX_LENGTH) && ring.outer_radius >= MIN_LENGTH;
+                check(ok, &format!("{field}.outer_radius"), || {
+                    format!(
+                        "must be in ({inner}, {MAX_LENGTH:e}] and at least {MIN_LENGTH:e} (radii strictly increasing), \
+                         got {}",
+                        ring.outer_radius
+                    )
+                })?;
+                check(ring.level.is_finite() && (0.0..=1e12).contains(&ring.level), &format!("{field}.level"), || {
+                    format!("must be in [0, 1e12], got {}", ring.level)
+                })?;
+                flux += ring.level * (ring.outer_radius.powi(2) - inner * inner);
+                inner = ring.outer_radius;
+            }
+            check(flux > 0.0, &format!("{f}.rings"), || "must emit some light: every level is 0".to_string())
+        }
+    }
+}
+
+fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
+    check(!edges.is_empty() && edges[0] == 0.0, field, || {
+        format!("must start at 0 (the first cell begins at r = 0), got {edges:?}")
+    })?;
+    for (i, pair) in edges.windows(2).enumerate() {
+        check(
+            pair[1].is_finite() && pair[1] > pair[0] && pair[1] <= MAX_LENGTH,
+            &format!("{field}[{}]", i + 1),
+            || {
+                format!(
+                    "edges must be finite and strictly increasing (≤ {MAX_LENGTH:e}), got {} after {}",
+                    pair[1], pair[0]
+                )
+            },
+        )?;
+    }
+    Ok(())
+}
+
+pub fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
+    validate_edges(&cells.r2_edges, "cells.r2_edges")?;
+    validate_edges(&cells.r3_edges, "cells.r3_edges")?;
+    check((1..=360).contains(&cells.phi_bins), "cells.phi_bins", || {
+        format!("must be in [1, 360], got {}", cells.phi_bins)
+    })?;
+    let total = cells.r2_edges.len() * cells.r3_edges.len() * cells.phi_bins as usize;
+    check(total <= MAX_CELLS, "cells", || {
+        format!(
+            "{} r2 cells × {} r3 cells × {} φ bins = {total} cells; at most {MAX_CELLS} are allowed",
+            cells.r2_edges.len(),
+            cells.r3_edges.len(),
+            cells.phi_bins
+        )
+    })?;
+    Ok(CellGrid::new(cells.r2_edges.clone(), cells.r3_edges.clone(), cells.phi_bins))
+}

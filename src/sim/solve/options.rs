@@ -1,0 +1,72 @@
+//! How the optimal weights are fitted: the solver options of a job (fixed weights, the gradient
+//! penalty λ, the cross-validation grid), their validation, and the one way to change them — a JSON
+//! Merge Patch naming the offending field the same way wherever a patch comes from (a re-solve, a
+//! study, the command line).
+
+use serde::{Deserialize, Serialize};
+
+use crate::sim::model::params::{SpecError, check};
+
+/// Most λ values a cross-validation grid may try.
+pub const MAX_CV_LAMBDAS: usize = 32;
+
+/// How the optimal weights are fitted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct SolverOptions {
+    /// Weights held fixed in every cell (the paper: w0 = 0).
+    pub fixed: FixedWeights,
+    /// Gradient penalty λ ≥ 0 between neighbouring cells (dimensionless; see the solver).
+    pub lambda: f64,
+    /// The λ grid searched by the `optimal_cv` strategy.
+    pub cv_lambdas: Vec<f64>,
+}
+
+/// Per-component fixed weights; `None` means fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct FixedWeights {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w0: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w1: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub w2: Option<f64>,
+}
+
+impl FixedWeights {
+    /// The fixed value of component m (0, 1, 2).
+    pub fn get(&self, m: usize) -> Option<f64> {
+        [self.w0, self.w1, self.w2][m]
+    }
+}
+
+/// Checks solver options (also used alone when a stored job is re-solved with new options).
+pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
+    for (m, w) in [solver.fixed.w0, solver.fixed.w1, solver.fixed.w2].into_iter().enumerate() {
+        if let Some(w) = w {
+            check(w.is_finite() && w.abs() <= 1e6, &format!("solver.fixed.w{m}"), || {
+                format!("must be a finite weight with |w| ≤ 1e6, got {w}")
+            })?;
+        }
+    }
+    if let (Some(a), Some(b), Some(c)) = (solver.fixed.w0, solver.fixed.w1, solver.fixed.w2) {
+        check((a + b + c - 1.0).abs() <= 1e-9, "solver.fixed", || {
+            format!("w0 + w1 + w2 must equal 1 when all three are fixed, got {}", a + b + c)
+        })?;
+    }
+    check(solver.lambda.is_finite() && (0.0..=1e12).contains(&solver.lambda), "solver.lambda", || {
+        format!("must be in [0, 1e12], got {}", solver.lambda)
+    })?;
+    check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
+        format!("must list 1 to {MAX_CV_LAMBDAS} values, got {}", solver.cv_lambdas.len())
+    })?;
+    for (i, &l) in solver.cv_lambdas.iter().enumerate() {
+        check(l.is_finite() && (0.0..=1e12).contains(&l), &format!("solver.cv_lambdas[{i}]"), || {
+            format!("must be in [0, 1e12], got {l}")
+        })?;
+    }
+    Ok(())
+}
