@@ -23,6 +23,8 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
 
+use crate::store::JobState;
+
 /// The `method` label of a request: a standard method's name, or `other` (a method is any token a
 /// client sends, up to the header size limit).
 pub fn method_label(method: &axum::http::Method) -> &'static str {
@@ -127,10 +129,10 @@ impl Metrics {
     }
 
     /// Renders the exposition with the given job counts by state and running jobs.
-    pub fn render(&self, states: &[(String, i64)], running: &[JobSample]) -> String {
+    pub fn render(&self, states: &[(JobState, i64)], running: &[JobSample]) -> String {
         self.jobs.clear();
         for (state, count) in states {
-            self.jobs.get_or_create(&StateLabels { state: state.clone() }).set(*count);
+            self.jobs.get_or_create(&StateLabels { state: state.as_str().to_string() }).set(*count);
         }
         self.job_iterations.clear();
         self.job_rate.clear();
@@ -155,7 +157,7 @@ mod tests {
         m.observe_request("GET", "/v1/jobs/{id}", 200, Duration::from_millis(3));
         m.observe_checkpoint(Duration::from_millis(20));
         let text = m.render(
-            &[("running".into(), 1), ("succeeded".into(), 4)],
+            &[(JobState::Running, 1), (JobState::Succeeded, 4)],
             &[JobSample { id: 7, iterations_done: 12, light_paths_per_second: 5e7 }],
         );
         for needle in [

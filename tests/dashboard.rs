@@ -118,7 +118,7 @@ async fn dashboard_works_with_a_token() {
         return;
     }
     const TOKEN: &str = "dashboard-token-0123456789";
-    let server = TestServer::start_with(|c| c.token = Some(optimis::server::BearerToken(TOKEN.into()))).await;
+    let server = TestServer::start_with(|c| c.token = Some(optimis::api::BearerToken(TOKEN.into()))).await;
     run_scenario(&server, Some(TOKEN)).await;
     server.stop().await;
 }

@@ -323,8 +323,8 @@ async fn documents_are_parsed_bounded_and_exactly() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn forged_empty_and_oversized_statistics_are_refused() {
     let server = TestServer::start_with(|c| {
-        c.limits.job_budget = 200_000.0 * 100.0 * 60.0;
-        c.limits.max_cells = 6;
+        c.policy.job_budget = 200_000.0 * 100.0 * 60.0;
+        c.policy.max_cells = 6;
     })
     .await;
     let (target, doc) = finished(&server, 1).await;
@@ -419,8 +419,8 @@ async fn a_vanishing_ring_flux_is_refused() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn event_streams_are_paced_and_finished_jobs_take_no_slot() {
     let server = TestServer::start_with(|c| {
-        c.limits.max_event_streams = 1;
-        c.checkpoint_iterations = 1;
+        c.http.max_event_streams = 1;
+        c.policy.checkpoint_iterations = 1;
     })
     .await;
     let (done, _) = finished(&server, 1).await;

@@ -9,7 +9,7 @@ use serde_json::{Value, json};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn request_bodies_are_limited() {
-    let server = TestServer::start_with(|c| c.limits.body_bytes = 4096).await;
+    let server = TestServer::start_with(|c| c.http.body_bytes = 4096).await;
     let padding = "x".repeat(8000);
     let body = json!({ "iterations": 1, "padding": padding });
     let problem = assert_problem(server.post("/v1/jobs", &body).await, 413).await;
@@ -21,8 +21,8 @@ async fn request_bodies_are_limited() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn job_budgets_and_cell_counts_are_limited() {
     let server = TestServer::start_with(|c| {
-        c.limits.job_budget = 1e9;
-        c.limits.max_cells = 30;
+        c.policy.job_budget = 1e9;
+        c.policy.max_cells = 30;
     })
     .await;
     // 20,000 × 200 × 300 = 1.2·10⁹ pairs > 10⁹.
@@ -55,7 +55,7 @@ async fn job_budgets_and_cell_counts_are_limited() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_queue_is_limited_with_retry_after() {
-    let server = TestServer::start_with(|c| c.limits.max_queued_jobs = 2).await;
+    let server = TestServer::start_with(|c| c.policy.max_queued_jobs = 2).await;
     let running = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(running, "running").await;
     let queued = [server.submit(&small_job(1, 1)).await, server.submit(&small_job(1, 2)).await];
@@ -73,7 +73,7 @@ async fn the_queue_is_limited_with_retry_after() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn event_streams_are_limited_with_retry_after() {
-    let server = TestServer::start_with(|c| c.limits.max_event_streams = 1).await;
+    let server = TestServer::start_with(|c| c.http.max_event_streams = 1).await;
     let id = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(id, "running").await;
     let first = server.get(&format!("/v1/jobs/{id}/events")).await;
@@ -99,7 +99,7 @@ async fn event_streams_are_limited_with_retry_after() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_token_guards_every_route_but_health_and_the_dashboard_files() {
     const TOKEN: &str = "correct-horse-battery-staple-42";
-    let server = TestServer::start_with(|c| c.token = Some(optimis::server::BearerToken(TOKEN.into()))).await;
+    let server = TestServer::start_with(|c| c.token = Some(optimis::api::BearerToken(TOKEN.into()))).await;
     let client = &server.client;
     for path in ["/v1/jobs", "/v1/jobs/1", "/metrics", "/openapi.yaml", "/v1/jobs/1/events", "/no/such/route"] {
         let missing = client.get(server.url(path)).send().await.unwrap();

@@ -131,7 +131,7 @@ async fn peer_documents_are_capped_by_the_document_limit() {
     let (a, b) = (declared.base.clone(), chunked.base.clone());
     let server = TestServer::start_with(move |c| {
         c.peers = allow(&[&a, &b]);
-        c.limits.document_bytes = 1 << 20;
+        c.http.document_bytes = 1 << 20;
     })
     .await;
     for peer in [&declared, &chunked] {

@@ -46,7 +46,7 @@ fn check_means_against_quadrature(doc: Value, strategies: &[&str]) {
     let reference = reference_luminance(&config.scene).expect("the reference converges");
     let table = noise_table(&moments, &config.cells, &job.spec.solver);
     for name in strategies {
-        let row = table.rows.iter().find(|r| r.strategy == *name).expect("strategy in the table");
+        let row = table.rows.iter().find(|r| r.strategy.name() == *name).expect("strategy in the table");
         let (l, se) = (row.luminance.unwrap(), row.luminance_stderr.unwrap());
         let z = (l - reference) / se;
         eprintln!("{name:>16}: L = {l:.6e} ± {se:.2e}  (reference {reference:.6e}, z = {z:+.2})");
@@ -209,7 +209,7 @@ fn fitted_weights_minimise_the_sample_variance() {
         }
     }
     let table = noise_table(&moments, &config.cells, &job.spec.solver);
-    let rms = |name: &str| table.rows.iter().find(|r| r.strategy == name).unwrap().rms_percent.unwrap();
+    let rms = |name: &str| table.rows.iter().find(|r| r.strategy.name() == name).unwrap().rms_percent.unwrap();
     assert!(rms("optimal") <= rms("switch") * (1.0 + 1e-9), "optimal {} vs switch {}", rms("optimal"), rms("switch"));
 }
 

@@ -16,10 +16,10 @@ use tokio::net::TcpStream;
 
 async fn server() -> TestServer {
     TestServer::start_with(|c| {
-        c.limits.header_timeout = Duration::from_millis(500);
-        c.limits.body_timeout = Duration::from_millis(500);
-        c.limits.send_timeout = Duration::from_secs(2);
-        c.limits.max_connections = 20;
+        c.connections.header_timeout = Duration::from_millis(500);
+        c.http.body_timeout = Duration::from_millis(500);
+        c.connections.send_timeout = Duration::from_secs(2);
+        c.connections.max_connections = 20;
     })
     .await
 }

@@ -13,6 +13,7 @@ mod extract;
 pub mod guard;
 mod health;
 mod jobs;
+pub mod limits;
 mod openapi;
 mod studies;
 
@@ -29,9 +30,9 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::jobs::JobManager;
-use crate::server::{BearerToken, Limits};
 use error::ApiError;
 use guard::Guard;
+pub use limits::{BearerToken, DEFAULT_DOCUMENT_LIMIT, HttpLimits};
 
 /// What every handler can reach; cheap to clone.
 #[derive(Clone)]
@@ -70,11 +71,6 @@ pub struct AppState {
     )
 )]
 struct ApiDoc;
-
-/// Body limit of the routes that take moments documents (which grow with the cell grid): 32 MiB,
-/// several times the largest document a single job can export (docs/results.md), and what the
-/// document parser may be asked to hold per request.
-pub const DEFAULT_DOCUMENT_LIMIT: usize = 32 << 20;
 
 fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
     let with_limit = |(schemas, paths, method_router): utoipa_axum::router::UtoipaMethodRouter<AppState>| {
@@ -148,7 +144,7 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
 /// authentication (when `token` is set), the body limits and timeout of `limits`, and panics
 /// answered as problem documents. Layers run outside in: trace → metrics → guard → auth → panics
 /// → the route (whose body limit applies as its body is read).
-pub fn router(jobs: JobManager, limits: &Limits, token: Option<BearerToken>, guard: Guard) -> Router {
+pub fn router(jobs: JobManager, limits: &HttpLimits, token: Option<BearerToken>, guard: Guard) -> Router {
     let (router, api) = routes_and_document(limits.document_bytes);
     let state = AppState {
         jobs,

@@ -11,9 +11,8 @@ use super::{CliError, table};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{MomentsDocument, merge_documents};
 use crate::sim::solve::options::SolverOptions;
-use crate::sim::solve::options::validate_solver;
 use crate::sim::solve::report::build_report;
-use crate::sim::spec::{SpecError, merge_patch};
+use crate::sim::spec::SpecError;
 #[derive(Debug, Args)]
 pub struct MergeArgs {
     /// Moments documents (from `optimis run --out` or `GET /v1/jobs/{id}/moments`).
@@ -55,15 +54,11 @@ pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// The document's solver options changed by `--solver` (see [`SolverOptions::patched`]).
 fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Result<SolverOptions, CliError> {
     let Some(text) = patch else { return Ok(base.clone()) };
     let patch: Value = serde_json::from_str(text).map_err(|e| SpecError::new("--solver", format!("not JSON: {e}")))?;
-    let mut options = serde_json::to_value(base).expect("solver options serialise");
-    merge_patch(&mut options, &patch);
-    let options: SolverOptions = serde_path_to_error::deserialize(&options)
-        .map_err(|e| SpecError::new(format!("solver.{}", e.path()), e.into_inner().to_string()))?;
-    validate_solver(&options)?;
-    Ok(options)
+    Ok(base.patched(&patch)?)
 }
 
 pub fn report(args: ReportArgs) -> Result<(), CliError> {

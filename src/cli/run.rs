@@ -14,9 +14,10 @@ use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::MomentsDocument;
+use crate::sim::model::params::merge_patch;
 use crate::sim::runner::run_iterations;
 use crate::sim::solve::report::build_report;
-use crate::sim::spec::{Shard, ValidJob, merge_patch, parse_job_spec};
+use crate::sim::spec::{Shard, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
 
 #[derive(Debug, Args)]

@@ -7,8 +7,10 @@ use std::time::Duration;
 use clap::{Args, ValueEnum};
 
 use super::{CliError, cores};
+use crate::api::{BearerToken, HttpLimits};
+use crate::jobs::RunPolicy;
 use crate::jobs::peers::{Peer, check_owner_only, read_secret};
-use crate::server::{BearerToken, Limits, ServerConfig, TlsFiles, serve, termination_signal};
+use crate::server::{ConnectionLimits, ServerConfig, TlsFiles, serve, termination_signal};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum LogFormat {
@@ -46,7 +48,7 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 1e16, value_parser = positive_number)]
     pub max_job_budget: f64,
     /// Largest expected work of one iteration, in light-path equivalents (a merge counts 50).
-    #[arg(long, default_value_t = crate::server::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
+    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
     pub max_iteration_work: f64,
     /// Most cells of a job's weight grid.
     #[arg(long, default_value_t = crate::sim::model::cells::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::model::cells::MAX_CELLS as u64))]
@@ -168,22 +170,26 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
     let config = ServerConfig {
         bind: args.bind,
         database: args.database,
-        workers: args.workers as usize,
         threads: args.threads.map_or_else(cores, |t| t as usize),
-        checkpoint_iterations: args.checkpoint_iterations,
-        checkpoint_interval: Duration::from_secs_f64(args.checkpoint_seconds),
-        limits: Limits {
-            body_bytes: args.body_limit as usize,
-            document_bytes: args.document_limit as usize,
+        policy: RunPolicy {
+            workers: args.workers as usize,
+            checkpoint_iterations: args.checkpoint_iterations,
+            checkpoint_interval: Duration::from_secs_f64(args.checkpoint_seconds),
             job_budget: args.max_job_budget,
             max_iteration_work: args.max_iteration_work,
             max_cells: args.max_cells as usize,
             max_queued_jobs: args.max_queued_jobs as usize,
+        },
+        http: HttpLimits {
+            body_bytes: args.body_limit as usize,
+            document_bytes: args.document_limit as usize,
             max_event_streams: args.max_event_streams as usize,
             max_document_requests: args.max_document_requests as usize,
+            body_timeout: Duration::from_secs_f64(args.body_timeout),
+        },
+        connections: ConnectionLimits {
             max_connections: args.max_connections as usize,
             header_timeout: Duration::from_secs_f64(args.header_timeout),
-            body_timeout: Duration::from_secs_f64(args.body_timeout),
             send_timeout: Duration::from_secs_f64(args.send_timeout),
         },
         token,

@@ -6,6 +6,7 @@ use utoipa::ToSchema;
 
 use super::resource::{JobResource, JobState};
 use crate::sim::solve::report::RunReport;
+use crate::sim::solve::strategy::Strategy;
 
 /// A job's results: the noise table and weights of the core's report, from the latest checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -30,7 +31,7 @@ pub struct JobList {
 /// One strategy at one checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct StrategyPoint {
-    pub strategy: String,
+    pub strategy: Strategy,
     pub luminance: Option<f64>,
     pub rms_percent: Option<f64>,
 }

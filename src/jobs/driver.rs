@@ -17,18 +17,13 @@ use std::ops::ControlFlow;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use super::documents::StrategyPoint;
+use super::checkpoint::{checkpoint_of, decode_checkpoint};
 use super::error::JobError;
-use super::manager::{ActiveJob, Inner, StopReason, best_strategy};
-use super::resource::{now_ms, rfc3339};
-use crate::sim::math::digest::sha256_hex;
+use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
+use super::state::{ActiveJob, Inner, StopReason};
 use crate::sim::runner::{RunError, run_iterations};
 use crate::sim::solve::noise::path_rows;
-use crate::sim::solve::report::build_report;
-use crate::sim::spec::ValidJob;
-use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
-use crate::store::{Checkpoint, StoreError};
 
 /// How often progress is published to the job's watchers.
 const PROGRESS_INTERVAL: Duration = Duration::from_millis(250);
@@ -50,46 +45,6 @@ pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
             tracing::error!(job = job.id, error = %e, "could not record the failure");
         }
     }
-}
-
-/// The moments of a checkpoint, verified: checksum, format and configuration must match the job,
-/// and for a job's own run (`own_run`) the coverage must be the start of its range — or the
-/// checkpoint is reported corrupted (never silently resumed from).
-pub(crate) fn decode_checkpoint(
-    id: i64,
-    checkpoint: &Checkpoint,
-    job: &ValidJob,
-    own_run: bool,
-) -> Result<Moments, JobError> {
-    let corrupt = |detail: String| JobError::Store(StoreError::Corrupt { job: id, detail });
-    let actual = sha256_hex(&checkpoint.moments);
-    if actual != checkpoint.checksum {
-        return Err(corrupt(format!(
-            "checkpoint checksum mismatch (stored {}, computed {actual})",
-            checkpoint.checksum
-        )));
-    }
-    let moments: Moments = serde_json::from_slice(&checkpoint.moments)
-        .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
-    moments.check_well_formed().map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
-    if moments.fingerprint != job.config.fingerprint() {
-        return Err(corrupt("checkpoint moments belong to another configuration".into()));
-    }
-    if moments.iterations() != checkpoint.iterations_done {
-        return Err(corrupt(format!(
-            "checkpoint holds {} iterations, its row says {}",
-            moments.iterations(),
-            checkpoint.iterations_done
-        )));
-    }
-    if own_run {
-        let start = job.spec.iteration_range().start;
-        let expected = Coverage::range(job.spec.seed, start, start + checkpoint.iterations_done);
-        if moments.coverage != expected {
-            return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
-        }
-    }
-    Ok(moments)
 }
 
 fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
@@ -247,28 +202,6 @@ fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, s
     });
 }
 
-/// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
-/// them with the job's solver options.
-pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference);
-    let best = best_strategy(&report.noise_table);
-    let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
-    let history: Vec<StrategyPoint> = report
-        .noise_table
-        .iter()
-        .map(|r| StrategyPoint { strategy: r.strategy.clone(), luminance: r.luminance, rms_percent: r.rms_percent })
-        .collect();
-    let internal = |e: serde_json::Error| JobError::Internal(e.to_string());
-    Ok(Checkpoint {
-        iterations_done: moments.iterations(),
-        checksum: sha256_hex(&bytes),
-        moments: bytes,
-        result: serde_json::to_string(&report).map_err(internal)?,
-        best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
-        history: serde_json::to_string(&history).map_err(internal)?,
-    })
-}
-
 /// Writes a checkpoint (retrying while storage is unavailable, see [`persist`]) and publishes it.
 /// `Ok(false)`: the job was asked to stop before the checkpoint could be stored.
 fn write_checkpoint(
@@ -279,7 +212,7 @@ fn write_checkpoint(
 ) -> Result<bool, JobError> {
     let started = Instant::now();
     let checkpoint = checkpoint_of(moments, &job.job, reference)?;
-    let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<super::resource::BestStrategy>(b).ok());
+    let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<BestStrategy>(b).ok());
     let mut now = now_ms();
     let stored = persist(inner, job, "write a checkpoint", || {
         now = now_ms();

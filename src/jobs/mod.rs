@@ -1,20 +1,29 @@
 //! The job runner: queued jobs, run a bounded number at a time on a dedicated rayon pool, with
 //! progress in memory and checkpoints in the store.
 //!
-//! * [`manager`] — the queue, the worker slots and every change of a job's state;
-//! * [`statistics`] — results, re-solves, the moments export, merges and studies;
+//! Layout (each module imports only those below it):
+//! * [`statistics`] — results, re-solves, the moments export, merges and studies (on the manager);
+//! * [`manager`] — the public handle: submit, get, list, cancel, extend, delete, shutdown;
+//! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
+//! * [`state`] — the jobs in memory (`ActiveJob`, `StopReason`) and the transitions of their state;
+//! * [`checkpoint`] — the stored forms: spec JSON, checkpoint encoding and verified decoding;
+//! * [`policy`] — what this server accepts: budgets, the work of an iteration, extension targets;
 //! * [`peers`] — moments documents pulled from allowed peer servers, for merges;
-//! * [`resource`], [`documents`] — what the API shows of a job;
-//! * [`error`] — what job operations fail with.
+//! * [`resource`], [`documents`] — what the API shows of a job; [`error`] — what job operations fail with.
 
+pub mod checkpoint;
 pub mod documents;
 pub mod driver;
 pub mod error;
 pub mod manager;
 pub mod peers;
+pub mod policy;
 pub mod resource;
+pub mod scheduler;
+pub mod state;
 pub mod statistics;
 
 pub use error::JobError;
-pub use manager::{JobManager, RunPolicy};
+pub use manager::JobManager;
+pub use policy::RunPolicy;

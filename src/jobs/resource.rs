@@ -4,48 +4,19 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::error::JobError;
+use crate::sim::solve::noise::NoiseRow;
+use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::JobSpec;
+use crate::store::JobRow;
 
-/// The life cycle of a job: `queued → running → succeeded | failed | cancelled`; `extend` sends a
-/// succeeded or cancelled job back to `queued`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum JobState {
-    Queued,
-    Running,
-    Succeeded,
-    Failed,
-    Cancelled,
-}
-
-impl JobState {
-    pub const ALL: [JobState; 5] = [Self::Queued, Self::Running, Self::Succeeded, Self::Failed, Self::Cancelled];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Queued => "queued",
-            Self::Running => "running",
-            Self::Succeeded => "succeeded",
-            Self::Failed => "failed",
-            Self::Cancelled => "cancelled",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|state| state.as_str() == s)
-    }
-
-    /// No further change without a user action.
-    pub fn is_terminal(self) -> bool {
-        matches!(self, Self::Succeeded | Self::Failed | Self::Cancelled)
-    }
-}
+pub use crate::store::JobState;
 
 /// The strategy with the lowest RMS so far, among the per-path strategies and the hold-out
 /// optimum (in-sample fits are optimistic and left out).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BestStrategy {
-    pub strategy: String,
+    pub strategy: Strategy,
     pub luminance: f64,
     pub rms_percent: f64,
 }
@@ -102,6 +73,50 @@ pub fn rfc3339(ms: i64) -> String {
     t.format(&format).unwrap_or_default()
 }
 
+/// The spec stored with a job.
+pub(super) fn parse_stored_spec(row: &JobRow) -> Result<JobSpec, JobError> {
+    serde_json::from_str(&row.spec)
+        .map_err(|e| JobError::Internal(format!("stored spec of job {} is unreadable: {e}", row.id)))
+}
+
+/// The resource of a job that is not active, from its row.
+pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
+    Ok(JobResource {
+        id: row.id,
+        state: row.state,
+        spec: parse_stored_spec(row)?,
+        created_at: rfc3339(row.created_at),
+        updated_at: rfc3339(row.updated_at),
+        progress: Progress {
+            iterations_done: row.iterations_done,
+            iterations_total: row.iterations_total,
+            iterations_checkpointed: row.iterations_done,
+            light_paths_per_second: None,
+            eta_seconds: None,
+            best: row.best.as_deref().and_then(|b| serde_json::from_str(b).ok()),
+        },
+        error: row.error.clone(),
+        fingerprint: row.fingerprint.clone(),
+        reference_luminance: row.reference_luminance,
+        merged: row.merged,
+    })
+}
+
+/// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample
+/// `optimal` and `optimal_cv` rows are evaluated on the data they were fitted to, so they are left
+/// out (`optimal_holdout` stays).
+pub(crate) fn best_strategy(rows: &[NoiseRow]) -> Option<BestStrategy> {
+    rows.iter()
+        .filter(|r| !r.strategy.is_in_sample())
+        .filter_map(|r| match (r.luminance, r.rms_percent) {
+            (Some(l), Some(rms)) if rms > 0.0 => {
+                Some(BestStrategy { strategy: r.strategy, luminance: l, rms_percent: rms })
+            }
+            _ => None,
+        })
+        .min_by(|a, b| a.rms_percent.total_cmp(&b.rms_percent))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -110,13 +125,5 @@ mod tests {
     fn timestamps_are_rfc3339_utc() {
         assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
         assert_eq!(rfc3339(1_795_000_000_123), "2026-11-18T11:06:40.123Z"); // checked with Python's datetime
-    }
-
-    #[test]
-    fn states_round_trip() {
-        for s in JobState::ALL {
-            assert_eq!(JobState::parse(s.as_str()), Some(s));
-        }
-        assert_eq!(JobState::parse("paused"), None);
     }
 }

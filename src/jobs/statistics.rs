@@ -13,25 +13,21 @@ use futures_util::stream::{self, StreamExt, TryStreamExt};
 use serde::Deserialize;
 use serde_json::Value;
 
+use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
 use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS, thin};
-use super::driver;
 use super::error::JobError;
-use super::manager::{JobManager, check_budget, parse_stored_spec, resource_from_row, spec_json};
+use super::manager::JobManager;
 use super::peers::CONCURRENT_PULLS;
-use super::resource::{JobResource, JobState, now_ms};
+use super::policy::check_budget;
+use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
 use crate::sim::math::digest::sha256_hex;
-use crate::sim::solve::options::SolverOptions;
-use crate::sim::solve::options::validate_solver;
 use crate::sim::solve::report::{RunReport, build_report};
-use crate::sim::spec::{JobSpec, SpecError, merge_patch};
+use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
 use crate::store::{Checkpoint, NewJob, StoreError};
-
-/// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
-pub(super) const MAX_VERIFIED: usize = 100_000;
 
 /// Most sources of one study.
 pub const MAX_STUDY_SOURCES: usize = 256;
@@ -147,28 +143,6 @@ pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
     Ok(StudyBody { sources, solver: raw.solver })
 }
 
-/// Solver options patched by `patch` (a JSON Merge Patch on `base`), validated; `prefix` names
-/// where the patch sits in the request for error messages ("" or "solver").
-fn patched_solver(base: &SolverOptions, patch: &Value, prefix: &str) -> Result<SolverOptions, JobError> {
-    if !patch.is_object() {
-        return Err(SpecError::new(prefix, "must be a JSON object of solver options").into());
-    }
-    let mut options = serde_json::to_value(base).map_err(|e| JobError::Internal(e.to_string()))?;
-    merge_patch(&mut options, patch);
-    let options: SolverOptions = serde_path_to_error::deserialize(&options).map_err(|e| {
-        let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
-        let field = match (prefix.is_empty(), path.is_empty()) {
-            (true, _) => path,
-            (false, true) => prefix.to_string(),
-            (false, false) => format!("{prefix}.{path}"),
-        };
-        SpecError::new(field, e.into_inner().to_string())
-    })?;
-    validate_solver(&options)?;
-    Ok(options)
-}
-
 impl JobManager {
     async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
         let resource = self.get(id).await?;
@@ -251,7 +225,7 @@ impl JobManager {
         let spec = spec.clone();
         self.compute(move || {
             let job = spec.validate()?;
-            let moments = driver::decode_checkpoint(id, &checkpoint, &job, !merged)?;
+            let moments = decode_checkpoint(id, &checkpoint, &job, !merged)?;
             Ok((moments, checkpoint))
         })
         .await?
@@ -261,7 +235,7 @@ impl JobManager {
     /// `solver`), without running anything or storing anything.
     pub async fn solve(&self, id: i64, patch: &Value) -> Result<JobResult, JobError> {
         let (state, total, spec, merged) = self.state_and_total(id).await?;
-        let solver = patched_solver(&spec.solver, patch, "")?;
+        let solver = spec.solver.patched(patch)?;
         let reference = self.get(id).await?.reference_luminance;
         let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
         let done = checkpoint.iterations_done;
@@ -331,7 +305,7 @@ impl JobManager {
                 )));
             }
             let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
-            if !matches!(row.state.as_str(), "succeeded" | "cancelled") {
+            if !matches!(row.state, JobState::Succeeded | JobState::Cancelled) {
                 return Err(JobError::Conflict(format!(
                     "job {id} is {}; only a succeeded or cancelled job takes merges",
                     row.state
@@ -349,14 +323,14 @@ impl JobManager {
                 let spec = parse_stored_spec(&row)?;
                 let job = spec.validate()?;
                 let mut moments = match checkpoint {
-                    Some(checkpoint) => driver::decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
+                    Some(checkpoint) => decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
                     None => Moments::new(&job.config),
                 };
                 moments.merge(&doc.moments).map_err(DocumentError::from)?;
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let spec = merged_spec(&spec, &moments);
                 check_budget(&policy, &spec, moments.iterations())?;
-                let checkpoint = driver::checkpoint_of(&moments, &job, row.reference_luminance)?;
+                let checkpoint = checkpoint_of(&moments, &job, row.reference_luminance)?;
                 Ok((checkpoint, spec_json(&spec)?))
             })
             .await??;
@@ -408,12 +382,12 @@ impl JobManager {
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let mut spec = merged_spec(&base, &moments);
                 if let Some(patch) = &solver {
-                    spec.solver = patched_solver(&spec.solver, patch, "solver")?;
+                    spec.solver = spec.solver.patched(patch)?;
                 }
                 let job = spec.validate()?;
                 check_budget(&policy, &job.spec, moments.iterations())?;
                 let reference = reference_luminance(&job.config.scene).ok();
-                let checkpoint = driver::checkpoint_of(&moments, &job, reference)?;
+                let checkpoint = checkpoint_of(&moments, &job, reference)?;
                 let new = NewJob {
                     spec: spec_json(&job.spec)?,
                     fingerprint: job.config.fingerprint().to_string(),

@@ -37,9 +37,19 @@ pub const GRACE: Duration = Duration::from_secs(10);
 /// The per-connection bounds.
 #[derive(Debug, Clone, Copy)]
 pub struct ConnectionLimits {
+    /// Most connections open at once.
     pub max_connections: usize,
+    /// A request head (and a TLS handshake) must arrive within this; keep-alive connections idle
+    /// this long are closed.
     pub header_timeout: Duration,
+    /// A response the client does not read for this long closes its connection.
     pub send_timeout: Duration,
+}
+
+impl Default for ConnectionLimits {
+    fn default() -> Self {
+        Self { max_connections: 512, header_timeout: Duration::from_secs(10), send_timeout: Duration::from_secs(60) }
+    }
 }
 
 /// Serves `app` on `listener` until `shutdown` resolves, then lets open connections finish (for at

@@ -18,7 +18,7 @@ use serde_json::{Value, json};
 use crate::sim::model::config::{Engine, Proposals, SimConfig};
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
-    CellSpec, MIN_LENGTH, SceneSpec, check, count, optional_count, validate_cells, validate_scene,
+    CellSpec, MIN_LENGTH, SceneSpec, check, count, merge_patch, optional_count, validate_cells, validate_scene,
 };
 use crate::sim::model::scene::Scene;
 use crate::sim::solve::options::{SolverOptions, validate_solver};
@@ -152,37 +152,6 @@ pub fn preset(name: &str) -> Option<Value> {
             Some(doc)
         }
         _ => None,
-    }
-}
-
-/// Applies `patch` to `base` by JSON Merge Patch, except that an object whose `kind` differs from
-/// the base's replaces it whole.
-pub fn merge_patch(base: &mut Value, patch: &Value) {
-    match (base, patch) {
-        (Value::Object(base_map), Value::Object(patch_map)) => {
-            for (key, value) in patch_map {
-                if value.is_null() {
-                    base_map.remove(key);
-                    continue;
-                }
-                match base_map.get_mut(key) {
-                    Some(slot) if slot.is_object() && value.is_object() && !kind_differs(slot, value) => {
-                        merge_patch(slot, value)
-                    }
-                    _ => {
-                        base_map.insert(key.clone(), value.clone());
-                    }
-                }
-            }
-        }
-        (base, patch) => *base = patch.clone(),
-    }
-}
-
-fn kind_differs(a: &Value, b: &Value) -> bool {
-    match (a.get("kind"), b.get("kind")) {
-        (Some(x), Some(y)) => x != y,
-        _ => false,
     }
 }
 

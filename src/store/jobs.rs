@@ -7,7 +7,7 @@
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
-use super::{Store, StoreError};
+use super::{JobState, Store, StoreError};
 
 /// Rows a job's history may reach before it is thinned (to ~1,000, evenly spaced in iterations).
 pub const MAX_HISTORY_ROWS: i64 = 2000;
@@ -21,7 +21,7 @@ pub(crate) fn now_ms() -> i64 {
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobRow {
     pub id: i64,
-    pub state: String,
+    pub state: JobState,
     /// The resolved spec, JSON.
     pub spec: String,
     pub fingerprint: String,
@@ -87,10 +87,19 @@ macro_rules! job_columns {
     };
 }
 
+/// The `state` column as a [`JobState`]; any other text is a decoding error (a corrupted row).
+fn decode_state(row: &SqliteRow) -> Result<JobState, sqlx::Error> {
+    let text: String = row.try_get("state")?;
+    JobState::parse(&text).ok_or_else(|| sqlx::Error::ColumnDecode {
+        index: "state".into(),
+        source: format!("unknown job state {text:?}").into(),
+    })
+}
+
 fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
     Ok(JobRow {
         id: row.try_get("id")?,
-        state: row.try_get("state")?,
+        state: decode_state(row)?,
         spec: row.try_get("spec")?,
         fingerprint: row.try_get("fingerprint")?,
         iterations_total: row.try_get::<i64, _>("iterations_total")? as u64,
@@ -190,9 +199,10 @@ impl Store {
         self.transaction(async |tx| {
             let row = sqlx::query(concat!(
                 "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
-             request_hash, created_at, updated_at) VALUES ('queued', ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
+             request_hash, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
                 job_columns!()
             ))
+            .bind(JobState::Queued.as_str())
             .bind(&job.spec)
             .bind(&job.fingerprint)
             .bind(job.iterations_total as i64)
@@ -238,7 +248,7 @@ impl Store {
     /// Jobs newest first, optionally in one state, with ids below `before` (keyset pagination).
     pub async fn list_jobs(
         &self,
-        state: Option<&str>,
+        state: Option<JobState>,
         before: Option<i64>,
         limit: u32,
     ) -> Result<Vec<JobRow>, StoreError> {
@@ -247,7 +257,7 @@ impl Store {
             job_columns!(),
             " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR id < ?2) ORDER BY id DESC LIMIT ?3"
         ))
-        .bind(state)
+        .bind(state.map(JobState::as_str))
         .bind(before)
         .bind(i64::from(limit))
         .fetch_all(self.pool())
@@ -260,17 +270,19 @@ impl Store {
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
-            " FROM jobs WHERE state IN ('running', 'queued') ORDER BY CASE state WHEN 'running' THEN 0 ELSE 1 END, id"
+            " FROM jobs WHERE state IN (?1, ?2) ORDER BY CASE state WHEN ?1 THEN 0 ELSE 1 END, id"
         ))
+        .bind(JobState::Running.as_str())
+        .bind(JobState::Queued.as_str())
         .fetch_all(self.pool())
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
 
     /// Sets a job's state (and error), returning whether the job exists.
-    pub async fn set_state(&self, id: i64, state: &str, error: Option<&str>, now: i64) -> Result<bool, StoreError> {
+    pub async fn set_state(&self, id: i64, state: JobState, error: Option<&str>, now: i64) -> Result<bool, StoreError> {
         let done = sqlx::query("UPDATE jobs SET state = ?, error = ?, updated_at = ? WHERE id = ?")
-            .bind(state)
+            .bind(state.as_str())
             .bind(error)
             .bind(now)
             .bind(id)
@@ -292,14 +304,21 @@ impl Store {
 
     /// Sets a job's total iterations with its updated spec (and state), clearing any error and
     /// cancel request, returning whether the job exists.
-    pub async fn set_total(&self, id: i64, total: u64, spec: &str, state: &str, now: i64) -> Result<bool, StoreError> {
+    pub async fn set_total(
+        &self,
+        id: i64,
+        total: u64,
+        spec: &str,
+        state: JobState,
+        now: i64,
+    ) -> Result<bool, StoreError> {
         let done = sqlx::query(
             "UPDATE jobs SET iterations_total = ?, spec = ?, state = ?, error = NULL, cancel_requested = 0, \
              updated_at = ? WHERE id = ?",
         )
         .bind(total as i64)
         .bind(spec)
-        .bind(state)
+        .bind(state.as_str())
         .bind(now)
         .bind(id)
         .execute(self.pool())
@@ -371,9 +390,10 @@ impl Store {
         self.transaction(async |tx| {
             let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
-             merged, created_at, updated_at) VALUES ('succeeded', ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
+             merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
             job_columns!()
         ))
+        .bind(JobState::Succeeded.as_str())
         .bind(&job.spec)
         .bind(&job.fingerprint)
         .bind(checkpoint.iterations_done as i64)
@@ -412,12 +432,11 @@ impl Store {
     }
 
     /// Number of jobs in each state (every state listed, zero included).
-    pub async fn count_by_state(&self) -> Result<Vec<(String, i64)>, StoreError> {
+    pub async fn count_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
         let rows = sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state").fetch_all(self.pool()).await?;
-        let mut counts: Vec<(String, i64)> =
-            ["queued", "running", "succeeded", "failed", "cancelled"].iter().map(|s| (s.to_string(), 0)).collect();
+        let mut counts: Vec<(JobState, i64)> = JobState::ALL.iter().map(|&s| (s, 0)).collect();
         for row in rows {
-            let state: String = row.try_get("state")?;
+            let state = decode_state(&row)?;
             let n: i64 = row.try_get("n")?;
             if let Some(slot) = counts.iter_mut().find(|(s, _)| *s == state) {
                 slot.1 = n;

@@ -13,6 +13,7 @@
 //! last such failure for a while so that `/readyz` reports it.
 
 mod jobs;
+mod state;
 
 use std::str::FromStr;
 use std::sync::Arc;
@@ -24,6 +25,7 @@ use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
+pub use state::JobState;
 
 /// The schema migrations, embedded in the binary.
 pub static MIGRATOR: Migrator = sqlx::migrate!("./migrations");

@@ -6,7 +6,9 @@ pub mod process;
 
 use std::time::{Duration, Instant};
 
-use optimis::server::{RunningServer, ServerConfig, spawn};
+use optimis::api::HttpLimits;
+use optimis::jobs::RunPolicy;
+use optimis::server::{ConnectionLimits, RunningServer, ServerConfig, spawn};
 use serde_json::Value;
 
 /// An HTTP client for tests (rustls needs its crypto provider installed once per process).
@@ -28,11 +30,15 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
     ServerConfig {
         bind: "127.0.0.1:0".parse().unwrap(),
         database: format!("sqlite://{}", dir.path().join("optimis.db").display()),
-        workers: 1,
         threads: 2,
-        checkpoint_iterations: 5,
-        checkpoint_interval: Duration::from_millis(300),
-        limits: optimis::server::Limits::default(),
+        policy: RunPolicy {
+            workers: 1,
+            checkpoint_iterations: 5,
+            checkpoint_interval: Duration::from_millis(300),
+            ..RunPolicy::default()
+        },
+        http: HttpLimits::default(),
+        connections: ConnectionLimits::default(),
         token: None,
         tls: None,
         peers: Vec::new(),

@@ -98,7 +98,7 @@ pub fn measure(config: &SimConfig, seed: u64, first: u64, blocks: u64, block_len
                 per_block.iter().map(|rows| f(&rows[s]).unwrap_or(f64::NAN)).collect()
             };
             (
-                per_block[0][s].strategy.clone(),
+                per_block[0][s].strategy.name().to_string(),
                 Estimate::of(&values(|r| r.luminance)),
                 Estimate::of(&values(|r| r.rms_percent)),
             )

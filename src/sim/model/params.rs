@@ -244,3 +244,34 @@ pub fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
     })?;
     Ok(CellGrid::new(cells.r2_edges.clone(), cells.r3_edges.clone(), cells.phi_bins))
 }
+
+/// Applies `patch` to `base` by JSON Merge Patch, except that an object whose `kind` differs from
+/// the base's replaces it whole.
+pub fn merge_patch(base: &mut Value, patch: &Value) {
+    match (base, patch) {
+        (Value::Object(base_map), Value::Object(patch_map)) => {
+            for (key, value) in patch_map {
+                if value.is_null() {
+                    base_map.remove(key);
+                    continue;
+                }
+                match base_map.get_mut(key) {
+                    Some(slot) if slot.is_object() && value.is_object() && !kind_differs(slot, value) => {
+                        merge_patch(slot, value)
+                    }
+                    _ => {
+                        base_map.insert(key.clone(), value.clone());
+                    }
+                }
+            }
+        }
+        (base, patch) => *base = patch.clone(),
+    }
+}
+
+fn kind_differs(a: &Value, b: &Value) -> bool {
+    match (a.get("kind"), b.get("kind")) {
+        (Some(x), Some(y)) => x != y,
+        _ => false,
+    }
+}

@@ -18,6 +18,7 @@ use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 use super::solver::{Fit, SolveError, YStats, fit};
+use super::strategy::Strategy;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::options::SolverOptions;
@@ -28,7 +29,7 @@ use crate::sim::stats::moments::{FoldMoments, Moments};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct NoiseRow {
-    pub strategy: String,
+    pub strategy: Strategy,
     pub luminance: Option<f64>,
     pub luminance_stderr: Option<f64>,
     pub rms_percent: Option<f64>,
@@ -41,9 +42,9 @@ pub struct NoiseRow {
 }
 
 impl NoiseRow {
-    fn failed(strategy: &str, error: String) -> Self {
+    fn failed(strategy: Strategy, error: String) -> Self {
         Self {
-            strategy: strategy.into(),
+            strategy,
             luminance: None,
             luminance_stderr: None,
             rms_percent: None,
@@ -55,7 +56,7 @@ impl NoiseRow {
     }
 
     /// A row from M, Σ C and Σ C² (and, if known, the central moments for the RMS error).
-    fn from_sums(strategy: &str, m: f64, s1: f64, s2: f64, higher: Option<(f64, f64)>) -> Self {
+    fn from_sums(strategy: Strategy, m: f64, s1: f64, s2: f64, higher: Option<(f64, f64)>) -> Self {
         if m < 2.0 {
             return Self::failed(strategy, format!("at least 2 iterations are needed, got {m}"));
         }
@@ -75,7 +76,7 @@ impl NoiseRow {
             _ => None,
         };
         Self {
-            strategy: strategy.into(),
+            strategy,
             luminance: Some(mean),
             luminance_stderr: Some(std / m.sqrt()),
             rms_percent: rms,
@@ -101,7 +102,7 @@ fn path_row(fold: &FoldMoments, strategy: PathStrategy) -> NoiseRow {
     let i = PathStrategy::ALL.iter().position(|&s| s == strategy).expect("strategy listed");
     let s = fold.strategies[i].clone().map(|x| x.value());
     let m = fold.iterations as f64;
-    NoiseRow::from_sums(strategy.name(), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+    NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
 }
 
 /// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
@@ -117,7 +118,7 @@ pub fn path_rows(moments: &Moments) -> Vec<NoiseRow> {
                 sum.add_sum(&odd.strategies[i][k]);
                 sum.value()
             });
-            NoiseRow::from_sums(strategy.name(), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+            NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
         })
         .collect()
 }
@@ -146,8 +147,9 @@ fn holdout_sums(
     Ok(total)
 }
 
+/// The hold-out RMS% of pooled hold-out sums.
 fn rms_of(m: f64, s1: f64, s2: f64) -> Option<f64> {
-    NoiseRow::from_sums("", m, s1, s2, None).rms_percent
+    NoiseRow::from_sums(Strategy::OptimalHoldout, m, s1, s2, None).rms_percent
 }
 
 /// Computes the noise table of `moments` with the given solver options.
@@ -164,7 +166,7 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
     let k = grid.len();
     let pooled = YStats::from_fold(&pooled_fold, k);
     let folds = [YStats::from_fold(&moments.folds[0], k), YStats::from_fold(&moments.folds[1], k)];
-    let fitted_row = |name: &str, f: &Fit, stats: &YStats| {
+    let fitted_row = |name: Strategy, f: &Fit, stats: &YStats| {
         let (s1, s2) = stats.evaluate(&f.vector());
         NoiseRow { lambda: Some(f.lambda), ..NoiseRow::from_sums(name, stats.m, s1, s2, None) }
     };
@@ -172,16 +174,16 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
     // Case 5: fitted and evaluated on all iterations.
     let optimal = fit(&pooled, grid, &solver.fixed, solver.lambda);
     rows.push(match &optimal {
-        Ok(f) => fitted_row("optimal", f, &pooled),
-        Err(e) => NoiseRow::failed("optimal", e.to_string()),
+        Ok(f) => fitted_row(Strategy::Optimal, f, &pooled),
+        Err(e) => NoiseRow::failed(Strategy::Optimal, e.to_string()),
     });
 
     // 2-fold cross-fitting with the requested λ.
     rows.push(match holdout_sums(&folds, grid, solver, solver.lambda) {
         Ok((m, s1, s2)) => {
-            NoiseRow { lambda: Some(solver.lambda), ..NoiseRow::from_sums("optimal_holdout", m, s1, s2, None) }
+            NoiseRow { lambda: Some(solver.lambda), ..NoiseRow::from_sums(Strategy::OptimalHoldout, m, s1, s2, None) }
         }
-        Err(e) => NoiseRow::failed("optimal_holdout", format!("a hold-out fit failed: {e}")),
+        Err(e) => NoiseRow::failed(Strategy::OptimalHoldout, format!("a hold-out fit failed: {e}")),
     });
 
     // λ by hold-out variance, then fitted on everything.
@@ -197,7 +199,7 @@ fn cross_validated(
     folds: &[YStats; 2],
     grid: &CellGrid,
     solver: &SolverOptions,
-    fitted_row: impl Fn(&str, &Fit, &YStats) -> NoiseRow,
+    fitted_row: impl Fn(Strategy, &Fit, &YStats) -> NoiseRow,
 ) -> NoiseRow {
     let mut best: Option<(f64, f64)> = None; // (hold-out RMS%, λ)
     let mut failures = Vec::new();
@@ -210,13 +212,13 @@ fn cross_validated(
     }
     let Some((holdout_rms, lambda)) = best else {
         return NoiseRow::failed(
-            "optimal_cv",
+            Strategy::OptimalCv,
             format!("no λ of the grid could be evaluated ({})", failures.join("; ")),
         );
     };
     match fit(pooled, grid, &solver.fixed, lambda) {
-        Ok(f) => NoiseRow { holdout_rms_percent: Some(holdout_rms), ..fitted_row("optimal_cv", &f, pooled) },
-        Err(e) => NoiseRow::failed("optimal_cv", format!("the final fit with λ = {lambda} failed: {e}")),
+        Ok(f) => NoiseRow { holdout_rms_percent: Some(holdout_rms), ..fitted_row(Strategy::OptimalCv, &f, pooled) },
+        Err(e) => NoiseRow::failed(Strategy::OptimalCv, format!("the final fit with λ = {lambda} failed: {e}")),
     }
 }
 
@@ -269,7 +271,7 @@ mod tests {
                 s[3] += x * x * x * x;
             }
             let mf = m as f64;
-            let row = NoiseRow::from_sums("x", mf, s[0], s[1], Some(central_3_4(mf, s)));
+            let row = NoiseRow::from_sums(Strategy::Plane1, mf, s[0], s[1], Some(central_3_4(mf, s)));
             rms_values.push(row.rms_percent.unwrap());
             ses.push(row.rms_percent_stderr.unwrap());
         }
@@ -287,7 +289,7 @@ mod tests {
 
     #[test]
     fn rows_need_two_iterations() {
-        let row = NoiseRow::from_sums("x", 1.0, 1.0, 1.0, None);
+        let row = NoiseRow::from_sums(Strategy::Plane1, 1.0, 1.0, 1.0, None);
         assert!(row.luminance.is_none() && row.error.is_some());
     }
 }

@@ -5,7 +5,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::sim::model::params::{SpecError, check};
+use serde_json::Value;
+
+use crate::sim::model::params::{SpecError, check, merge_patch};
 
 /// Most λ values a cross-validation grid may try.
 pub const MAX_CV_LAMBDAS: usize = 32;
@@ -34,6 +36,26 @@ pub struct FixedWeights {
     pub w1: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w2: Option<f64>,
+}
+
+impl SolverOptions {
+    /// These options changed by `patch` (a JSON Merge Patch of solver options) and validated. Every
+    /// caller — a re-solve, a study, the command line — names a bad field the same way: `solver.…`
+    /// as in a job specification (`solver` alone when the patch is not an object).
+    pub fn patched(&self, patch: &Value) -> Result<SolverOptions, SpecError> {
+        if !patch.is_object() {
+            return Err(SpecError::new("solver", "must be a JSON object of solver options"));
+        }
+        let mut options = serde_json::to_value(self).expect("solver options serialise");
+        merge_patch(&mut options, patch);
+        let options: SolverOptions = serde_path_to_error::deserialize(&options).map_err(|e| {
+            let path = e.path().to_string();
+            let field = if path == "." { "solver".to_string() } else { format!("solver.{path}") };
+            SpecError::new(field, e.into_inner().to_string())
+        })?;
+        validate_solver(&options)?;
+        Ok(options)
+    }
 }
 
 impl FixedWeights {
@@ -69,4 +91,36 @@ pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
         })?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn base() -> SolverOptions {
+        SolverOptions {
+            fixed: FixedWeights { w0: Some(0.0), ..FixedWeights::default() },
+            lambda: 0.0,
+            cv_lambdas: vec![0.1],
+        }
+    }
+
+    #[test]
+    fn a_patch_changes_only_what_it_names_and_null_frees_a_weight() {
+        let patched = base().patched(&json!({ "lambda": 0.5, "fixed": { "w0": null } })).unwrap();
+        assert_eq!(patched.lambda, 0.5);
+        assert_eq!(patched.fixed, FixedWeights::default());
+        assert_eq!(patched.cv_lambdas, vec![0.1]);
+    }
+
+    #[test]
+    fn a_bad_patch_names_the_field_as_a_job_specification_does() {
+        let field = |patch: serde_json::Value| base().patched(&patch).unwrap_err().field;
+        assert_eq!(field(json!({ "lambda": -1 })), "solver.lambda");
+        assert_eq!(field(json!({ "lambda": "x" })), "solver.lambda");
+        assert_eq!(field(json!({ "fixed": { "w1": 2e6 } })), "solver.fixed.w1");
+        assert_eq!(field(json!({ "lamda": 1 })), "solver");
+        assert_eq!(field(json!(3)), "solver");
+    }
 }

@@ -1,0 +1,197 @@
+//! The jobs in memory and the transitions of their state.
+//!
+//! [`Inner`] is the manager's shared state (see `manager` for what each part is for); the
+//! transitions a running job goes through (running, succeeded, cancelled, interrupted, failed) are
+//! methods on it, called by the job's driver, so that the driver needs nothing of the manager.
+//! Every transition takes the lifecycle lock, writes the store and then updates memory.
+
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use tokio::runtime::Handle;
+use tokio::sync::{Notify, watch};
+
+use super::error::JobError;
+use super::peers::Peers;
+use super::policy::RunPolicy;
+use super::resource::{JobResource, JobState, now_ms, rfc3339};
+use crate::metrics::Metrics;
+use crate::sim::spec::ValidJob;
+use crate::store::Store;
+
+/// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
+pub(super) const MAX_VERIFIED: usize = 100_000;
+
+/// Why a running job was asked to stop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub(crate) enum StopReason {
+    /// The user cancelled it: it ends `cancelled` (the request is also stored).
+    Cancel = 1,
+    /// The server is stopping: it stays `queued` and resumes at the next start.
+    Shutdown = 2,
+}
+
+/// A queued or running job, in memory.
+pub(crate) struct ActiveJob {
+    pub id: i64,
+    pub job: ValidJob,
+    /// First iteration index of the job's range (see `JobSpec::iteration_range`).
+    pub start: u64,
+    /// Checked by the simulation before every chunk (and inside restricted iterations).
+    pub stop: AtomicBool,
+    /// A `StopReason` once `stop` is set (0 before).
+    pub(super) stop_reason: AtomicU8,
+    /// Iterations to reach (extend raises it while the job runs).
+    pub total: AtomicU64,
+    /// The job's current resource; GET and the event stream read it.
+    pub view: watch::Sender<JobResource>,
+}
+
+impl ActiveJob {
+    /// Asks the job to stop. A cancel wins over a shutdown (a shutdown never turns an
+    /// acknowledged cancel into "resume later").
+    pub fn request_stop(&self, reason: StopReason) {
+        match reason {
+            StopReason::Cancel => self.stop_reason.store(reason as u8, Ordering::SeqCst),
+            StopReason::Shutdown => {
+                let _ = self.stop_reason.compare_exchange(0, reason as u8, Ordering::SeqCst, Ordering::SeqCst);
+            }
+        }
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    pub fn stop_reason(&self) -> Option<StopReason> {
+        match self.stop_reason.load(Ordering::SeqCst) {
+            1 => Some(StopReason::Cancel),
+            2 => Some(StopReason::Shutdown),
+            _ => None,
+        }
+    }
+
+    pub fn state(&self) -> JobState {
+        self.view.borrow().state
+    }
+}
+
+pub(crate) struct Inner {
+    pub store: Store,
+    /// The simulation pool, shared by the running jobs.
+    pub pool: Arc<rayon::ThreadPool>,
+    /// A small pool for computations a request waits for (validation, verification, re-solves):
+    /// on the simulation pool they would queue behind thousands of chunks of the running jobs.
+    pub(super) requests: rayon::ThreadPool,
+    /// The allowed peers and the client that pulls from them.
+    pub(super) peers: Peers,
+    pub metrics: Arc<Metrics>,
+    pub policy: RunPolicy,
+    pub runtime: Handle,
+    /// std Mutex: held only for map operations, never across an `.await`.
+    pub(super) active: Mutex<HashMap<i64, Arc<ActiveJob>>>,
+    /// std Mutex, same reason.
+    pub(super) queue: Mutex<VecDeque<i64>>,
+    /// Serialises state transitions; async because it is held across database writes.
+    pub(super) lifecycle: tokio::sync::Mutex<()>,
+    /// Jobs a merge is changing; std Mutex, held for set operations only.
+    pub(super) merging: Mutex<HashSet<i64>>,
+    /// The checkpoint checksum of each job whose stored moments were last verified against it
+    /// (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
+    /// checkpoint changed since. std Mutex, map operations only.
+    pub(super) verified: Mutex<HashMap<i64, String>>,
+    /// Wakes the scheduler: a job was queued or a worker became free.
+    pub(super) wake: Notify,
+    pub(super) running: AtomicUsize,
+    /// Signalled whenever a driver ends (shutdown waits for all of them).
+    pub(super) driver_ended: Notify,
+    pub(super) shutdown: watch::Sender<bool>,
+}
+
+/// A job's merge in progress: released (and the job open to extend and delete again) on drop.
+pub(super) struct MergeReservation {
+    pub(super) inner: Arc<Inner>,
+    pub(super) id: i64,
+}
+
+impl Drop for MergeReservation {
+    fn drop(&mut self) {
+        self.inner.merging.lock().expect("merging set").remove(&self.id);
+    }
+}
+
+/// State transitions of a running job, called by its driver (through `block_on`).
+impl Inner {
+    pub(crate) async fn mark_running(&self, job: &ActiveJob) -> Result<(), JobError> {
+        let _guard = self.lifecycle.lock().await;
+        let now = now_ms();
+        self.store.set_state(job.id, JobState::Running, None, now).await?;
+        job.view.send_modify(|r| {
+            r.state = JobState::Running;
+            r.updated_at = rfc3339(now);
+        });
+        Ok(())
+    }
+
+    /// Marks the job succeeded if it has all its iterations; false if it was extended meanwhile.
+    pub(crate) async fn finish(&self, job: &ActiveJob, done: u64) -> Result<bool, JobError> {
+        let _guard = self.lifecycle.lock().await;
+        if job.total.load(Ordering::SeqCst) > done {
+            return Ok(false);
+        }
+        self.end(job, JobState::Succeeded, None).await?;
+        Ok(true)
+    }
+
+    pub(crate) async fn mark_cancelled(&self, job: &ActiveJob) -> Result<(), JobError> {
+        let _guard = self.lifecycle.lock().await;
+        self.end(job, JobState::Cancelled, None).await
+    }
+
+    /// Leaves a job interrupted by shutdown as queued (it resumes at the next start).
+    pub(crate) async fn mark_interrupted(&self, job: &ActiveJob) -> Result<(), JobError> {
+        let _guard = self.lifecycle.lock().await;
+        self.store.set_state(job.id, JobState::Queued, None, now_ms()).await?;
+        self.active.lock().expect("active map").remove(&job.id);
+        job.view.send_modify(|r| r.state = JobState::Queued);
+        Ok(())
+    }
+
+    pub(crate) async fn fail(&self, id: i64, reason: &str) -> Result<(), JobError> {
+        let _guard = self.lifecycle.lock().await;
+        let job = self.active.lock().expect("active map").get(&id).cloned();
+        match job {
+            Some(job) => self.end(&job, JobState::Failed, Some(reason)).await,
+            None => {
+                self.store.set_state(id, JobState::Failed, Some(reason), now_ms()).await.map(|_| ()).map_err(Into::into)
+            }
+        }
+    }
+
+    /// Records that job `id`'s stored moments match `checksum` (see `verified`).
+    pub(crate) fn remember_verified(&self, id: i64, checksum: &str) {
+        let mut verified = self.verified.lock().expect("verified map");
+        if verified.len() >= MAX_VERIFIED {
+            verified.clear();
+        }
+        verified.insert(id, checksum.to_string());
+    }
+
+    /// Whether the server is stopping.
+    pub(crate) fn shutting_down(&self) -> bool {
+        *self.shutdown.borrow()
+    }
+
+    async fn end(&self, job: &ActiveJob, state: JobState, error: Option<&str>) -> Result<(), JobError> {
+        let now = now_ms();
+        self.store.set_state(job.id, state, error, now).await?;
+        self.active.lock().expect("active map").remove(&job.id);
+        job.view.send_modify(|r| {
+            r.state = state;
+            r.error = error.map(str::to_string);
+            r.updated_at = rfc3339(now);
+            r.progress.light_paths_per_second = None;
+            r.progress.eta_seconds = None;
+        });
+        Ok(())
+    }
+}
