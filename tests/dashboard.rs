@@ -11,7 +11,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::TestServer;
+use common::{TestServer, assert_problem};
 use tokio::process::Command;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
@@ -98,6 +98,70 @@ async fn run_scenario(server: &TestServer, token: Option<&str>) {
     for name in SCREENSHOTS {
         assert_png(&screenshots.path().join(name));
     }
+}
+
+/// The names of the dashboard files `text` refers to: `/assets/…` in the page, `from './….js'` in a
+/// module (every import of the dashboard is a sibling file).
+fn referenced_assets(text: &str) -> Vec<String> {
+    let mut names = Vec::new();
+    for marker in ["\"/assets/", "from './"] {
+        for (start, _) in text.match_indices(marker) {
+            let rest = &text[start + marker.len()..];
+            let end = rest.find(['"', '\'']).expect("a closing quote");
+            names.push(rest[..end].to_owned());
+        }
+    }
+    names
+}
+
+/// Without a browser: the page and every file it loads, the script's modules followed import by
+/// import from app.js, are served with their media type; an unknown name is a 404 problem.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_dashboard_file_is_served() {
+    let server = TestServer::start().await;
+    let page = server.get("/").await;
+    assert_eq!(page.status(), 200);
+    let mut pending = referenced_assets(&page.text().await.unwrap());
+    assert!(pending.contains(&"app.js".to_owned()), "the page loads app.js: {pending:?}");
+    let mut served = Vec::new();
+    while let Some(name) = pending.pop() {
+        if served.contains(&name) {
+            continue;
+        }
+        let response = server.get(&format!("/assets/{name}")).await;
+        assert_eq!(response.status(), 200, "/assets/{name}");
+        let media_type = response.headers()["content-type"].to_str().unwrap().to_owned();
+        let body = response.text().await.unwrap();
+        if name.ends_with(".js") {
+            assert_eq!(media_type, "text/javascript; charset=utf-8", "/assets/{name}");
+            pending.extend(referenced_assets(&body));
+        } else {
+            assert_eq!(media_type, "text/css; charset=utf-8", "/assets/{name}");
+        }
+        served.push(name);
+    }
+    served.sort();
+    let expected = [
+        "api.js",
+        "app.css",
+        "app.js",
+        "form.js",
+        "format.js",
+        "job.js",
+        "list.js",
+        "plots.js",
+        "results.js",
+        "uPlot.iife.min.js",
+        "uPlot.min.css",
+    ];
+    assert_eq!(served, expected, "the files the page loads");
+    for name in ["nope.js", "app.JS", "..%2Fapp.js"] {
+        let problem = assert_problem(server.get(&format!("/assets/{name}")).await, 404).await;
+        assert!(problem["detail"].as_str().unwrap().contains("no dashboard file"), "{name}: {problem}");
+    }
+    // No folders under /assets/.
+    assert_problem(server.get("/assets/js/app.js").await, 404).await;
+    server.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

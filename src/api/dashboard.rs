@@ -1,5 +1,6 @@
-//! The built-in dashboard: one HTML page, its script and style, and the vendored plotting library
-//! (uPlot), all compiled into the binary — no CDN, nothing fetched from the internet.
+//! The built-in dashboard: one HTML page, its script (plain ES modules, no build step) and style,
+//! and the vendored plotting library (uPlot), all compiled into the binary — no CDN, nothing
+//! fetched from the internet.
 //!
 //! The page is a client of the public API (`/v1/jobs…`, Server-Sent Events); it has no routes of
 //! its own beyond its files. A Content-Security-Policy keeps it to this origin.
@@ -10,11 +11,21 @@ use axum::response::{IntoResponse, Response};
 
 use super::error::{ApiError, Problem};
 
+const JS: &str = "text/javascript; charset=utf-8";
+
 /// (name, media type, bytes) of every asset under `/assets/`.
 const ASSETS: &[(&str, &str, &[u8])] = &[
-    ("app.js", "text/javascript; charset=utf-8", include_bytes!("dashboard/app.js")),
+    // The script: ES modules, app.js the entry, which imports the others by relative name.
+    ("app.js", JS, include_bytes!("dashboard/app.js")),
+    ("api.js", JS, include_bytes!("dashboard/api.js")),
+    ("format.js", JS, include_bytes!("dashboard/format.js")),
+    ("plots.js", JS, include_bytes!("dashboard/plots.js")),
+    ("results.js", JS, include_bytes!("dashboard/results.js")),
+    ("form.js", JS, include_bytes!("dashboard/form.js")),
+    ("list.js", JS, include_bytes!("dashboard/list.js")),
+    ("job.js", JS, include_bytes!("dashboard/job.js")),
     ("app.css", "text/css; charset=utf-8", include_bytes!("dashboard/app.css")),
-    ("uPlot.iife.min.js", "text/javascript; charset=utf-8", include_bytes!("dashboard/vendor/uPlot.iife.min.js")),
+    ("uPlot.iife.min.js", JS, include_bytes!("dashboard/vendor/uPlot.iife.min.js")),
     ("uPlot.min.css", "text/css; charset=utf-8", include_bytes!("dashboard/vendor/uPlot.min.css")),
 ];
 

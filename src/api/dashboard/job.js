@@ -1,0 +1,180 @@
+// The job page: one job, streamed live while it runs, its figures and specification, cancel and
+// extend, and its results (results.js).
+
+import { TERMINAL, api, streamJob } from './api.js';
+import {
+  badge, describeBest, formatCount, formatDuration, formatParameter, formatRate, formatTime, h, instantiate, showMessage,
+  updateProgress,
+} from './format.js';
+import { PlotSlot } from './plots.js';
+import { ResultsLoader } from './results.js';
+
+const RETRY_MS = 3000;
+
+/** Shows job `id` in `app` (the page's #app element); returns what leaving the page does. */
+export function showJob(app, id) {
+  const { fragment, refs } = instantiate('tpl-job');
+  app.replaceChildren(fragment);
+  document.title = `Job ${id} · optimis`;
+
+  const weightsPlot = new PlotSlot(refs['weights-plot']);
+  const historyPlot = new PlotSlot(refs['history-plot']);
+  const results = new ResultsLoader(id, refs, weightsPlot, historyPlot);
+  let job = null;
+  let closeStream = null;
+  let retryTimer = null;
+  let alive = true;
+
+  function render(next) {
+    job = next;
+    refs.body.hidden = false;
+    refs.id.textContent = job.id;
+    refs.state.replaceChildren(badge(job.state));
+    updateProgress(refs.progress, job);
+    renderStats(refs, job);
+    renderSpec(refs.spec, job);
+    renderActions(refs, job);
+    showMessage(refs['job-error'], job.error ? `The job failed: ${job.error}` : '');
+    const { iterations_done: done, iterations_total: total } = job.progress;
+    document.title = `Job ${job.id} · ${job.state}${TERMINAL.has(job.state) ? '' : ` ${done}/${total}`} · optimis`;
+    results.update(job);
+    if (TERMINAL.has(job.state)) setLive('');
+    else openStream();
+  }
+
+  function openStream() {
+    if (closeStream) return;
+    setLive('live');
+    closeStream = streamJob(id, {
+      onJob: (next) => {
+        if (TERMINAL.has(next.state)) closeStream = null;
+        if (alive) render(next);
+      },
+      onLost: () => {
+        closeStream = null;
+        setLive('reconnecting');
+        retryTimer = setTimeout(reload, RETRY_MS);
+      },
+    });
+  }
+
+  function setLive(status) {
+    refs.live.dataset.status = status;
+    refs.live.textContent = { live: 'live', reconnecting: 'connection lost — reconnecting…', '': '' }[status];
+  }
+
+  async function reload() {
+    try {
+      const next = await api(`/v1/jobs/${id}`);
+      if (!alive) return;
+      showMessage(refs['load-error'], '');
+      render(next);
+    } catch (error) {
+      if (!alive) return;
+      if (error.status === 404) {
+        showMessage(refs['load-error'], `Job ${id} does not exist (it may have been deleted).`);
+        refs.body.hidden = true;
+        return;
+      }
+      showMessage(refs['load-error'], `${error.message} Retrying every ${RETRY_MS / 1000} s.`);
+      retryTimer = setTimeout(reload, RETRY_MS);
+    }
+  }
+
+  async function act(button, path, body) {
+    showMessage(refs['action-error'], '');
+    button.disabled = true;
+    try {
+      const next = await api(path, { method: 'POST', body });
+      if (alive) render(next);
+      return true;
+    } catch (error) {
+      if (alive) showMessage(refs['action-error'], error.message);
+      return false;
+    } finally {
+      button.disabled = false;
+      if (job) renderActions(refs, job);
+    }
+  }
+
+  refs.cancel.addEventListener('click', () => act(refs.cancel, `/v1/jobs/${id}/cancel`));
+  refs['extend-form'].addEventListener('submit', async (event) => {
+    event.preventDefault();
+    const input = refs['extend-form'].elements.iterations;
+    const iterations = Number(input.value.trim());
+    if (!Number.isSafeInteger(iterations) || iterations < 1) {
+      showMessage(refs['action-error'], 'Enter how many iterations to add: a whole number of at least 1.');
+      input.focus();
+      return;
+    }
+    if (await act(refs.extend, `/v1/jobs/${id}/extend`, { iterations })) input.value = '';
+  });
+  reload();
+
+  return () => {
+    alive = false;
+    clearTimeout(retryTimer);
+    if (closeStream) closeStream();
+    results.stop();
+    weightsPlot.destroy();
+    historyPlot.destroy();
+  };
+}
+
+function renderStats(refs, job) {
+  const p = job.progress;
+  const running = job.state === 'running';
+  refs.rate.textContent = running ? formatRate(p.light_paths_per_second) : '—';
+  refs.eta.textContent = running ? formatDuration(p.eta_seconds) : '—';
+  refs.checkpointed.textContent = `${formatCount(p.iterations_checkpointed)} iterations`;
+  refs.best.textContent = describeBest(p.best);
+  refs.created.textContent = formatTime(job.created_at);
+  refs.updated.textContent = formatTime(job.updated_at);
+}
+
+function renderSpec(dl, job) {
+  const spec = job.spec;
+  const rows = [
+    ['Preset', spec.preset],
+    ['Engine', spec.engine || 'brute'],
+    [['Light paths ', symbol('N', 'F')], formatCount(spec.light_paths)],
+    [['Camera paths ', symbol('N', 'B')], formatCount(spec.camera_paths)],
+    [['Merge radius ', symbol('R')], formatParameter(spec.merge_radius)],
+    [['Lobe width ', symbol('β')], `${formatParameter(spec.scene.beta_deg)}°`],
+    [['Iterations ', symbol('M')], formatCount(spec.iterations)],
+    ['Seed', String(spec.seed)],
+    ['Illumination', describeIllumination(spec.scene.illumination)],
+    ['Cells (r₂ × r₃ × φ)', `${spec.cells.r2_edges.length} × ${spec.cells.r3_edges.length} × ${spec.cells.phi_bins}`],
+    [['Gradient penalty ', symbol('λ')], formatParameter(spec.solver.lambda)],
+  ];
+  if (spec.shard) rows.push(['Shard', `${spec.shard.index + 1} of ${spec.shard.count}`]);
+  if (spec.first_iteration !== undefined) rows.push(['First iteration', formatCount(spec.first_iteration)]);
+  if (job.merged) rows.push(['Merged', 'yes: the moments of several jobs added together']);
+  dl.replaceChildren(...rows.map(([term, value]) => h('div', {}, h('dt', {}, term), h('dd', {}, value))));
+}
+
+/** A variable of the paper, such as N_F, in italics with its subscript. */
+function symbol(name, subscript) {
+  return h('var', {}, name, subscript ? h('sub', {}, subscript) : null);
+}
+
+function describeIllumination(ill) {
+  switch (ill.kind) {
+    case 'spot':
+      return `spot: a = ${formatParameter(ill.a)}, r_ls = ${formatParameter(ill.r_ls)}, contrast ${formatParameter(ill.contrast)}`;
+    case 'uniform':
+      return `uniform: r_ls = ${formatParameter(ill.r_ls)}`;
+    default:
+      return `${ill.rings.length} rings`;
+  }
+}
+
+/** Cancel while the job can still stop; Extend unless the server is known to refuse it. */
+function renderActions(refs, job) {
+  refs.cancel.hidden = TERMINAL.has(job.state);
+  const refusal = job.state === 'failed' ? 'A failed job cannot be extended; submit a new one.'
+    : job.merged ? 'A merged job cannot be extended; extend its parts and merge again.'
+      : job.spec.shard ? 'A shard cannot be extended; extend the study instead.' : '';
+  refs['extend-form'].hidden = Boolean(refusal);
+  showMessage(refs['extend-note'], refusal);
+}

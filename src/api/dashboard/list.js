@@ -1,0 +1,164 @@
+// The job list page: one page of jobs, polled, with the first running ones streamed live, the
+// state filter and paging, and the submit form (form.js).
+
+import { TERMINAL, api, streamJob } from './api.js';
+import {
+  badge, describeBest, formatDuration, formatRate, formatShortTime, formatTime, h, instantiate, isNewer, progressBar,
+  showMessage, updateProgress,
+} from './format.js';
+import { setupSubmitForm } from './form.js';
+
+const PAGE_SIZE = 25;
+const LIST_POLL_MS = 3000;
+// Each event stream holds one of the browser's six HTTP/1.1 connections to this origin, so the list
+// streams at most this many running jobs live and polls for the rest.
+const MAX_LIST_STREAMS = 2;
+
+// Kept across page changes so that coming back from a job shows the same page of the list.
+const listView = { filter: '', cursors: [null] };
+
+/** Shows the list in `app` (the page's #app element); returns what leaving the page does. */
+export function showList(app) {
+  const { fragment, refs } = instantiate('tpl-list');
+  app.replaceChildren(fragment);
+  document.title = 'Jobs · optimis';
+
+  const streams = new Map(); // job id → close()
+  let jobs = [];
+  let nextCursor = null;
+  let pollTimer = null;
+  let requestSeq = 0;
+  let alive = true;
+
+  async function load() {
+    clearTimeout(pollTimer);
+    const seq = ++requestSeq;
+    const params = new URLSearchParams({ limit: PAGE_SIZE });
+    if (listView.filter) params.set('state', listView.filter);
+    const cursor = listView.cursors.at(-1);
+    if (cursor) params.set('cursor', cursor);
+    try {
+      const page = await api(`/v1/jobs?${params}`);
+      if (!alive || seq !== requestSeq) return;
+      showMessage(refs['list-error'], '');
+      jobs = page.jobs.map((job) => keepNewest(job));
+      nextCursor = page.next_cursor;
+      render();
+    } catch (error) {
+      if (!alive || seq !== requestSeq) return;
+      showMessage(refs['list-error'], `${error.message} Retrying every ${LIST_POLL_MS / 1000} s.`);
+    }
+    pollTimer = setTimeout(load, LIST_POLL_MS);
+  }
+
+  // A row streamed live may be newer than the page the poll just fetched.
+  function keepNewest(job) {
+    const shown = jobs.find((j) => j.id === job.id);
+    return shown && streams.has(job.id) && isNewer(shown, job) ? shown : job;
+  }
+
+  function render() {
+    renderRows();
+    const first = listView.cursors.length === 1;
+    refs.table.hidden = jobs.length === 0;
+    showMessage(refs.empty, jobs.length > 0 ? '' : emptyText(first));
+    refs.prev.disabled = first;
+    refs.next.disabled = nextCursor === null;
+    refs['page-label'].textContent = `Page ${listView.cursors.length}`;
+    reconcileStreams();
+  }
+
+  function emptyText(firstPage) {
+    if (!firstPage) return 'No more jobs on this page.';
+    return listView.filter ? `No ${listView.filter} jobs.` : 'No jobs yet. Submit one with the form.';
+  }
+
+  // Rows are updated in place, and moved only when the order changes: a row taken out of the
+  // page loses the keyboard focus, and every poll would otherwise do that.
+  function renderRows() {
+    const shown = new Map([...refs.rows.rows].map((tr) => [Number(tr.dataset.job), tr]));
+    const rows = jobs.map((job) => fillRow(shown.get(job.id) ?? jobRow(job), job));
+    const sameOrder = rows.length === refs.rows.rows.length && rows.every((tr, i) => refs.rows.rows[i] === tr);
+    if (!sameOrder) refs.rows.replaceChildren(...rows);
+  }
+
+  function jobRow(job) {
+    return h('tr', { 'data-job': job.id },
+      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, job.spec.preset)),
+      h('td'),
+      h('td', { class: 'col-progress' }, progressBar()),
+      h('td', { class: 'num' }),
+      h('td', { class: 'num' }),
+      h('td'),
+      h('td', { title: formatTime(job.created_at) }, formatShortTime(job.created_at)));
+  }
+
+  function fillRow(tr, job) {
+    const [, state, progress, rate, eta, best] = tr.cells;
+    const running = job.state === 'running';
+    if (state.textContent !== job.state) state.replaceChildren(badge(job.state));
+    updateProgress(progress.firstChild, job);
+    rate.textContent = running ? formatRate(job.progress.light_paths_per_second) : '—';
+    eta.textContent = running ? formatDuration(job.progress.eta_seconds) : '—';
+    best.textContent = describeBest(job.progress.best);
+    return tr;
+  }
+
+  function updateRow(job) {
+    const index = jobs.findIndex((j) => j.id === job.id);
+    if (index < 0) return;
+    jobs[index] = job;
+    const tr = refs.rows.querySelector(`tr[data-job="${job.id}"]`);
+    if (tr) fillRow(tr, job);
+  }
+
+  // Streams the first running jobs of the page; polling covers the rest.
+  function reconcileStreams() {
+    const wanted = new Set(jobs.filter((j) => j.state === 'running').slice(0, MAX_LIST_STREAMS).map((j) => j.id));
+    for (const [id, close] of streams) {
+      if (!wanted.has(id)) {
+        close();
+        streams.delete(id);
+      }
+    }
+    for (const id of wanted) {
+      if (streams.has(id)) continue;
+      const forget = () => streams.delete(id);
+      streams.set(id, streamJob(id, {
+        onJob: (job) => {
+          if (TERMINAL.has(job.state)) forget();
+          updateRow(job);
+        },
+        onLost: forget, // the next poll opens it again
+      }));
+    }
+  }
+
+  refs.filter.value = listView.filter;
+  refs.filter.addEventListener('change', () => {
+    listView.filter = refs.filter.value;
+    listView.cursors = [null];
+    load();
+  });
+  refs.next.addEventListener('click', () => {
+    listView.cursors.push(nextCursor);
+    load();
+  });
+  refs.prev.addEventListener('click', () => {
+    listView.cursors.pop();
+    load();
+  });
+  // The whole row leads to the job, not only its id.
+  refs.rows.addEventListener('click', (event) => {
+    const row = event.target.closest('tr[data-job]');
+    if (row && !event.target.closest('a')) location.hash = `#/jobs/${row.dataset.job}`;
+  });
+  setupSubmitForm(refs);
+  load();
+
+  return () => {
+    alive = false;
+    clearTimeout(pollTimer);
+    for (const close of streams.values()) close();
+  };
+}
