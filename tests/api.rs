@@ -6,16 +6,16 @@ use std::time::Duration;
 
 use common::{TestServer, assert_problem, small_job};
 use futures_util::StreamExt;
+use reqwest::Method;
 use serde_json::{Value, json};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn submit_poll_and_read_the_result() {
     let server = TestServer::start().await;
     let response = server.post("/v1/jobs", &small_job(12, 3)).await;
-    assert_eq!(response.status(), 202);
-    let location = response.headers()["location"].to_str().unwrap().to_string();
-    let job: Value = response.json().await.unwrap();
-    assert_eq!(location, format!("/v1/jobs/{}", job["id"]));
+    assert_eq!(response.status, 202);
+    let job = response.json();
+    assert_eq!(response.header("location"), Some(format!("/v1/jobs/{}", job["id"]).as_str()));
     assert_eq!(job["state"], "queued");
     assert_eq!(job["spec"]["preset"], "paper-table1");
     assert_eq!(job["spec"]["light_paths"], 20_000);
@@ -28,7 +28,7 @@ async fn submit_poll_and_read_the_result() {
     assert_eq!(done["progress"]["iterations_checkpointed"], 12);
     assert!(done["progress"]["best"]["rms_percent"].as_f64().unwrap() > 0.0);
 
-    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let result = server.result(id).await;
     assert_eq!(result["partial"], false);
     assert_eq!(result["iterations"], 12);
     let names: Vec<&str> =
@@ -71,12 +71,12 @@ async fn the_default_engine_is_the_restricted_one() {
     let done = server.wait_for_state(id, "succeeded").await;
     assert_eq!(done["spec"]["engine"], "restricted");
     assert_eq!(done["spec"]["light_paths"], 10_000_000);
-    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let result = server.result(id).await;
     // The statistics are checked against the brute force in tests/engines.rs; here: it merged.
     let plane2 = &result["merges_per_iteration"]["plane2"];
     assert!(plane2["mean"].as_f64().unwrap() > 10.0 * plane2["stderr"].as_f64().unwrap(), "{plane2}");
     let brute = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1000 })).await;
-    assert_eq!(server.get_json(&format!("/v1/jobs/{brute}")).await["spec"]["engine"], "brute");
+    assert_eq!(server.job(brute).await["spec"]["engine"], "brute");
     server.stop().await;
 }
 
@@ -84,8 +84,8 @@ async fn the_default_engine_is_the_restricted_one() {
 async fn every_error_is_a_problem_document_with_the_right_status() {
     let server = TestServer::start().await;
     // 400: malformed JSON, empty body.
-    assert_problem(server.post_raw("/v1/jobs", "{\"iterations\": ").await, 400).await;
-    assert_problem(server.post_raw("/v1/jobs", "").await, 400).await;
+    assert_problem(server.post_raw("/v1/jobs", "{\"iterations\": ").await, 400);
+    assert_problem(server.post_raw("/v1/jobs", "").await, 400);
     // 422: invalid fields, named in the detail and in `field`.
     for (body, field) in [
         (json!({ "merge_radius": -0.1 }), "merge_radius"),
@@ -96,54 +96,49 @@ async fn every_error_is_a_problem_document_with_the_right_status() {
         (json!({ "preset": "unknown" }), "preset"),
         (json!([1, 2]), ""),
     ] {
-        let problem = assert_problem(server.post("/v1/jobs", &body).await, 422).await;
+        let problem = assert_problem(server.post("/v1/jobs", &body).await, 422);
         if !field.is_empty() {
             assert_eq!(problem["field"], field, "{body}");
             assert!(problem["detail"].as_str().unwrap().contains(field), "{problem}");
         }
     }
-    let problem = assert_problem(server.get("/v1/jobs?limit=9999").await, 422).await;
+    let problem = assert_problem(server.get("/v1/jobs?limit=9999").await, 422);
     assert_eq!(problem["field"], "limit");
-    let problem = assert_problem(server.get("/v1/jobs?state=paused").await, 422).await;
+    let problem = assert_problem(server.get("/v1/jobs?state=paused").await, 422);
     assert_eq!(problem["field"], "state");
-    assert_problem(server.get("/v1/jobs?cursor=xyz").await, 422).await;
-    assert_problem(server.get("/v1/jobs?unknown=1").await, 422).await;
+    assert_problem(server.get("/v1/jobs?cursor=xyz").await, 422);
+    assert_problem(server.get("/v1/jobs?unknown=1").await, 422);
     // 404: unknown jobs and routes.
-    assert_problem(server.get("/v1/jobs/424242").await, 404).await;
-    assert_problem(server.get("/v1/jobs/not-a-number").await, 404).await;
-    assert_problem(server.get("/v1/jobs/424242/result").await, 404).await;
-    assert_problem(server.post("/v1/jobs/424242/cancel", &json!({})).await, 404).await;
-    assert_problem(server.client.delete(server.url("/v1/jobs/424242")).send().await.unwrap(), 404).await;
-    assert_problem(server.get("/v2/nothing").await, 404).await;
+    assert_problem(server.get("/v1/jobs/424242").await, 404);
+    assert_problem(server.get("/v1/jobs/not-a-number").await, 404);
+    assert_problem(server.get("/v1/jobs/424242/result").await, 404);
+    assert_problem(server.cancel(424242).await, 404);
+    assert_problem(server.delete(424242).await, 404);
+    assert_problem(server.get("/v2/nothing").await, 404);
     // 405.
-    assert_problem(server.client.put(server.url("/v1/jobs")).send().await.unwrap(), 405).await;
+    assert_problem(server.request(Method::PUT, "/v1/jobs", None).await, 405);
 
     // 409: results before the first checkpoint (a queued job behind a long one), cancel of a
     // finished job, delete of a running one, extend of a failed one is covered elsewhere.
     let long = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(long, "running").await;
     let waiting = server.submit(&small_job(2, 1)).await;
-    assert_problem(server.get(&format!("/v1/jobs/{waiting}/result")).await, 409).await;
-    assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({})).await, 409).await;
-    assert_problem(server.client.delete(server.url(&format!("/v1/jobs/{long}"))).send().await.unwrap(), 409).await;
-    server.post(&format!("/v1/jobs/{long}/cancel"), &json!({})).await;
+    assert_problem(server.get(&format!("/v1/jobs/{waiting}/result")).await, 409);
+    assert_problem(server.solve(waiting, &json!({})).await, 409);
+    assert_problem(server.delete(long).await, 409);
+    server.cancel(long).await;
     server.wait_for_state(long, "cancelled").await;
     server.wait_for_state(waiting, "succeeded").await;
-    assert_problem(server.post(&format!("/v1/jobs/{waiting}/cancel"), &json!({})).await, 409).await;
+    assert_problem(server.cancel(waiting).await, 409);
 
     // 422 on the job sub-resources.
-    let problem =
-        assert_problem(server.post(&format!("/v1/jobs/{waiting}/extend"), &json!({ "iterations": 0 })).await, 422)
-            .await;
+    let problem = assert_problem(server.extend(waiting, &json!({ "iterations": 0 })).await, 422);
     assert_eq!(problem["field"], "iterations");
-    let problem =
-        assert_problem(server.post(&format!("/v1/jobs/{waiting}/extend"), &json!({ "more": 2 })).await, 422).await;
+    let problem = assert_problem(server.extend(waiting, &json!({ "more": 2 })).await, 422);
     assert_eq!(problem["field"], "more");
-    let problem =
-        assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({ "lambda": -1 })).await, 422).await;
+    let problem = assert_problem(server.solve(waiting, &json!({ "lambda": -1 })).await, 422);
     assert_eq!(problem["field"], "solver.lambda");
-    assert_problem(server.post(&format!("/v1/jobs/{waiting}/solve"), &json!({ "fixed": { "w3": 1 } })).await, 422)
-        .await;
+    assert_problem(server.solve(waiting, &json!({ "fixed": { "w3": 1 } })).await, 422);
     server.stop().await;
 }
 
@@ -156,19 +151,19 @@ async fn cancel_stops_a_running_job_within_a_chunk() {
     let id = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(id, "running").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let response = server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
-    assert_eq!(response.status(), 202);
+    let response = server.cancel(id).await;
+    assert_eq!(response.status, 202);
     let job = server.wait_for_state(id, "cancelled").await;
     assert_eq!(job["progress"]["iterations_done"], 0, "the iteration was interrupted, not completed");
-    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409).await;
+    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
 
     // A queued job is cancelled at once.
     let blocker = server.submit(&json!({ "engine": "brute", "iterations": 1, "light_paths": 1_000_000_000u64 })).await;
     server.wait_for_state(blocker, "running").await;
     let queued = server.submit(&small_job(3, 2)).await;
-    let cancelled: Value = server.post(&format!("/v1/jobs/{queued}/cancel"), &json!({})).await.json().await.unwrap();
+    let cancelled = server.cancel(queued).await.json();
     assert_eq!(cancelled["state"], "cancelled");
-    server.post(&format!("/v1/jobs/{blocker}/cancel"), &json!({})).await;
+    server.cancel(blocker).await;
     server.wait_for_state(blocker, "cancelled").await;
     server.stop().await;
 }
@@ -204,10 +199,8 @@ async fn the_list_paginates_newest_first() {
     newest_first.reverse();
     assert_eq!(seen, newest_first);
 
-    let cancelled = server.get_json("/v1/jobs?state=cancelled").await;
-    assert!(cancelled["jobs"].as_array().unwrap().is_empty());
-    let succeeded = server.get_json("/v1/jobs?state=succeeded&limit=500").await;
-    assert_eq!(succeeded["jobs"].as_array().unwrap().len(), 7);
+    assert!(server.list("?state=cancelled").await.is_empty());
+    assert_eq!(server.list("?state=succeeded&limit=500").await.len(), 7);
     server.stop().await;
 }
 
@@ -215,22 +208,21 @@ async fn the_list_paginates_newest_first() {
 async fn idempotency_keys_replay_the_original_job() {
     let server = TestServer::start().await;
     let send = |body: Value, key: &'static str| {
-        server.client.post(server.url("/v1/jobs")).header("Idempotency-Key", key).json(&body).send()
+        server.send(server.builder(Method::POST, "/v1/jobs").header("Idempotency-Key", key).json(&body))
     };
-    let first = send(small_job(2, 9), "abc-1").await.unwrap();
-    assert_eq!(first.status(), 202);
-    let first: Value = first.json().await.unwrap();
-    let again = send(small_job(2, 9), "abc-1").await.unwrap();
-    assert_eq!(again.status(), 202);
-    assert_eq!(again.headers()["idempotent-replayed"], "true");
-    let again: Value = again.json().await.unwrap();
+    let first = send(small_job(2, 9), "abc-1").await;
+    assert_eq!(first.status, 202);
+    let first = first.json();
+    let again = send(small_job(2, 9), "abc-1").await;
+    assert_eq!(again.status, 202);
+    assert_eq!(again.header("idempotent-replayed"), Some("true"));
+    let again = again.json();
     assert_eq!(first["id"], again["id"]);
-    let problem = assert_problem(send(small_job(3, 9), "abc-1").await.unwrap(), 422).await;
+    let problem = assert_problem(send(small_job(3, 9), "abc-1").await, 422);
     assert_eq!(problem["field"], "Idempotency-Key");
-    let other: Value = send(small_job(2, 9), "abc-2").await.unwrap().json().await.unwrap();
+    let other = send(small_job(2, 9), "abc-2").await.json();
     assert_ne!(other["id"], first["id"]);
-    let list = server.get_json("/v1/jobs").await;
-    assert_eq!(list["jobs"].as_array().unwrap().len(), 2);
+    assert_eq!(server.list("").await.len(), 2);
     server.stop().await;
 }
 
@@ -241,23 +233,21 @@ async fn extend_continues_the_sequence_and_delete_removes() {
     let server = TestServer::start().await;
     let id = server.submit(&small_job(6, 4)).await;
     server.wait_for_state(id, "succeeded").await;
-    let response = server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "iterations": 5 })).await;
-    assert_eq!(response.status(), 202);
-    let extended: Value = response.json().await.unwrap();
+    let response = server.extend(id, &json!({ "iterations": 5 })).await;
+    assert_eq!(response.status, 202);
+    let extended = response.json();
     assert_eq!(extended["progress"]["iterations_total"], 11);
-    let done = server.wait_for(id, |j| j["state"] == "succeeded" && j["progress"]["iterations_done"] == 11).await;
+    let done = server.wait_until(id, |j| j["state"] == "succeeded" && j["progress"]["iterations_done"] == 11).await;
     assert_eq!(done["spec"]["iterations"], 11);
-    let whole = server.submit(&small_job(11, 4)).await;
-    server.wait_for_state(whole, "succeeded").await;
-    let a = server.get_json(&format!("/v1/jobs/{id}/moments")).await;
-    let b = server.get_json(&format!("/v1/jobs/{whole}/moments")).await;
+    let whole = server.submit_and_wait(&small_job(11, 4)).await;
+    let a = server.moments(id).await;
+    let b = server.moments(whole).await;
     assert_eq!(a["moments"], b["moments"]);
     assert_eq!(a["checksum"], b["checksum"]);
 
-    let response = server.client.delete(server.url(&format!("/v1/jobs/{id}"))).send().await.unwrap();
-    assert_eq!(response.status(), 204);
-    assert_problem(server.get(&format!("/v1/jobs/{id}")).await, 404).await;
-    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 404).await;
+    assert_eq!(server.delete(id).await.status, 204);
+    assert_problem(server.get(&format!("/v1/jobs/{id}")).await, 404);
+    assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 404);
     server.stop().await;
 }
 
@@ -270,23 +260,17 @@ async fn solve_recomputes_from_the_stored_moments() {
         )
         .await;
     server.wait_for_state(id, "succeeded").await;
-    let stored = server.get_json(&format!("/v1/jobs/{id}/result")).await;
-    let same: Value = server.post(&format!("/v1/jobs/{id}/solve"), &json!({})).await.json().await.unwrap();
+    let stored = server.result(id).await;
+    let same = server.solve(id, &json!({})).await.json();
     assert_eq!(same, stored, "an empty patch reproduces the stored result");
-    let smooth: Value =
-        server.post(&format!("/v1/jobs/{id}/solve"), &json!({ "lambda": 10 })).await.json().await.unwrap();
+    let smooth = server.solve(id, &json!({ "lambda": 10 })).await.json();
     assert_eq!(smooth["noise_table"][0], stored["noise_table"][0], "fixed strategies do not change");
     assert_ne!(smooth["weights"], stored["weights"]);
     let optimal = |r: &Value| r["noise_table"][4]["lambda"].clone();
     assert_eq!(optimal(&smooth), 10.0);
-    let free: Value = server
-        .post(&format!("/v1/jobs/{id}/solve"), &json!({ "fixed": { "w0": null }, "lambda": 1e-3 }))
-        .await
-        .json()
-        .await
-        .unwrap();
+    let free = server.solve(id, &json!({ "fixed": { "w0": null }, "lambda": 1e-3 })).await.json();
     assert!(free["weights"].as_array().unwrap().iter().any(|w| w["w0"] != 0.0), "w0 is fitted once freed");
-    let unchanged = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let unchanged = server.result(id).await;
     assert_eq!(unchanged, stored, "solve stores nothing");
     server.stop().await;
 }
@@ -295,7 +279,7 @@ async fn solve_recomputes_from_the_stored_moments() {
 async fn events_stream_progress_until_the_end() {
     let server = TestServer::start().await;
     let id = server.submit(&small_job(30, 6)).await;
-    let response = server.get(&format!("/v1/jobs/{id}/events")).await;
+    let response = server.open(&format!("/v1/jobs/{id}/events")).await;
     assert_eq!(response.status(), 200);
     assert!(response.headers()["content-type"].to_str().unwrap().starts_with("text/event-stream"));
     let mut body = String::new();
@@ -311,9 +295,9 @@ async fn events_stream_progress_until_the_end() {
     let done: Vec<u64> = events.iter().map(|e| e["progress"]["iterations_done"].as_u64().unwrap()).collect();
     assert!(done.windows(2).all(|w| w[0] <= w[1]), "progress never goes back: {done:?}");
     // A finished job's stream is its one current event.
-    let text = server.get(&format!("/v1/jobs/{id}/events")).await.text().await.unwrap();
+    let text = server.get(&format!("/v1/jobs/{id}/events")).await.text();
     assert_eq!(text.lines().filter(|l| l.starts_with("data: ")).count(), 1);
-    assert_problem(server.get("/v1/jobs/999/events").await, 404).await;
+    assert_problem(server.get("/v1/jobs/999/events").await, 404);
     server.stop().await;
 }
 
@@ -322,7 +306,7 @@ async fn health_readiness_and_openapi() {
     let server = TestServer::start().await;
     assert_eq!(server.get_json("/healthz").await["status"], "ok");
     assert_eq!(server.get_json("/readyz").await["status"], "ok");
-    let served = server.get("/openapi.yaml").await.text().await.unwrap();
+    let served = server.get("/openapi.yaml").await.text();
     let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml")).unwrap();
     assert_eq!(
         served, committed,
@@ -348,9 +332,9 @@ async fn metrics_show_a_running_job_progressing() {
     let started = std::time::Instant::now();
     let text = loop {
         let response = server.get("/metrics").await;
-        assert_eq!(response.status(), 200);
-        assert!(response.headers()["content-type"].to_str().unwrap().starts_with("application/openmetrics-text"));
-        let text = response.text().await.unwrap();
+        assert_eq!(response.status, 200);
+        assert!(response.header("content-type").unwrap().starts_with("application/openmetrics-text"));
+        let text = response.text();
         if let Some(v) = sample(&text, &series)
             && seen.last() != Some(&v)
         {
@@ -370,9 +354,9 @@ async fn metrics_show_a_running_job_progressing() {
         text.contains(r#"optimis_http_requests_total{method="GET",route="/v1/jobs/{id}",status="200"}"#),
         "requests are counted by route template:\n{text}"
     );
-    server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    server.cancel(id).await;
     server.wait_for_state(id, "cancelled").await;
-    let text = server.get("/metrics").await.text().await.unwrap();
+    let text = server.get("/metrics").await.text();
     assert_eq!(sample(&text, &series), None, "a job that stopped leaves the gauges");
     assert_eq!(sample(&text, "optimis_jobs{state=\"cancelled\"}"), Some(1.0));
     server.stop().await;

@@ -4,59 +4,48 @@
 
 mod common;
 
-use common::process::{Process, get, wait_for};
+use common::process::Process;
 
-use serde_json::{Value, json};
+use serde_json::json;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_server_resumes_jobs_bit_identically() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("crash.db").display());
-    let client = common::client();
 
     let first = Process::start(&database);
-    let submit = |base: String, spec: Value| {
-        let client = client.clone();
-        async move {
-            let response = client.post(format!("{base}/v1/jobs")).json(&spec).send().await.unwrap();
-            assert_eq!(response.status(), 202);
-            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
-        }
-    };
     // A job that finishes before the crash.
     let finished_spec = json!({ "engine": "brute", "light_paths": 20_000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 8, "seed": 3 });
-    let finished = submit(first.base.clone(), finished_spec).await;
-    wait_for(&client, &first.base, finished, |j| j["state"] == "succeeded").await;
-    let finished_before = get(&client, format!("{}/v1/jobs/{finished}", first.base)).await;
-    let result_before = get(&client, format!("{}/v1/jobs/{finished}/result", first.base)).await;
-    let moments_before = get(&client, format!("{}/v1/jobs/{finished}/moments", first.base)).await;
+    let finished = first.submit_and_wait(&finished_spec).await;
+    let finished_before = first.job(finished).await;
+    let result_before = first.result(finished).await;
+    let moments_before = first.moments(finished).await;
 
     // The job that is killed: about 40 iterations of 2·10⁶ light paths.
     let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 40, "seed": 17 });
-    let id = submit(first.base.clone(), spec.clone()).await;
-    let before_kill = wait_for(&client, &first.base, id, |j| {
-        j["state"] == "running" && j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 6
-    })
-    .await;
+    let id = first.submit(&spec).await;
+    let before_kill = first
+        .wait_until(id, |j| j["state"] == "running" && j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 6)
+        .await;
     let checkpointed = before_kill["progress"]["iterations_checkpointed"].as_u64().unwrap();
     first.kill();
 
     let second = Process::start(&database);
-    let resumed = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+    let resumed = second.job(id).await;
     assert!(
         resumed["progress"]["iterations_checkpointed"].as_u64().unwrap() >= checkpointed,
         "the job resumes from its checkpoint, not from zero: {resumed}"
     );
-    let done = wait_for(&client, &second.base, id, |j| j["state"] == "succeeded").await;
+    let done = second.wait_for_state(id, "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], 40);
-    let document = get(&client, format!("{}/v1/jobs/{id}/moments", second.base)).await;
+    let document = second.moments(id).await;
 
     assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments differ from an uninterrupted run");
 
     // The finished job is untouched.
-    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}", second.base)).await, finished_before);
-    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/result", second.base)).await, result_before);
-    assert_eq!(get(&client, format!("{}/v1/jobs/{finished}/moments", second.base)).await, moments_before);
+    assert_eq!(second.job(finished).await, finished_before);
+    assert_eq!(second.result(finished).await, result_before);
+    assert_eq!(second.moments(finished).await, moments_before);
     second.kill();
 }
 
@@ -66,19 +55,17 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
 async fn sigterm_checkpoints_running_jobs_before_exiting() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("term.db").display());
-    let client = common::client();
     let first = Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
     let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 5 });
-    let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();
-    let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
-    let running = wait_for(&client, &first.base, id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 5).await;
+    let id = first.submit(&spec).await;
+    let running = first.wait_until(id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 5).await;
     assert_eq!(running["progress"]["iterations_checkpointed"], 0, "no periodic checkpoint yet");
     let status = first.terminate();
     assert!(status.success(), "a clean exit on SIGTERM: {status}");
 
     let second =
         Process::start_with(&database, &["--checkpoint-iterations", "1000000", "--checkpoint-seconds", "3600"]);
-    let resumed = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+    let resumed = second.job(id).await;
     assert!(
         resumed["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5,
         "the shutdown checkpoint kept the work: {resumed}"
@@ -92,27 +79,24 @@ async fn sigterm_checkpoints_running_jobs_before_exiting() {
 /// when it is acknowledged, and wins over a shutdown.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_cancel_survives_a_shutdown_and_a_kill() {
-    let client = common::client();
     let spec = json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 100_000, "seed": 5 });
     for stop in ["term", "kill"] {
         let dir = tempfile::tempdir().unwrap();
         let database = format!("sqlite://{}", dir.path().join("cancel.db").display());
         let first = Process::start(&database);
-        let response = client.post(format!("{}/v1/jobs", first.base)).json(&spec).send().await.unwrap();
-        let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
-        wait_for(&client, &first.base, id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 2).await;
-        let cancel = client.post(format!("{}/v1/jobs/{id}/cancel", first.base)).send().await.unwrap();
-        assert_eq!(cancel.status(), 202);
+        let id = first.submit(&spec).await;
+        first.wait_until(id, |j| j["progress"]["iterations_done"].as_u64().unwrap() >= 2).await;
+        assert_eq!(first.cancel(id).await.status, 202);
         if stop == "term" {
             assert!(first.terminate().success());
         } else {
             first.kill();
         }
         let second = Process::start(&database);
-        let job = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+        let job = second.job(id).await;
         assert_eq!(job["state"], "cancelled", "after SIG{}: {job}", stop.to_uppercase());
         tokio::time::sleep(std::time::Duration::from_millis(300)).await;
-        let later = get(&client, format!("{}/v1/jobs/{id}", second.base)).await;
+        let later = second.job(id).await;
         assert_eq!(later["progress"]["iterations_done"], job["progress"]["iterations_done"], "it does not run again");
         second.kill();
     }

@@ -4,18 +4,17 @@
 
 mod common;
 
-use common::process::{Process, get, wait_for};
-use common::{TestServer, small_job};
-use serde_json::{Value, json};
+use common::process::Process;
+use common::{TestServer, assert_problem, small_job};
+use serde_json::json;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_corrupted_checkpoint_fails_only_its_job() {
     let server = TestServer::start().await;
-    let finished = server.submit(&small_job(4, 1)).await;
-    server.wait_for_state(finished, "succeeded").await;
-    let finished_result = server.get_json(&format!("/v1/jobs/{finished}/result")).await;
+    let finished = server.submit_and_wait(&small_job(4, 1)).await;
+    let finished_result = server.result(finished).await;
     let victim = server.submit(&json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 2 })).await;
-    server.wait_for(victim, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
+    server.wait_until(victim, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
     let dir = server.stop().await; // the victim checkpoints and waits, queued
 
     // Change one digit of the victim's stored moments (its checksum no longer matches).
@@ -42,10 +41,9 @@ async fn a_corrupted_checkpoint_fails_only_its_job() {
     let error = failed["error"].as_str().unwrap();
     assert!(error.contains("checksum mismatch"), "a clear error: {error}");
     // The other jobs are untouched and the server keeps working.
-    assert_eq!(server.get_json(&format!("/v1/jobs/{finished}/result")).await, finished_result);
-    let fresh = server.submit(&small_job(3, 9)).await;
-    server.wait_for_state(fresh, "succeeded").await;
-    let problem = common::assert_problem(server.get(&format!("/v1/jobs/{victim}/moments")).await, 409).await;
+    assert_eq!(server.result(finished).await, finished_result);
+    server.submit_and_wait(&small_job(3, 9)).await;
+    let problem = assert_problem(server.get(&format!("/v1/jobs/{victim}/moments")).await, 409);
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
     server.stop().await;
 }
@@ -59,7 +57,7 @@ async fn a_failed_solve_still_reports_the_fixed_strategies() {
             "solver": { "fixed": { "w0": null } } }))
         .await;
     server.wait_for_state(id, "succeeded").await;
-    let result = server.get_json(&format!("/v1/jobs/{id}/result")).await;
+    let result = server.result(id).await;
     let reason = result["solve_error"].as_str().expect("the reason is reported");
     assert!(reason.contains("singular"), "{reason}");
     assert!(result["weights"].as_array().unwrap().is_empty());
@@ -94,37 +92,21 @@ fn draws(count: usize, seed: u64, lo: u64, hi: u64) -> Vec<u64> {
 async fn twenty_kills_never_lose_or_corrupt_work() {
     let dir = tempfile::tempdir().unwrap();
     let database = format!("sqlite://{}", dir.path().join("faults.db").display());
-    let client = common::client();
     let flags = ["--checkpoint-iterations", "1", "--checkpoint-seconds", "0.05"];
     let server = Process::start_with(&database, &flags);
-    let submit = |base: String, spec: Value| {
-        let client = client.clone();
-        async move {
-            let response = client.post(format!("{base}/v1/jobs")).json(&spec).send().await.unwrap();
-            assert_eq!(response.status(), 202);
-            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
-        }
+    let bystander = server.submit_and_wait(&small_job(6, 3)).await;
+    let snapshot = |process: &Process| {
+        let api = process.api.clone();
+        async move { (api.job(bystander).await, api.result(bystander).await, api.moments(bystander).await) }
     };
-    let bystander = submit(server.base.clone(), small_job(6, 3)).await;
-    wait_for(&client, &server.base, bystander, |j| j["state"] == "succeeded").await;
-    let snapshot = |base: String| {
-        let client = client.clone();
-        async move {
-            (
-                get(&client, format!("{base}/v1/jobs/{bystander}")).await,
-                get(&client, format!("{base}/v1/jobs/{bystander}/result")).await,
-                get(&client, format!("{base}/v1/jobs/{bystander}/moments")).await,
-            )
-        }
-    };
-    let before = snapshot(server.base.clone()).await;
+    let before = snapshot(&server).await;
 
     // A 128-cell grid makes every checkpoint a few hundred kilobytes: writes take a real share
     // of the time, so kills land in them.
     let r3_edges: Vec<f64> = (0..=63).map(|i| f64::from(i) / 1000.0).collect();
     let spec = json!({ "engine": "brute", "light_paths": 1_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 300, "seed": 31,
         "cells": { "r3_edges": r3_edges } });
-    let id = submit(server.base.clone(), spec.clone()).await;
+    let id = server.submit(&spec).await;
     let mut server = Some(server);
     let mut progress = Vec::new();
     let mut stored = 0;
@@ -132,10 +114,9 @@ async fn twenty_kills_never_lose_or_corrupt_work() {
     let jitters = draws(20, 11, 0, 5);
     for (step, jitter) in steps.into_iter().zip(jitters) {
         let process = server.take().unwrap_or_else(|| Process::start_with(&database, &flags));
-        let job = wait_for(&client, &process.base, id, |j| {
-            j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= stored + step
-        })
-        .await;
+        let job = process
+            .wait_until(id, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= stored + step)
+            .await;
         tokio::time::sleep(std::time::Duration::from_millis(jitter)).await;
         stored = job["progress"]["iterations_checkpointed"].as_u64().unwrap();
         progress.push(stored);
@@ -145,12 +126,12 @@ async fn twenty_kills_never_lose_or_corrupt_work() {
     assert!(*progress.last().unwrap() < 300, "the kills interrupted a running job: {progress:?}");
 
     let last = Process::start_with(&database, &flags);
-    let done = wait_for(&client, &last.base, id, |j| j["state"] == "succeeded").await;
+    let done = last.wait_for_state(id, "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], 300);
-    let document = get(&client, format!("{}/v1/jobs/{id}/moments", last.base)).await;
+    let document = last.moments(id).await;
     assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments equal an uninterrupted run's");
-    let history = get(&client, format!("{}/v1/jobs/{id}/history", last.base)).await;
+    let history = last.history(id).await;
     assert!(history["points"].as_array().unwrap().len() >= 20);
-    assert_eq!(snapshot(last.base.clone()).await, before, "the finished job's data did not change");
+    assert_eq!(snapshot(&last).await, before, "the finished job's data did not change");
     last.kill();
 }

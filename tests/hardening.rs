@@ -13,6 +13,7 @@ use futures_util::StreamExt;
 use optimis::sim::document::MomentsDocument;
 use optimis::sim::math::exact_sum::ExactSum;
 use optimis::sim::stats::moments::packed_index;
+use reqwest::Method;
 use serde_json::{Value, json};
 
 /// Fails the test if `f` does not complete within a minute (a freeze, not a slow machine).
@@ -28,9 +29,8 @@ fn small(seed: u64) -> Value {
 
 /// A finished job of `small(seed)` and its moments document.
 async fn finished(server: &TestServer, seed: u64) -> (i64, Value) {
-    let id = server.submit(&small(seed)).await;
-    server.wait_for_state(id, "succeeded").await;
-    (id, server.get_json(&format!("/v1/jobs/{id}/moments")).await)
+    let id = server.submit_and_wait(&small(seed)).await;
+    (id, server.moments(id).await)
 }
 
 /// `doc` edited as a typed document and re-sealed (anyone can recompute the checksum).
@@ -52,18 +52,16 @@ async fn poisoned_documents_are_refused_while_the_server_keeps_answering() {
         let (server, poisoned) = (&server, poisoned.clone());
         async move {
             let response = if k % 2 == 0 {
-                server.post("/v1/studies", &json!({ "sources": [poisoned] })).await
+                server.study(&json!({ "sources": [poisoned] })).await
             } else {
-                server.post(&format!("/v1/jobs/{target}/merge"), &poisoned).await
+                server.merge(target, &poisoned).await
             };
-            let status = response.status().as_u16();
-            let problem: Value = response.json().await.unwrap();
-            (status, problem)
+            (response.status, response.json())
         }
     });
     let health = async {
         for _ in 0..20 {
-            assert_eq!(server.get("/healthz").await.status(), 200);
+            assert_eq!(server.get("/healthz").await.status, 200);
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     };
@@ -76,7 +74,7 @@ async fn poisoned_documents_are_refused_while_the_server_keeps_answering() {
         assert_eq!(status, 422, "{problem}");
         assert!(problem["detail"].as_str().unwrap().contains("2^1000"), "{problem}");
     }
-    assert!(server.get_json("/v1/jobs").await["jobs"].as_array().unwrap().len() == 1, "no study was created");
+    assert!(server.list("").await.len() == 1, "no study was created");
     server.stop().await;
 }
 
@@ -94,20 +92,19 @@ async fn merges_that_would_overflow_change_nothing() {
             d.moments.folds[0].sum_yy[packed_index(n, 0, 1)] = ExactSum::from_parts(&[1e301]).unwrap();
         })
     };
-    let response = hang_guard("a merge", server.post(&format!("/v1/jobs/{target}/merge"), &huge(&two))).await;
-    assert_eq!(response.status(), 200, "within bounds, one merge is accepted");
-    let before = server.get_json(&format!("/v1/jobs/{target}/moments")).await;
-    let response = hang_guard("a merge", server.post(&format!("/v1/jobs/{target}/merge"), &huge(&three))).await;
-    let problem = assert_problem(response, 422).await;
+    let response = hang_guard("a merge", server.merge(target, &huge(&two))).await;
+    assert_eq!(response.status, 200, "within bounds, one merge is accepted");
+    let before = server.moments(target).await;
+    let response = hang_guard("a merge", server.merge(target, &huge(&three))).await;
+    let problem = assert_problem(response, 422);
     assert!(problem["detail"].as_str().unwrap().contains("overflow"), "{problem}");
-    assert_eq!(server.get_json(&format!("/v1/jobs/{target}/moments")).await, before, "nothing changed");
+    assert_eq!(server.moments(target).await, before, "nothing changed");
     // The lifecycle is not held: other transitions answer.
-    let other = server.submit(&small(4)).await;
+    let other = server.submit_and_wait(&small(4)).await;
+    let extended = server.extend(other, &json!({ "iterations": 2 })).await;
+    assert_eq!(extended.status, 202);
     server.wait_for_state(other, "succeeded").await;
-    let extended = server.post(&format!("/v1/jobs/{other}/extend"), &json!({ "iterations": 2 })).await;
-    assert_eq!(extended.status(), 202);
-    server.wait_for_state(other, "succeeded").await;
-    assert_eq!(server.client.delete(server.url(&format!("/v1/jobs/{other}"))).send().await.unwrap().status(), 204);
+    assert_eq!(server.delete(other).await.status, 204);
     server.stop().await;
 }
 
@@ -122,18 +119,17 @@ async fn extreme_geometries_answer_with_or_without_a_reference() {
         json!({ "scene": { "l2": 1e-6 }, "merge_radius": 1e-7, "iterations": 1 }),
     ] {
         let response = hang_guard("an extreme submission", server.post("/v1/jobs", &spec)).await;
-        let status = response.status().as_u16();
-        let body: Value = response.json().await.unwrap();
+        let (status, body) = (response.status, response.json());
         assert!(status == 202 || status == 422, "{spec}: {status} {body}");
         if status == 202 {
             assert!(body["reference_luminance"].is_null(), "no converged reference for {spec}: {body}");
             let id = body["id"].as_i64().unwrap();
-            let done = server.wait_for(id, |j| j["state"] != "queued" && j["state"] != "running").await;
+            let done = server.wait_finished(id).await;
             assert_eq!(done["state"], "succeeded", "{done}");
         }
     }
     // A normal scene still has its reference.
-    let job: Value = server.post("/v1/jobs", &small(1)).await.json().await.unwrap();
+    let job = server.post("/v1/jobs", &small(1)).await.json();
     assert!(job["reference_luminance"].as_f64().unwrap() > 2.6e-4);
     server.stop().await;
 }
@@ -145,7 +141,7 @@ async fn huge_iterations_are_refused_and_long_ones_cancel_inside_an_iteration() 
     let server = TestServer::start().await;
     let huge =
         json!({ "scene": { "l2": 1e6, "l3": 1e6 }, "merge_radius": 9e5, "light_paths": 100_000, "iterations": 2 });
-    let problem = assert_problem(hang_guard("a huge submission", server.post("/v1/jobs", &huge)).await, 422).await;
+    let problem = assert_problem(hang_guard("a huge submission", server.post("/v1/jobs", &huge)).await, 422);
     assert_eq!(problem["field"], "merge_radius", "{problem}");
     let detail = problem["detail"].as_str().unwrap();
     assert!(detail.contains("--max-iteration-work") && detail.contains("1.000e10"), "the bound is stated: {detail}");
@@ -154,10 +150,10 @@ async fn huge_iterations_are_refused_and_long_ones_cancel_inside_an_iteration() 
     let id = server.submit(&wide).await;
     server.wait_for_state(id, "running").await;
     tokio::time::sleep(Duration::from_millis(300)).await; // well inside the first iteration
-    assert_eq!(server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await.status(), 202);
+    assert_eq!(server.cancel(id).await.status, 202);
     let cancelled = hang_guard("the cancel", server.wait_for_state(id, "cancelled")).await;
     assert_eq!(cancelled["progress"]["iterations_checkpointed"], 0, "the partial iteration was dropped");
-    assert_eq!(server.client.delete(server.url(&format!("/v1/jobs/{id}"))).send().await.unwrap().status(), 204);
+    assert_eq!(server.delete(id).await.status, 204);
     // The graceful stop (SIGTERM's path) ends too.
     let again = server.submit(&wide).await;
     server.wait_for_state(again, "running").await;
@@ -177,7 +173,7 @@ async fn a_full_disk_acknowledges_nothing_and_loses_nothing() {
     let running_spec = json!({ "engine": "brute", "light_paths": 200_000, "camera_paths": 100, "merge_radius": 0.02,
         "iterations": 400, "seed": 5, "cells": { "r2_edges": [0, 0.5], "r3_edges": [0, 0.01, 0.02] } });
     let running = server.submit(&running_spec).await;
-    server.wait_for(running, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 1).await;
+    server.wait_until(running, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 1).await;
     // Free pages would take writes beyond the limit: compact the file first (from a connection of
     // the test's own; the running job's writes may make it busy for a moment).
     let url = format!("sqlite://{}", server.dir.path().join("optimis.db").display());
@@ -191,44 +187,37 @@ async fn a_full_disk_acknowledges_nothing_and_loses_nothing() {
     let mut refused = 0;
     for seed in 10..30 {
         let response = server.post("/v1/jobs", &small(seed)).await;
-        if response.status() == 503 {
-            assert!(response.headers().contains_key("retry-after"), "{:?}", response.text().await);
-            let problem = assert_problem(response, 503).await;
+        if response.status == 503 {
+            assert!(response.headers.contains_key("retry-after"), "{:?}", response.text());
+            let problem = assert_problem(response, 503);
             assert!(problem["detail"].as_str().unwrap().contains("nothing was changed"), "{problem}");
             refused += 1;
         } else {
             // A write that still fit (free pages of the file): it must then really be stored.
-            assert_eq!(response.status(), 202);
-            let id = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
-            assert_eq!(server.get(&format!("/v1/jobs/{id}")).await.status(), 200);
+            assert_eq!(response.status, 202);
+            let id = response.json()["id"].as_i64().unwrap();
+            assert_eq!(server.get(&format!("/v1/jobs/{id}")).await.status, 200);
         }
     }
     assert!(refused > 0, "the page limit must refuse a write");
-    let ready = server.get("/readyz").await;
-    assert_problem(ready, 503).await;
-    let checkpointed =
-        server.get_json(&format!("/v1/jobs/{running}")).await["progress"]["iterations_checkpointed"].clone();
+    assert_problem(server.get("/readyz").await, 503);
+    let checkpointed = server.job(running).await["progress"]["iterations_checkpointed"].clone();
     tokio::time::sleep(Duration::from_millis(500)).await;
-    let job = server.get_json(&format!("/v1/jobs/{running}")).await;
+    let job = server.job(running).await;
     assert_eq!(job["state"], "running", "a storage failure does not fail the job: {job}");
 
     // Space comes back: new ids follow the highest one ever handed out, and the job finishes.
     store.limit_pages(None);
-    let listed: Vec<i64> = server.get_json("/v1/jobs?limit=500").await["jobs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|j| j["id"].as_i64().unwrap())
-        .collect();
+    let listed: Vec<i64> = server.list("?limit=500").await.iter().map(|j| j["id"].as_i64().unwrap()).collect();
     let next = server.submit(&small(20)).await;
     assert!(listed.iter().all(|&id| id < next), "id {next} is new (listed {listed:?})");
     let done = server.wait_for_state(running, "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], 400);
     assert!(checkpointed.as_u64().unwrap() < 400);
-    let document = server.get_json(&format!("/v1/jobs/{running}/moments")).await;
+    let document = server.moments(running).await;
     assert_eq!(document["moments"], common::uninterrupted_moments(&running_spec), "every iteration, once");
-    assert_eq!(server.get("/readyz").await.status(), 200);
-    assert_eq!(server.get_json(&format!("/v1/jobs/{first}")).await["state"], "succeeded");
+    assert_eq!(server.get("/readyz").await.status, 200);
+    assert_eq!(server.job(first).await["state"], "succeeded");
     server.stop().await;
 }
 
@@ -238,9 +227,9 @@ async fn odd_methods_do_not_grow_the_metrics() {
     let server = TestServer::start().await;
     for i in 0..3000 {
         let method = reqwest::Method::from_bytes(format!("ODD{i:05}{}", "X".repeat(40)).as_bytes()).unwrap();
-        let _ = server.client.request(method, server.url(&format!("/v1/jobs/{i}"))).send().await.unwrap();
+        server.request(method, &format!("/v1/jobs/{i}"), None).await;
     }
-    let metrics = server.get("/metrics").await.text().await.unwrap();
+    let metrics = server.get("/metrics").await.text();
     assert!(metrics.len() < 100_000, "/metrics is {} bytes", metrics.len());
     assert!(metrics.contains(r#"method="other""#), "odd methods share one label");
     server.stop().await;
@@ -252,35 +241,21 @@ async fn odd_methods_do_not_grow_the_metrics() {
 async fn cross_site_requests_are_refused() {
     let server = TestServer::start().await;
     let body = serde_json::to_string(&small(1)).unwrap();
-    let text = server
-        .client
-        .post(server.url("/v1/jobs"))
-        .header("content-type", "text/plain")
-        .body(body.clone())
-        .send()
-        .await
-        .unwrap();
-    assert_problem(text, 415).await;
-    let evil =
-        server.client.post(server.url("/v1/jobs")).header("origin", "http://evil.example").json(&small(1)).send();
-    assert_problem(evil.await.unwrap(), 403).await;
-    let rebinding = server
-        .client
-        .post(server.url("/v1/jobs"))
-        .header("host", "evil.example:8080")
-        .header("origin", "http://evil.example:8080")
-        .json(&small(1))
-        .send();
-    assert_problem(rebinding.await.unwrap(), 403).await;
-    assert!(server.get_json("/v1/jobs").await["jobs"].as_array().unwrap().is_empty(), "nothing was created");
+    let post = || server.builder(Method::POST, "/v1/jobs");
+    let text = server.send(post().header("content-type", "text/plain").body(body.clone())).await;
+    assert_problem(text, 415);
+    let evil = server.send(post().header("origin", "http://evil.example").json(&small(1))).await;
+    assert_problem(evil, 403);
+    let rebinding = post().header("host", "evil.example:8080").header("origin", "http://evil.example:8080");
+    assert_problem(server.send(rebinding.json(&small(1))).await, 403);
+    assert!(server.list("").await.is_empty(), "nothing was created");
     // The dashboard's own requests (same origin) and curl's (no origin) pass.
     let own = format!("http://{}", server.base.trim_start_matches("http://"));
-    let same = server.client.post(server.url("/v1/jobs")).header("origin", own).json(&small(1)).send();
-    assert_eq!(same.await.unwrap().status(), 202);
+    let same = server.send(post().header("origin", own).json(&small(1))).await;
+    assert_eq!(same.status, 202);
     let id = server.submit(&small(2)).await;
-    let cancel =
-        server.client.post(server.url(&format!("/v1/jobs/{id}/cancel"))).header("origin", "http://evil.example");
-    assert_problem(cancel.send().await.unwrap(), 403).await;
+    let cancel = server.builder(Method::POST, &format!("/v1/jobs/{id}/cancel")).header("origin", "http://evil.example");
+    assert_problem(server.send(cancel).await, 403);
     server.stop().await;
 }
 
@@ -293,7 +268,7 @@ async fn documents_are_parsed_bounded_and_exactly() {
     let (target, doc) = finished(&server, 1).await;
     let mut long = doc.clone();
     long["moments"]["folds"][0]["sum_yy"] = json!(vec![0.5; 200_000]);
-    let problem = assert_problem(server.post(&format!("/v1/jobs/{target}/merge"), &long).await, 422).await;
+    let problem = assert_problem(server.merge(target, &long).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("more than 131841 entries"), "{problem}");
     // A u128 counter beyond 2^64 (Σ m² of 2^33 merge events), as the server itself would export it.
     let (_, other) = finished(&server, 2).await;
@@ -306,15 +281,8 @@ async fn documents_are_parsed_bounded_and_exactly() {
     fold.merges_sq[2] = 1u128 << 65;
     let text = typed.sealed().to_json();
     assert!(String::from_utf8_lossy(&text).contains("36893488147419103232"), "2^65 in the text");
-    let response = server
-        .client
-        .post(server.url(&format!("/v1/jobs/{target}/merge")))
-        .header("content-type", "application/json")
-        .body(text)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(response.status(), 200, "{}", response.text().await.unwrap());
+    let response = server.post_raw(&format!("/v1/jobs/{target}/merge"), text).await;
+    assert_eq!(response.status, 200, "{}", response.text());
     server.stop().await;
 }
 
@@ -329,7 +297,7 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
     .await;
     let (target, doc) = finished(&server, 1).await;
     let negative = forge(&doc, |d| d.moments.folds[1].strategies[0][1] = ExactSum::from_parts(&[-1.0]).unwrap());
-    let problem = assert_problem(server.post("/v1/studies", &json!({ "sources": [negative] })).await, 422).await;
+    let problem = assert_problem(server.study(&json!({ "sources": [negative] })).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("contradict"), "{problem}");
     let wrapped = forge(&doc, |d| {
         let huge: optimis::sim::stats::coverage::Coverage = serde_json::from_value(json!([
@@ -339,7 +307,7 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
         d.coverage = huge.clone();
         d.moments.coverage = huge;
     });
-    assert_problem(server.post(&format!("/v1/jobs/{target}/merge"), &wrapped).await, 422).await;
+    assert_problem(server.merge(target, &wrapped).await, 422);
     let empty = forge(&doc, |d| {
         let spec = d.spec.clone();
         *d = MomentsDocument::new(
@@ -347,15 +315,13 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
             optimis::sim::stats::moments::Moments::new(&spec.validate().unwrap().config),
         );
     });
-    let problem = assert_problem(server.post("/v1/studies", &json!({ "sources": [empty] })).await, 422).await;
+    let problem = assert_problem(server.study(&json!({ "sources": [empty] })).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("no iterations"), "{problem}");
     // 40 + 40 iterations of 2·10⁷ pairs exceed a budget of 60 iterations' worth.
     let (_, second) = finished(&server, 2).await;
-    let problem =
-        assert_problem(server.post("/v1/studies", &json!({ "sources": [doc.clone(), second.clone()] })).await, 422)
-            .await;
+    let problem = assert_problem(server.study(&json!({ "sources": [doc.clone(), second.clone()] })).await, 422);
     assert_eq!(problem["field"], "iterations", "{problem}");
-    let problem = assert_problem(server.post(&format!("/v1/jobs/{target}/merge"), &second).await, 422).await;
+    let problem = assert_problem(server.merge(target, &second).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("--max-job-budget"), "{problem}");
     server.stop().await;
 }
@@ -367,14 +333,14 @@ async fn a_merged_job_describes_what_it_holds() {
     let server = TestServer::start().await;
     let (target, _) = finished(&server, 1).await;
     let (_, other) = finished(&server, 2).await;
-    assert_eq!(server.post(&format!("/v1/jobs/{target}/merge"), &other).await.status(), 200);
-    let job = server.get_json(&format!("/v1/jobs/{target}")).await;
+    assert_eq!(server.merge(target, &other).await.status, 200);
+    let job = server.job(target).await;
     assert_eq!(job["spec"]["iterations"], 80, "{job}");
     assert_eq!(job["progress"]["iterations_done"], 80);
-    let document = server.get_json(&format!("/v1/jobs/{target}/moments")).await;
+    let document = server.moments(target).await;
     assert_eq!(document["spec"]["iterations"], 80);
-    let study = server.post("/v1/studies", &json!({ "sources": [document] })).await;
-    assert_eq!(study.status(), 201);
+    let study = server.study(&json!({ "sources": [document] })).await;
+    assert_eq!(study.status, 201);
     server.stop().await;
 }
 
@@ -385,21 +351,18 @@ async fn extending_a_cancelled_job_counts_from_what_it_holds() {
     let server = TestServer::start().await;
     let spec = json!({ "engine": "brute", "light_paths": 200_000, "camera_paths": 100, "merge_radius": 0.02, "iterations": 100_000 });
     let id = server.submit(&spec).await;
-    server.wait_for(id, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
-    server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    server.wait_until(id, |j| j["progress"]["iterations_checkpointed"].as_u64().unwrap() >= 5).await;
+    server.cancel(id).await;
     let cancelled = server.wait_for_state(id, "cancelled").await;
     let held = cancelled["progress"]["iterations_done"].as_u64().unwrap();
-    let extended: Value =
-        server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "iterations": 3 })).await.json().await.unwrap();
+    let extended = server.extend(id, &json!({ "iterations": 3 })).await.json();
     assert_eq!(extended["progress"]["iterations_total"], held + 3, "{extended}");
     let done = server.wait_for_state(id, "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], held + 3);
-    let to_target: Value =
-        server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "total": held + 5 })).await.json().await.unwrap();
+    let to_target = server.extend(id, &json!({ "total": held + 5 })).await.json();
     assert_eq!(to_target["progress"]["iterations_total"], held + 5);
     server.wait_for_state(id, "succeeded").await;
-    let problem =
-        assert_problem(server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "total": 2 })).await, 422).await;
+    let problem = assert_problem(server.extend(id, &json!({ "total": 2 })).await, 422);
     assert_eq!(problem["field"], "total");
     server.stop().await;
 }
@@ -409,7 +372,7 @@ async fn extending_a_cancelled_job_counts_from_what_it_holds() {
 async fn a_vanishing_ring_flux_is_refused() {
     let server = TestServer::start().await;
     let spec = json!({ "scene": { "illumination": { "kind": "rings", "rings": [{ "outer_radius": 1.0, "level": 1e-320 }] } } });
-    let problem = assert_problem(server.post("/v1/jobs", &spec).await, 422).await;
+    let problem = assert_problem(server.post("/v1/jobs", &spec).await, 422);
     assert_eq!(problem["field"], "scene.illumination", "{problem}");
     server.stop().await;
 }
@@ -428,7 +391,7 @@ async fn event_streams_are_paced_and_finished_jobs_take_no_slot() {
     let id = server.submit(&json!({ "iterations": 400_000, "seed": 2 })).await;
     server.wait_for_state(id, "running").await;
     let started = std::time::Instant::now();
-    let mut stream = server.get(&format!("/v1/jobs/{id}/events")).await.bytes_stream();
+    let mut stream = server.open(&format!("/v1/jobs/{id}/events")).await.bytes_stream();
     let mut events = 0;
     let mut text = String::new();
     while started.elapsed() < Duration::from_secs(2) {
@@ -441,10 +404,10 @@ async fn event_streams_are_paced_and_finished_jobs_take_no_slot() {
     assert!(events as f64 <= elapsed / 0.25 + 2.0, "{events} events in {elapsed:.2} s");
     // The one slot is taken by the live stream; a finished job's single event still answers.
     let finished_stream = server.get(&format!("/v1/jobs/{done}/events")).await;
-    assert_eq!(finished_stream.status(), 200);
-    assert!(finished_stream.text().await.unwrap().contains("succeeded"));
+    assert_eq!(finished_stream.status, 200);
+    assert!(finished_stream.text().contains("succeeded"));
     drop(stream);
-    server.post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    server.cancel(id).await;
     server.wait_for_state(id, "cancelled").await;
     server.stop().await;
 }
@@ -483,7 +446,7 @@ async fn histories_stay_bounded() {
     let server = TestServer::start_in(dir, |_| {}).await;
     let url = format!("sqlite://{}", server.dir.path().join("optimis.db").display());
     // One more checkpoint thins the job's history.
-    assert_eq!(server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "iterations": 1 })).await.status(), 202);
+    assert_eq!(server.extend(id, &json!({ "iterations": 1 })).await.status, 202);
     server.wait_for_state(id, "succeeded").await;
     let db = sqlx::SqlitePool::connect(&url).await.unwrap();
     let rows: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
@@ -493,7 +456,7 @@ async fn histories_stay_bounded() {
         .unwrap();
     db.close().await;
     assert!(rows <= 2000, "{rows} history rows kept");
-    let history = server.get_json(&format!("/v1/jobs/{id}/history")).await;
+    let history = server.history(id).await;
     assert!(history["points"].as_array().unwrap().len() <= 1000);
     server.stop().await;
 }
@@ -520,9 +483,9 @@ async fn a_corrupted_checkpoint_is_reported_not_served() {
         .unwrap();
     db.close().await;
     let server = TestServer::start_in(dir, |_| {}).await;
-    let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409).await;
+    let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
-    assert_problem(server.post(&format!("/v1/jobs/{id}/extend"), &json!({ "iterations": 2 })).await, 409).await;
-    assert_eq!(server.get_json(&format!("/v1/jobs/{id}")).await["state"], "succeeded", "the job is unchanged");
+    assert_problem(server.extend(id, &json!({ "iterations": 2 })).await, 409);
+    assert_eq!(server.job(id).await["state"], "succeeded", "the job is unchanged");
     server.stop().await;
 }

@@ -10,9 +10,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
-use common::process::{Process, free_port, get, wait_for};
-use common::{TestServer, assert_problem};
-use serde_json::{Value, json};
+use common::process::{Process, free_port};
+use common::{Client, TestServer, assert_problem};
+use serde_json::json;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
@@ -91,14 +91,13 @@ async fn peer_errors_are_read_a_little_never_echoed_and_redirects_not_followed()
     .await;
     let (error_base, redirect_base) = (error.base.clone(), redirect.base.clone());
     let server = TestServer::start_with(move |c| c.peers = allow(&[&error_base, &redirect_base])).await;
-    let target = server.submit(&json!({ "iterations": 4, "light_paths": 100_000 })).await;
-    server.wait_for_state(target, "succeeded").await;
+    let target = server.submit_and_wait(&json!({ "iterations": 4, "light_paths": 100_000 })).await;
     let merge = |from: String| {
         let server = &server;
-        async move { server.post(&format!("/v1/jobs/{target}/merge"), &json!({ "from": from })).await }
+        async move { server.merge(target, &json!({ "from": from })).await }
     };
 
-    let problem = assert_problem(merge(format!("{}/v1/jobs/1", error.base)).await, 422).await;
+    let problem = assert_problem(merge(format!("{}/v1/jobs/1", error.base)).await, 422);
     assert!(error.contacted.load(Ordering::SeqCst), "the allowed peer was asked");
     let detail = problem["detail"].as_str().unwrap();
     assert!(detail.contains("500") && !detail.contains("SECRET"), "{detail}");
@@ -106,7 +105,7 @@ async fn peer_errors_are_read_a_little_never_echoed_and_redirects_not_followed()
     let sent = error.sent.load(Ordering::SeqCst);
     assert!(sent < 32 << 20, "the error body was read on: {sent} bytes went out");
 
-    let problem = assert_problem(merge(format!("{}/v1/jobs/1", redirect.base)).await, 422).await;
+    let problem = assert_problem(merge(format!("{}/v1/jobs/1", redirect.base)).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("redirects are not followed"), "{problem}");
     tokio::time::sleep(Duration::from_millis(200)).await;
     assert!(!hidden_contacted.load(Ordering::SeqCst), "the redirect target was contacted");
@@ -135,9 +134,8 @@ async fn peer_documents_are_capped_by_the_document_limit() {
     })
     .await;
     for peer in [&declared, &chunked] {
-        let response =
-            server.post("/v1/studies", &json!({ "sources": [{ "from": format!("{}/v1/jobs/3", peer.base) }] })).await;
-        let problem = assert_problem(response, 422).await;
+        let response = server.study(&json!({ "sources": [{ "from": format!("{}/v1/jobs/3", peer.base) }] })).await;
+        let problem = assert_problem(response, 422);
         assert!(problem["detail"].as_str().unwrap().contains("document limit"), "{problem}");
         assert!(peer.sent.load(Ordering::SeqCst) < 32 << 20);
     }
@@ -157,8 +155,7 @@ async fn only_allowed_peers_are_contacted() {
         format!("https://127.0.0.1:{port}/optimis/v1/jobs/1"), // another scheme
         format!("http://127.0.0.1:{}/v1/jobs/1", free_port()), // another port
     ] {
-        let problem =
-            assert_problem(server.post("/v1/studies", &json!({ "sources": [{ "from": url }] })).await, 403).await;
+        let problem = assert_problem(server.study(&json!({ "sources": [{ "from": url }] })).await, 403);
         let detail = problem["detail"].as_str().unwrap();
         assert!(detail.contains("not an allowed peer") && detail.contains("--peer"), "{detail}");
     }
@@ -222,19 +219,14 @@ async fn two_servers_with_tokens_exchange_a_study_over_https() {
     optimis::jobs::peers::install_crypto_provider();
     let ca = reqwest::Certificate::from_pem(certified.cert.pem().as_bytes()).unwrap();
     let https = reqwest::Client::builder().tls_certs_only([ca]).build().unwrap();
-    let with = |token: &str| {
-        let mut headers = reqwest::header::HeaderMap::new();
-        headers.insert("authorization", format!("Bearer {token}").parse().unwrap());
-        reqwest::Client::builder()
-            .tls_certs_only([reqwest::Certificate::from_pem(certified.cert.pem().as_bytes()).unwrap()])
-            .default_headers(headers)
-            .build()
-            .unwrap()
-    };
-    let (client_a, client_b) = (with(token_a), with(token_b));
+    let (client_a, client_b) = (
+        Client::new(&base_a).with_http(https.clone()).with_token(token_a),
+        Client::new(&base_b).with_http(https.clone()).with_token(token_b),
+    );
     // Without its token a server refuses; plain http is not served.
-    assert_eq!(https.get(format!("{base_a}/v1/jobs")).send().await.unwrap().status(), 401);
-    assert!(common::client().get(format!("http://localhost:{pa}/healthz")).send().await.is_err());
+    assert_eq!(Client::new(&base_a).with_http(https).get("/v1/jobs").await.status, 401);
+    let plain = Client::new(format!("http://localhost:{pa}"));
+    assert!(plain.builder(reqwest::Method::GET, "/healthz").send().await.is_err());
 
     let study = |shard: Option<(u64, u64)>| {
         let mut spec =
@@ -244,27 +236,18 @@ async fn two_servers_with_tokens_exchange_a_study_over_https() {
         }
         spec
     };
-    let submit = |client: &reqwest::Client, base: &str, spec: Value| {
-        let (client, url) = (client.clone(), format!("{base}/v1/jobs"));
-        async move {
-            let response = client.post(url).json(&spec).send().await.unwrap();
-            assert_eq!(response.status(), 202);
-            response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
-        }
-    };
-    let shard0 = submit(&client_a, &base_a, study(Some((0, 2)))).await;
-    let shard1 = submit(&client_b, &base_b, study(Some((1, 2)))).await;
-    let whole = submit(&client_a, &base_a, study(None)).await;
-    for (client, base, id) in [(&client_a, &base_a, shard0), (&client_b, &base_b, shard1), (&client_a, &base_a, whole)]
-    {
-        wait_for(client, base, id, |j| j["state"] == "succeeded").await;
+    let shard0 = client_a.submit(&study(Some((0, 2)))).await;
+    let shard1 = client_b.submit(&study(Some((1, 2)))).await;
+    let whole = client_a.submit(&study(None)).await;
+    for (client, id) in [(&client_a, shard0), (&client_b, shard1), (&client_a, whole)] {
+        client.wait_for_state(id, "succeeded").await;
     }
     let sources = json!({ "sources": [{ "from": format!("{base_a}/v1/jobs/{shard0}") }, { "from": format!("{base_b}/v1/jobs/{shard1}") }] });
-    let response = client_a.post(format!("{base_a}/v1/studies")).json(&sources).send().await.unwrap();
-    assert_eq!(response.status(), 201, "{}", response.text().await.unwrap());
-    let merged = response.json::<Value>().await.unwrap()["id"].as_i64().unwrap();
-    let merged_moments = get(&client_a, format!("{base_a}/v1/jobs/{merged}/moments")).await;
-    let whole_moments = get(&client_a, format!("{base_a}/v1/jobs/{whole}/moments")).await;
+    let response = client_a.study(&sources).await;
+    assert_eq!(response.status, 201, "{}", response.text());
+    let merged = response.json()["id"].as_i64().unwrap();
+    let merged_moments = client_a.moments(merged).await;
+    let whole_moments = client_a.moments(whole).await;
     assert_eq!(merged_moments["moments"], whole_moments["moments"], "bit-identical to the single run");
     a.kill();
     b.kill();

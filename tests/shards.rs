@@ -5,23 +5,9 @@
 
 mod common;
 
-use common::process::{Process, free_port, get, wait_for};
+use common::assert_problem;
+use common::process::{Process, free_port};
 use serde_json::{Value, json};
-
-async fn submit(client: &reqwest::Client, base: &str, spec: &Value) -> i64 {
-    let response = client.post(format!("{base}/v1/jobs")).json(spec).send().await.unwrap();
-    assert_eq!(response.status(), 202, "submit {spec}");
-    response.json::<Value>().await.unwrap()["id"].as_i64().unwrap()
-}
-
-async fn post(client: &reqwest::Client, url: String, body: &Value) -> (u16, Value) {
-    let response = client.post(&url).json(body).send().await.unwrap();
-    let status = response.status().as_u16();
-    if status >= 400 {
-        assert_eq!(response.headers()["content-type"], "application/problem+json");
-    }
-    (status, response.json().await.unwrap())
-}
 
 fn study(seed: u64, shard: Option<(u64, u64)>, radius: f64) -> Value {
     let mut spec =
@@ -48,119 +34,92 @@ async fn shards_on_two_servers_merge_into_the_whole_study() {
         pa,
         &[&flags[..], &["--peer", &peer_a, "--peer", &peer_b, "--peer", &peer_9]].concat(),
     );
-    let client = common::client();
 
-    let shard0 = submit(&client, &a.base, &study(21, Some((0, 2)), 0.02)).await;
-    let shard1 = submit(&client, &b.base, &study(21, Some((1, 2)), 0.02)).await;
-    let whole = submit(&client, &a.base, &study(21, None, 0.02)).await;
-    for (base, id) in [(&a.base, shard0), (&b.base, shard1), (&a.base, whole)] {
-        wait_for(&client, base, id, |j| j["state"] == "succeeded").await;
+    let shard0 = a.submit(&study(21, Some((0, 2)), 0.02)).await;
+    let shard1 = b.submit(&study(21, Some((1, 2)), 0.02)).await;
+    let whole = a.submit(&study(21, None, 0.02)).await;
+    for (server, id) in [(&a, shard0), (&b, shard1), (&a, whole)] {
+        server.wait_for_state(id, "succeeded").await;
     }
-    let s0 = get(&client, format!("{}/v1/jobs/{shard0}", a.base)).await;
+    let s0 = a.job(shard0).await;
     assert_eq!(s0["progress"]["iterations_total"], 15, "shard 0 of 2 runs half of the 30 iterations");
 
     // The study, on server A, pulls both shards from their servers.
     let from = |base: &str, id: i64| json!({ "from": format!("{base}/v1/jobs/{id}") });
-    let response = client
-        .post(format!("{}/v1/studies", a.base))
-        .json(&json!({ "sources": [from(&a.base, shard0), from(&b.base, shard1)] }))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(response.status(), 201);
-    let location = response.headers()["location"].to_str().unwrap().to_string();
-    let merged_job: Value = response.json().await.unwrap();
+    let response = a.study(&json!({ "sources": [from(&a.base, shard0), from(&b.base, shard1)] })).await;
+    assert_eq!(response.status, 201);
+    let merged_job = response.json();
     assert_eq!(merged_job["state"], "succeeded");
     assert_eq!(merged_job["merged"], true);
     let merged = merged_job["id"].as_i64().unwrap();
-    assert_eq!(location, format!("/v1/jobs/{merged}"));
+    assert_eq!(response.header("location"), Some(format!("/v1/jobs/{merged}").as_str()));
 
-    let merged_moments = get(&client, format!("{}/v1/jobs/{merged}/moments", a.base)).await;
-    let whole_moments = get(&client, format!("{}/v1/jobs/{whole}/moments", a.base)).await;
+    let merged_moments = a.moments(merged).await;
+    let whole_moments = a.moments(whole).await;
     assert_eq!(merged_moments["moments"], whole_moments["moments"], "merged shards are bit-identical to the whole run");
     let report = |mut r: Value| {
         r.as_object_mut().unwrap().remove("job_id");
         r
     };
-    let merged_result = report(get(&client, format!("{}/v1/jobs/{merged}/result", a.base)).await);
-    let whole_result = report(get(&client, format!("{}/v1/jobs/{whole}/result", a.base)).await);
+    let merged_result = report(a.result(merged).await);
+    let whole_result = report(a.result(whole).await);
     assert_eq!(merged_result, whole_result, "the results are equal");
 
     // Refusals, each leaving the target unchanged.
-    let unchanged = || async { get(&client, format!("{}/v1/jobs/{merged}/moments", a.base)).await };
+    let unchanged = || a.moments(merged);
     let before = unchanged().await;
-    let merge_url = format!("{}/v1/jobs/{merged}/merge", a.base);
+    let merge_path = format!("/v1/jobs/{merged}/merge");
 
     // The same shard a second time: 409 naming the overlapping iterations.
-    let (status, problem) = post(&client, merge_url.clone(), &from(&b.base, shard1)).await;
-    assert_eq!(status, 409, "{problem}");
+    let problem = assert_problem(a.merge(merged, &from(&b.base, shard1)).await, 409);
     assert!(problem["detail"].as_str().unwrap().contains("seed 21 iterations [15, 30)"), "{problem}");
     assert_eq!(unchanged().await, before);
 
     // A shard of another configuration (another R): 409.
-    let foreign = submit(&client, &b.base, &study(22, Some((0, 2)), 0.021)).await;
-    wait_for(&client, &b.base, foreign, |j| j["state"] == "succeeded").await;
-    let (status, problem) = post(&client, merge_url.clone(), &from(&b.base, foreign)).await;
-    assert_eq!(status, 409, "{problem}");
+    let foreign = b.submit_and_wait(&study(22, Some((0, 2)), 0.021)).await;
+    let problem = assert_problem(a.merge(merged, &from(&b.base, foreign)).await, 409);
     assert!(problem["detail"].as_str().unwrap().contains("fingerprint"), "{problem}");
     assert_eq!(unchanged().await, before);
 
     // A document with one byte changed (a digit of its statistics): 422.
-    let other_seed = submit(&client, &b.base, &study(23, None, 0.02)).await;
-    wait_for(&client, &b.base, other_seed, |j| j["state"] == "succeeded").await;
-    let text =
-        client.get(format!("{}/v1/jobs/{other_seed}/moments", b.base)).send().await.unwrap().text().await.unwrap();
+    let other_seed = b.submit_and_wait(&study(23, None, 0.02)).await;
+    let text = b.get(&format!("/v1/jobs/{other_seed}/moments")).await.text();
     let at = text.find("\"sum_y\":[").unwrap() + 50;
     let pos = text[at..].find(|c: char| c.is_ascii_digit() && c != '0').unwrap() + at;
     let mut corrupted = text.clone().into_bytes();
     corrupted[pos] = if corrupted[pos] == b'9' { b'1' } else { corrupted[pos] + 1 };
-    let response =
-        client.post(&merge_url).header("content-type", "application/json").body(corrupted).send().await.unwrap();
-    assert_eq!(response.status(), 422);
-    let problem: Value = response.json().await.unwrap();
+    let problem = assert_problem(a.post_raw(&merge_path, corrupted).await, 422);
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
     assert_eq!(unchanged().await, before);
 
     // A truncated document: 400.
-    let response = client
-        .post(&merge_url)
-        .header("content-type", "application/json")
-        .body(text[..text.len() / 2].to_string())
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(response.status(), 400);
+    assert_problem(a.post_raw(&merge_path, text[..text.len() / 2].to_string()).await, 400);
     assert_eq!(unchanged().await, before);
 
     // An allowed peer that is not there: 422 naming the source.
-    let (status, problem) = post(&client, merge_url.clone(), &json!({ "from": "http://127.0.0.1:9/v1/jobs/1" })).await;
-    assert_eq!(status, 422);
+    let problem = assert_problem(a.merge(merged, &json!({ "from": "http://127.0.0.1:9/v1/jobs/1" })).await, 422);
     assert_eq!(problem["field"], "from");
     assert!(problem["detail"].as_str().unwrap().contains("could not be reached"), "{problem}");
     assert_eq!(unchanged().await, before);
     // A server that is not on the allow-list: 403, nothing pulled.
-    let (status, problem) =
-        post(&client, merge_url.clone(), &json!({ "from": format!("{}/v1/jobs/1", peer(free_port())) })).await;
-    assert_eq!(status, 403, "{problem}");
+    let problem =
+        assert_problem(a.merge(merged, &json!({ "from": format!("{}/v1/jobs/1", peer(free_port())) })).await, 403);
     assert!(problem["detail"].as_str().unwrap().contains("--peer"), "{problem}");
     // B allows no peers at all.
-    let (status, _) =
-        post(&client, format!("{}/v1/studies", b.base), &json!({ "sources": [from(&a.base, shard0)] })).await;
-    assert_eq!(status, 403);
+    assert_problem(b.study(&json!({ "sources": [from(&a.base, shard0)] })).await, 403);
 
     // The intact document of another seed merges: 30 more iterations, results recomputed.
-    let (status, result) = post(&client, merge_url, &serde_json::from_str::<Value>(&text).unwrap()).await;
-    assert_eq!(status, 200, "{result}");
+    let response = a.merge(merged, &serde_json::from_str::<Value>(&text).unwrap()).await;
+    let result = response.json();
+    assert_eq!(response.status, 200, "{result}");
     assert_eq!(result["iterations"], 60);
     assert_eq!(result["coverage"].as_array().unwrap().len(), 2, "two seeds covered");
-    let job = get(&client, format!("{}/v1/jobs/{merged}", a.base)).await;
+    let job = a.job(merged).await;
     assert_eq!(job["progress"]["iterations_done"], 60);
 
     // A merged job cannot run more iterations; a shard cannot be extended past its range.
-    let (status, _) = post(&client, format!("{}/v1/jobs/{merged}/extend", a.base), &json!({ "iterations": 5 })).await;
-    assert_eq!(status, 409);
-    let (status, _) = post(&client, format!("{}/v1/jobs/{shard0}/extend", a.base), &json!({ "iterations": 5 })).await;
-    assert_eq!(status, 409);
+    assert_problem(a.extend(merged, &json!({ "iterations": 5 })).await, 409);
+    assert_problem(a.extend(shard0, &json!({ "iterations": 5 })).await, 409);
     a.kill();
     b.kill();
 }

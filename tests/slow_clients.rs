@@ -56,7 +56,7 @@ async fn half_open_connections_are_closed_after_the_timeouts() {
     idle.write_all(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n").await.unwrap();
     let answer = until_closed(&mut idle).await;
     assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
-    assert!(server.get_json("/v1/jobs").await["jobs"].as_array().unwrap().is_empty(), "no half request was served");
+    assert!(server.list("").await.is_empty(), "no half request was served");
     server.stop().await;
 }
 
@@ -71,7 +71,7 @@ async fn idle_connections_cannot_exhaust_the_server() {
     }
     // The server answers again once the timeouts free slots (the idle ones wait in the backlog).
     let health = tokio::time::timeout(Duration::from_secs(30), server.get("/healthz")).await;
-    assert_eq!(health.expect("the server answers again").status(), 200);
+    assert_eq!(health.expect("the server answers again").status, 200);
     for stream in &mut idle {
         until_closed(stream).await;
     }

@@ -1,15 +1,17 @@
 //! A real `optimis serve` process for tests that need the binary: crash, restart, several servers.
 
+use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
 
-use serde_json::Value;
+use super::Client;
 
-/// A running `optimis serve` process and its address.
+/// A running `optimis serve` process and its address; it dereferences to a [`Client`] of that
+/// address (without a token).
 pub struct Process {
     child: Child,
     pub base: String,
+    pub api: Client,
 }
 
 impl Process {
@@ -43,7 +45,8 @@ impl Process {
         };
         // Keep draining the log so the server never blocks on a full pipe.
         std::thread::spawn(move || for _ in lines {});
-        Self { child, base: format!("http://{address}") }
+        let base = format!("http://{address}");
+        Self { child, api: Client::new(&base), base }
     }
 
     pub fn kill(mut self) {
@@ -60,26 +63,16 @@ impl Process {
     }
 }
 
+impl std::ops::Deref for Process {
+    type Target = Client;
+
+    fn deref(&self) -> &Client {
+        &self.api
+    }
+}
+
 /// A loopback port that was free a moment ago (for servers that must know each other's address
 /// before they start, such as peers on each other's allow-list).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-pub async fn get(client: &reqwest::Client, url: String) -> Value {
-    let response = client.get(&url).send().await.unwrap();
-    assert_eq!(response.status(), 200, "GET {url}");
-    response.json().await.unwrap()
-}
-
-pub async fn wait_for(client: &reqwest::Client, base: &str, id: i64, done: impl Fn(&Value) -> bool) -> Value {
-    let started = Instant::now();
-    loop {
-        let job = get(client, format!("{base}/v1/jobs/{id}")).await;
-        if done(&job) {
-            return job;
-        }
-        assert!(started.elapsed() < Duration::from_secs(600), "hang guard: {job}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }
