@@ -269,7 +269,16 @@ mod tests {
             check(1.0 + u * 1e-6);
             check(u * 1e300);
         }
-        for x in [1.0, 2.0, 0.5, f64::MIN_POSITIVE, f64::MAX, 2f64.powi(-52), 0.7071067811865476, 1.4142135623730951] {
+        for x in [
+            1.0,
+            2.0,
+            0.5,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            2f64.powi(-52),
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::SQRT_2,
+        ] {
             check(x);
         }
         assert_eq!(ln(1.0), 0.0);
