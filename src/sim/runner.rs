@@ -131,9 +131,19 @@ fn brute_batch(config: &SimConfig, seed: u64, batch: Range<u64>, cancel: &Atomic
     )
 }
 
+/// What a worker of the restricted engine reuses from iteration to iteration: with these, an
+/// iteration allocates nothing once the buffers have grown.
+struct RestrictedWorker {
+    scratch: ChunkScratch,
+    buffers: RestrictedScratch,
+    cameras: CameraSet,
+    chunk: ChunkTally,
+    tally: IterationTally,
+}
+
 /// The restricted engine's iterations `batch` as moments of their own. An iteration takes tens of
 /// microseconds, so adding it to the moments (exact sums) would be a serial bottleneck: each
-/// worker adds its iterations to moments of its own and those are merged. The sums are exact, so
+/// worker adds its iterations to moments of their own and those are merged. The sums are exact, so
 /// the grouping does not change a bit. `Cancelled` if cancelled.
 fn restricted_batch(
     config: &SimConfig,
@@ -143,30 +153,36 @@ fn restricted_batch(
     cancel: &AtomicBool,
 ) -> Result<Moments, RunError> {
     let (k, norm) = (config.cells.len(), tally_norm(config));
-    // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value.
+    let worker = || RestrictedWorker {
+        scratch: ChunkScratch::new(k),
+        buffers: RestrictedScratch::default(),
+        cameras: CameraSet::default(),
+        chunk: ChunkTally::default(),
+        tally: IterationTally::from_chunks(0, k, norm, []),
+    };
+    // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value
+    // and a fresh worker.
     (0..(batch.end - batch.start) as usize)
         .into_par_iter()
         .with_min_len(16)
-        .map_init(
-            || (ChunkScratch::new(k), RestrictedScratch::default()),
-            |(scratch, buffers), i| {
+        .try_fold(
+            || (Moments::new(config), worker()),
+            |(mut moments, mut w), i| {
                 let s = batch.start + i as u64;
                 if cancel.load(Ordering::Relaxed) {
                     return Err(RunError::Cancelled);
                 }
-                let cameras = CameraSet::generate(config, seed, s);
-                let chunk = trace_restricted(config, plan, &cameras, seed, s, scratch, buffers, cancel)
-                    .ok_or(RunError::Cancelled)?;
-                Ok(IterationTally::from_chunks(s, k, norm, std::iter::once(&chunk)))
+                w.cameras.regenerate(config, seed, s);
+                let RestrictedWorker { scratch, buffers, cameras, chunk, tally } = &mut w;
+                if !trace_restricted(config, plan, cameras, seed, s, scratch, buffers, cancel, chunk) {
+                    return Err(RunError::Cancelled);
+                }
+                tally.set_from_chunks(s, k, norm, std::iter::once(&*chunk));
+                moments.add_iteration(seed, tally)?;
+                Ok((moments, w))
             },
         )
-        .try_fold(
-            || Moments::new(config),
-            |mut moments, tally: Result<IterationTally, RunError>| {
-                moments.add_iteration(seed, &tally?)?;
-                Ok(moments)
-            },
-        )
+        .map(|piece| piece.map(|(moments, _)| moments))
         .try_reduce(
             || Moments::new(config),
             |mut a, b| {

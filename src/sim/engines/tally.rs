@@ -122,25 +122,27 @@ impl ChunkScratch {
 
     /// Hands over the chunk's tally and resets the scratch for the next chunk.
     pub fn take(&mut self) -> ChunkTally {
-        if self.touched.is_empty() && self.merges == [0; 3] {
-            return ChunkTally::default();
-        }
+        let mut tally = ChunkTally::default();
+        self.take_into(&mut tally);
+        tally
+    }
+
+    /// [`ChunkScratch::take`] into `tally`, reusing its buffer (the restricted engine's worker
+    /// keeps one across iterations, so that none allocates).
+    pub fn take_into(&mut self, tally: &mut ChunkTally) {
+        tally.entries.clear();
+        tally.strategies = self.strategies;
+        tally.merges = self.merges;
         self.touched.sort_unstable();
-        let entries = self
-            .touched
-            .drain(..)
-            .map(|slot| {
-                let s = slot as usize;
-                let entry = (slot, self.sums[s], self.counts[s]);
-                self.sums[s] = 0.0;
-                self.counts[s] = 0;
-                entry
-            })
-            .collect();
-        let tally = ChunkTally { entries, strategies: self.strategies, merges: self.merges };
+        tally.entries.extend(self.touched.drain(..).map(|slot| {
+            let s = slot as usize;
+            let entry = (slot, self.sums[s], self.counts[s]);
+            self.sums[s] = 0.0;
+            self.counts[s] = 0;
+            entry
+        }));
         self.strategies = [0.0; PathStrategy::COUNT];
         self.merges = [0; 3];
-        tally
     }
 }
 
@@ -167,8 +169,31 @@ impl IterationTally {
         norm: f64,
         chunks: impl IntoIterator<Item = &'a ChunkTally>,
     ) -> Self {
-        let mut sums = vec![0.0; 3 * cells];
-        let mut cell_counts = vec![0u64; 3 * cells];
+        let mut tally = Self {
+            iteration,
+            cell_values: Vec::new(),
+            cell_counts: Vec::new(),
+            strategies: [0.0; PathStrategy::COUNT],
+            merges: [0; 3],
+        };
+        tally.set_from_chunks(iteration, cells, norm, chunks);
+        tally
+    }
+
+    /// [`IterationTally::from_chunks`] into `self`, reusing its buffers (the same values).
+    pub fn set_from_chunks<'a>(
+        &mut self,
+        iteration: u64,
+        cells: usize,
+        norm: f64,
+        chunks: impl IntoIterator<Item = &'a ChunkTally>,
+    ) {
+        self.iteration = iteration;
+        let (sums, cell_counts) = (&mut self.cell_values, &mut self.cell_counts);
+        sums.clear();
+        sums.resize(3 * cells, 0.0);
+        cell_counts.clear();
+        cell_counts.resize(3 * cells, 0);
         let mut strategies = [0.0; PathStrategy::COUNT];
         let mut merges = [0u64; 3];
         for chunk in chunks {
@@ -183,13 +208,11 @@ impl IterationTally {
                 *acc += v;
             }
         }
-        Self {
-            iteration,
-            cell_values: sums.into_iter().map(|s| s * norm).collect(),
-            cell_counts,
-            strategies: strategies.map(|s| s * norm),
-            merges,
+        for s in sums.iter_mut() {
+            *s *= norm;
         }
+        self.strategies = strategies.map(|s| s * norm);
+        self.merges = merges;
     }
 
     /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of model.md as sparse (index, value) pairs in index

@@ -32,7 +32,10 @@ pub const CAMERA_STREAM: u64 = u64::MAX;
 ///
 /// v2: light paths draw their starts and directions from a [`LaneRng`] (8 jumped lanes) in polar
 /// form, and their lobe deflections from the unjumped stream.
-pub const GENERATOR_ID: &str = "xoshiro256++/splitmix64(seed,iteration,stream)/chunk65536/v2";
+/// v3: camera paths take three words each of the camera stream, in path order: the direction in
+/// polar form (sin² θ and the azimuth) and the lobe's u and azimuth, evaluated with the
+/// vectorisable logarithm, sine and cosine of [`super::fastmath`].
+pub const GENERATOR_ID: &str = "xoshiro256++/splitmix64(seed,iteration,stream)/chunk65536/v3";
 
 /// SplitMix64 output function (Steele, Lea & Flood 2014): a bijective 64-bit mixer.
 #[inline]

@@ -85,8 +85,8 @@ pub const RESTRICTED_STREAM: u64 = u64::MAX - 1;
 /// never look at it.
 pub(crate) const CANCEL_CHECK_INTERVAL: u64 = 1024;
 
-/// Traces iteration `iteration` with the restricted engine and returns its tally, or `None` if
-/// `cancel` was set while it ran (the partial iteration is dropped whole).
+/// Traces iteration `iteration` with the restricted engine into `tally` (its buffer reused) and
+/// returns true, or false if `cancel` was set while it ran (the partial iteration is dropped whole).
 #[allow(clippy::too_many_arguments)]
 pub fn trace_restricted(
     config: &SimConfig,
@@ -97,15 +97,16 @@ pub fn trace_restricted(
     scratch: &mut ChunkScratch,
     buffers: &mut RestrictedScratch,
     cancel: &AtomicBool,
-) -> Option<ChunkTally> {
+    tally: &mut ChunkTally,
+) -> bool {
     let mut rng = stream(seed, iteration, RESTRICTED_STREAM);
     let it = Iteration { config, plan, cameras, cancel };
     let complete = plane1_bundle(&it, &mut rng, scratch, buffers)
         && plane2_bundle(&it, &mut rng, scratch, buffers)
         && plane3_bundle(&it, &mut rng, scratch, buffers);
     // Taken either way: the scratch must be clean for the next iteration.
-    let tally = scratch.take();
-    complete.then_some(tally)
+    scratch.take_into(tally);
+    complete
 }
 
 /// The expected number of candidates the restricted engine draws in an iteration with these
