@@ -34,7 +34,7 @@ fn sources() -> BTreeMap<PathBuf, Source> {
             let path = entry.unwrap().path();
             if path.is_dir() {
                 stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "rs") && !path.ends_with("tests.rs") {
+            } else if path.extension().is_some_and(|e| e == "rs") && !path.to_string_lossy().ends_with("tests.rs") {
                 let rel = path.strip_prefix(&root).unwrap().with_extension("");
                 let mut module: Vec<String> = rel.iter().map(|c| c.to_string_lossy().into_owned()).collect();
                 if module.last().is_some_and(|m| m == "mod" || m == "lib" || m == "main") {
@@ -94,7 +94,7 @@ fn expand(tree: &str) -> Vec<String> {
 }
 
 /// Every module path `text` refers to, absolute from the crate root.
-fn referenced_paths(module: &[String], is_mod_file: bool, text: &str) -> Vec<Vec<String>> {
+fn referenced_paths(module: &[String], text: &str) -> Vec<Vec<String>> {
     let mut raw = Vec::new();
     let mut offset = 0;
     for line in text.split_inclusive('\n') {
@@ -115,15 +115,14 @@ fn referenced_paths(module: &[String], is_mod_file: bool, text: &str) -> Vec<Vec
         let end = rest.find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':')).unwrap_or(rest.len());
         raw.push(rest[..end].trim_end_matches(':').to_string());
     }
-    // `super` of a `mod.rs` file is its folder's parent; of any other file, its folder.
-    let folder: Vec<String> = if is_mod_file { module.to_vec() } else { module[..module.len() - 1].to_vec() };
     raw.into_iter()
         .filter_map(|path| {
             let segments: Vec<&str> = path.split("::").map(str::trim).collect();
             let mut base: Vec<String> = match segments[0] {
                 "crate" => Vec::new(),
-                "super" => folder[..folder.len().saturating_sub(1)].to_vec(),
-                "self" => folder.clone(),
+                // A `mod.rs` file's module is its folder, so `super` is one level up either way.
+                "super" => module[..module.len().saturating_sub(1)].to_vec(),
+                "self" => module.to_vec(),
                 _ => return None,
             };
             let mut rest = &segments[1..];
@@ -148,9 +147,8 @@ fn graph() -> (BTreeMap<PathBuf, Source>, BTreeMap<PathBuf, BTreeSet<PathBuf>>) 
         sources.iter().filter(|(p, _)| !p.ends_with("main")).map(|(p, s)| (s.module.clone(), p.clone())).collect();
     let mut edges: BTreeMap<PathBuf, BTreeSet<PathBuf>> = BTreeMap::new();
     for (path, source) in &sources {
-        let is_mod_file = path.ends_with("mod") || path.ends_with("lib");
         let targets = edges.entry(path.clone()).or_default();
-        for referenced in referenced_paths(&source.module, is_mod_file, &source.text) {
+        for referenced in referenced_paths(&source.module, &source.text) {
             if let Some(target) = resolve(&referenced, &modules)
                 && target != *path
             {

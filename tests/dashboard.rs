@@ -120,8 +120,8 @@ fn referenced_assets(text: &str) -> Vec<String> {
 async fn every_dashboard_file_is_served() {
     let server = TestServer::start().await;
     let page = server.get("/").await;
-    assert_eq!(page.status(), 200);
-    let mut pending = referenced_assets(&page.text().await.unwrap());
+    assert_eq!(page.status, 200);
+    let mut pending = referenced_assets(&page.text());
     assert!(pending.contains(&"app.js".to_owned()), "the page loads app.js: {pending:?}");
     let mut served = Vec::new();
     while let Some(name) = pending.pop() {
@@ -129,9 +129,9 @@ async fn every_dashboard_file_is_served() {
             continue;
         }
         let response = server.get(&format!("/assets/{name}")).await;
-        assert_eq!(response.status(), 200, "/assets/{name}");
-        let media_type = response.headers()["content-type"].to_str().unwrap().to_owned();
-        let body = response.text().await.unwrap();
+        assert_eq!(response.status, 200, "/assets/{name}");
+        let media_type = response.header("content-type").unwrap().to_owned();
+        let body = response.text();
         if name.ends_with(".js") {
             assert_eq!(media_type, "text/javascript; charset=utf-8", "/assets/{name}");
             pending.extend(referenced_assets(&body));
@@ -156,11 +156,11 @@ async fn every_dashboard_file_is_served() {
     ];
     assert_eq!(served, expected, "the files the page loads");
     for name in ["nope.js", "app.JS", "..%2Fapp.js"] {
-        let problem = assert_problem(server.get(&format!("/assets/{name}")).await, 404).await;
+        let problem = assert_problem(server.get(&format!("/assets/{name}")).await, 404);
         assert!(problem["detail"].as_str().unwrap().contains("no dashboard file"), "{name}: {problem}");
     }
     // No folders under /assets/.
-    assert_problem(server.get("/assets/js/app.js").await, 404).await;
+    assert_problem(server.get("/assets/js/app.js").await, 404);
     server.stop().await;
 }
 

@@ -50,9 +50,31 @@ impl PathStrategy {
     }
 }
 
-/// Weights every per-path strategy gives a merge at `plane` of the join path (x2, x3).
+/// The three merge techniques, by the plane where the merge happens (model.md: the weights w0, w1,
+/// w2 and the contributions C0, C1, C2 are indexed the same way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(usize)]
+pub enum Technique {
+    /// Merge at the pixel (plane 1): C0, weight w0.
+    Plane1 = 0,
+    /// Merge at plane 2: C1, weight w1.
+    Plane2 = 1,
+    /// Merge at plane 3: C2, weight w2.
+    Plane3 = 2,
+}
+
+impl Technique {
+    /// The index m of w_m and C_m.
+    #[inline]
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Weights every per-path strategy gives a merge by `technique` on the join path (x2, x3).
 #[inline]
-pub fn strategy_weights(scene: &Scene, plane: usize, x2: [f64; 2], x3: [f64; 2]) -> [f64; PathStrategy::COUNT] {
+pub fn strategy_weights(scene: &Scene, technique: Technique, x2: [f64; 2], x3: [f64; 2]) -> [f64; PathStrategy::COUNT] {
+    let plane = technique.index();
     let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
     let inside = x3[0].hypot(x3[1]) <= scene.illumination.switch_radius();
     let switch = match plane {
@@ -98,11 +120,18 @@ impl ChunkScratch {
         }
     }
 
-    /// Records one merge event: contribution `c` at `plane`, in cell `cell` of a grid of `cells`
-    /// cells, with the per-path strategy weights `weights`.
+    /// Records one merge event: contribution `c` by `technique`, in cell `cell` of a grid of
+    /// `cells` cells, with the per-path strategy weights `weights`.
     #[inline]
-    pub fn record(&mut self, plane: usize, cell: usize, cells: usize, c: f64, weights: &[f64; PathStrategy::COUNT]) {
-        let slot = plane * cells + cell;
+    pub fn record(
+        &mut self,
+        technique: Technique,
+        cell: usize,
+        cells: usize,
+        c: f64,
+        weights: &[f64; PathStrategy::COUNT],
+    ) {
+        let slot = technique.index() * cells + cell;
         if self.counts[slot] == 0 {
             self.touched.push(slot as u32);
         }
@@ -116,8 +145,8 @@ impl ChunkScratch {
     /// Counts a merge event at `plane` (a plane-1 hit counts once per light path, although it merges
     /// with all N_B camera paths at the shared pixel).
     #[inline]
-    pub fn count_merge(&mut self, plane: usize) {
-        self.merges[plane] += 1;
+    pub fn count_merge(&mut self, technique: Technique) {
+        self.merges[technique.index()] += 1;
     }
 
     /// Hands over the chunk's tally and resets the scratch for the next chunk.
@@ -245,14 +274,14 @@ mod tests {
         let cells = 2;
         let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25];
         let mut scratch = ChunkScratch::new(cells);
-        scratch.record(0, 1, cells, 4.0, &w);
-        scratch.count_merge(0);
-        scratch.record(2, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
-        scratch.count_merge(2);
+        scratch.record(Technique::Plane1, 1, cells, 4.0, &w);
+        scratch.count_merge(Technique::Plane1);
+        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        scratch.count_merge(Technique::Plane3);
         let a = scratch.take();
         assert_eq!(a.entries, vec![(1, 4.0, 1), (4, 2.0, 1)], "slots sorted, counts kept");
         assert_eq!(scratch.take(), ChunkTally::default(), "take resets the scratch");
-        scratch.record(2, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
         let b = scratch.take();
         let t = IterationTally::from_chunks(3, cells, 0.5, [&a, &b]);
         assert_eq!(t.cell_values, vec![0.0, 2.0, 0.0, 0.0, 4.0, 0.0]);

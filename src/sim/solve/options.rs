@@ -120,7 +120,7 @@ mod tests {
         assert_eq!(field(json!({ "lambda": -1 })), "solver.lambda");
         assert_eq!(field(json!({ "lambda": "x" })), "solver.lambda");
         assert_eq!(field(json!({ "fixed": { "w1": 2e6 } })), "solver.fixed.w1");
-        assert_eq!(field(json!({ "lamda": 1 })), "solver");
+        assert_eq!(field(json!({ "lamda": 1 })), "solver.lamda", "an unknown option is named");
         assert_eq!(field(json!(3)), "solver");
     }
 }

@@ -41,6 +41,13 @@ use crate::sim::math::rng::{LaneRng, StreamRng, stream, uniform_open0, unit52};
 use crate::sim::model::config::SimConfig;
 use near_filter::{NEAR_WORDS, NearFilter};
 
+/// The bits of a path's flags: which work it needs beyond its draws. Near a camera vertex at
+/// plane 3 (bit 0) or plane 2 (bit 1), or deflected by the lobe, possibly onto the pixel (bit 2).
+/// The AVX2 near filter builds bits 0 and 1 as `near3 | near2 << 1`.
+const NEAR_PLANE3: u32 = 1;
+const NEAR_PLANE2: u32 = 1 << 1;
+const MAY_REACH_PIXEL: u32 = 1 << 2;
+
 /// Light paths per block of the chunk loop.
 const BLOCK: usize = 64;
 const _: () = assert!(
@@ -210,7 +217,7 @@ fn trace_blocks<const AVX2: bool>(
             sin2[i] = s2;
             cos_phi[i] = cp;
             sin_phi[i] = sp;
-            b.flags[i] = u32::from(setup.cone.may_reach_polar(x, y, cp, sp, tan, c2, l2)) << 2;
+            b.flags[i] = u32::from(setup.cone.may_reach_polar(x, y, cp, sp, tan, c2, l2)) * MAY_REACH_PIXEL;
             cell3[i] = setup.near3.cell(x3x[i], x3y[i]);
             cell2[i] = setup.near2.cell(x, y);
         }
@@ -242,7 +249,9 @@ fn trace_blocks<const AVX2: bool>(
 fn flag_paths(setup: &Chunk, b: &mut Block) -> u128 {
     let mut flagged = 0;
     for i in 0..BLOCK {
-        let flags = b.flags[i] | setup.near3.holds(b.cells[0][i]) | (setup.near2.holds(b.cells[1][i]) << 1);
+        let flags = b.flags[i]
+            | (setup.near3.holds(b.cells[0][i]) * NEAR_PLANE3)
+            | (setup.near2.holds(b.cells[1][i]) * NEAR_PLANE2);
         b.flags[i] = flags;
         flagged |= u128::from(flags != 0) << i;
     }
@@ -275,7 +284,10 @@ fn flag_paths_avx2(setup: &Chunk, b: &mut Block) -> u128 {
             let load = |a: &[u32; BLOCK]| _mm256_loadu_si256(a.as_ptr().add(j).cast());
             let near3 = holds(&setup.near3, load(&b.cells[0]));
             let near2 = holds(&setup.near2, load(&b.cells[1]));
-            let flags = _mm256_or_si256(load(&b.flags), _mm256_or_si256(near3, _mm256_slli_epi32::<1>(near2)));
+            let flags = _mm256_or_si256(
+                load(&b.flags),
+                _mm256_or_si256(near3, _mm256_slli_epi32::<1>(near2)), /* NEAR_PLANE3 | NEAR_PLANE2 */
+            );
             _mm256_storeu_si256(b.flags.as_mut_ptr().add(j).cast(), flags);
             let any = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(flags, _mm256_setzero_si256())));
             flagged |= u128::from(any as u8) << j;
@@ -300,13 +312,13 @@ fn trace_flagged(
     let (config, cameras) = (setup.config, setup.cameras);
     let sin_theta = sin2.sqrt();
     let d = Vector3::new(sin_theta * cos_phi, sin_theta * sin_phi, -(1.0 - sin2).sqrt());
-    if flags & 1 != 0 {
+    if flags & NEAR_PLANE3 != 0 {
         merge_plane3(config, cameras, cameras.plane3.candidates(x3), x3, scratch);
     }
-    if flags & 2 != 0 {
+    if flags & NEAR_PLANE2 != 0 {
         merge_plane2(config, cameras, cameras.plane2.candidates(x2), x2, x3, &d, scratch);
     }
-    if flags & 4 != 0 {
+    if flags & MAY_REACH_PIXEL != 0 {
         // The lobe draw of `sample_lobe` (ϑ = β·√(−2 ln u₁), azimuth 2πu₂), with the logarithm,
         // the azimuth and the deflection skipped when ϑ cannot bring the path within R of the
         // pixel: the outcome (no merge) does not depend on them.

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use nalgebra::Vector3;
 
 use super::CANCEL_CHECK_INTERVAL;
-use super::plan::{Kind, RestrictedPlan, RestrictedScratch, d_min_squared, tail_probability};
+use super::plan::{BundleEntry, Kind, RestrictedPlan, RestrictedScratch, d_min_squared, tail_probability};
 use crate::sim::engines::camera::CameraSet;
 use crate::sim::engines::merge::{merge_plane1, merge_plane2, merge_plane3, within};
 use crate::sim::engines::pixel::{land_on_pixel, pixel_hit};
@@ -83,15 +83,18 @@ fn for_each_candidate(
     cancel: &AtomicBool,
     mut draw: impl FnMut(&mut StreamRng, u32, u32, Kind),
 ) -> bool {
-    let Some(&(total, ..)) = buffers.bundle.last() else { return true };
+    if buffers.bundle.is_empty() {
+        return true;
+    }
+    let total = buffers.total();
     let Some(count) = poisson_until(rng, total, cancel) else { return false };
     for k in 0..count {
         if k % CANCEL_CHECK_INTERVAL == CANCEL_CHECK_INTERVAL - 1 && cancel.load(Ordering::Relaxed) {
             return false;
         }
         let u = uniform(rng) * total;
-        let i = buffers.bundle.partition_point(|&(c, ..)| c <= u).min(buffers.bundle.len() - 1);
-        let (_, layer, camera, kind) = buffers.bundle[i];
+        let i = buffers.bundle.partition_point(|e| e.cumulative <= u).min(buffers.bundle.len() - 1);
+        let BundleEntry { layer, camera, kind, .. } = buffers.bundle[i];
         draw(rng, layer, camera, kind);
     }
     true
@@ -105,8 +108,8 @@ pub(super) fn plane1_bundle(
 ) -> bool {
     let Iteration { config, plan, cameras, cancel } = *it;
     buffers.bundle.clear();
-    for &(mass, l, kind) in &plan.plane1 {
-        buffers.push(mass, l, 0, kind);
+    for part in &plan.plane1 {
+        buffers.push(part.mass, part.layer, 0, part.kind);
     }
     let r = config.merge_radius;
     let (l2, l3) = (config.scene.l2, config.scene.l3);

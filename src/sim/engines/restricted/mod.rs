@@ -117,7 +117,7 @@ pub fn expected_candidates(config: &SimConfig, plan: &RestrictedPlan, cameras: &
     let mut total = plan.plane1_mass();
     for build in [build_plane2, build_plane3] {
         build(config, plan, cameras, &mut buffers);
-        total += buffers.bundle.last().map_or(0.0, |&(c, ..)| c);
+        total += buffers.total();
     }
     total
 }

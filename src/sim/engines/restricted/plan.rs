@@ -45,25 +45,47 @@ pub(super) fn tail_probability() -> f64 {
 pub struct RestrictedPlan {
     proposals: Proposals,
     pub(super) layers: Vec<Layer>,
-    /// The plane-1 bundle, (mass, layer, kind) per part: it does not depend on the cameras, so it
-    /// is worked out once per run.
-    pub(super) plane1: Vec<(f64, usize, Kind)>,
+    /// The plane-1 bundle: it does not depend on the cameras, so it is worked out once per run.
+    pub(super) plane1: Vec<Plane1Part>,
     pub(super) cone: PixelCone,
     pub(super) angle: DiscAngle,
+}
+
+/// One part of the plane-1 bundle: the expected candidates of one layer drawn one way.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Plane1Part {
+    pub(super) mass: f64,
+    pub(super) layer: usize,
+    pub(super) kind: Kind,
+}
+
+/// One (layer, camera) pair of a bundle, with the bundle's mass up to and including it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct BundleEntry {
+    /// Σ of the masses of this entry and every entry before it (drawn by bisection).
+    pub(super) cumulative: f64,
+    pub(super) layer: u32,
+    pub(super) camera: u32,
+    pub(super) kind: Kind,
 }
 
 /// Per-thread buffers reused across iterations (the bundles' cumulative masses).
 #[derive(Debug, Default)]
 pub struct RestrictedScratch {
-    /// (cumulative mass, layer, camera, kind) of the current bundle.
-    pub(super) bundle: Vec<(f64, u32, u32, Kind)>,
+    /// The current bundle.
+    pub(super) bundle: Vec<BundleEntry>,
 }
 
 impl RestrictedScratch {
     /// Adds a (layer, camera) pair of mass `mass` to the current bundle.
     pub(super) fn push(&mut self, mass: f64, layer: usize, camera: usize, kind: Kind) {
-        let total = self.bundle.last().map_or(0.0, |&(c, ..)| c) + mass;
-        self.bundle.push((total, layer as u32, camera as u32, kind));
+        let cumulative = self.total() + mass;
+        self.bundle.push(BundleEntry { cumulative, layer: layer as u32, camera: camera as u32, kind });
+    }
+
+    /// The current bundle's total mass (its expected number of candidates).
+    pub(super) fn total(&self) -> f64 {
+        self.bundle.last().map_or(0.0, |e| e.cumulative)
     }
 }
 
@@ -129,7 +151,13 @@ impl RestrictedPlan {
         let angle = DiscAngle::new(config.merge_radius, scene.l2);
         let mut plan = Self { proposals, layers, plane1: Vec::new(), cone, angle };
         plan.plane1 = (0..plan.layers.len())
-            .flat_map(|l| plan.plane1_parts(&plan.layers[l], config).into_iter().map(move |(m, k)| (m, l, k)))
+            .flat_map(|layer| {
+                plan.plane1_parts(&plan.layers[layer], config).into_iter().map(move |(mass, kind)| Plane1Part {
+                    mass,
+                    layer,
+                    kind,
+                })
+            })
             .collect();
         plan
     }
@@ -137,7 +165,7 @@ impl RestrictedPlan {
     /// The expected number of plane-1 candidates of an iteration (it does not depend on the
     /// cameras).
     pub fn plane1_mass(&self) -> f64 {
-        self.plane1.iter().map(|&(mass, ..)| mass).sum()
+        self.plane1.iter().map(|part| part.mass).sum()
     }
 
     /// The plane-1 proposals for `layer`: (mass, kind) of each part.
