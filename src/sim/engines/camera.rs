@@ -70,6 +70,19 @@ struct Block {
     reached: [bool; BLOCK],
 }
 
+impl Block {
+    fn empty() -> Self {
+        Self {
+            bits: [[0; WORDS]; BLOCK],
+            x2: [[0.0; BLOCK]; 2],
+            d1: [[0.0; BLOCK]; 3],
+            x3: [[0.0; BLOCK]; 2],
+            energy3: [0.0; BLOCK],
+            reached: [false; BLOCK],
+        }
+    }
+}
+
 impl CameraSet {
     /// Traces the N_B camera paths of iteration `iteration` from its camera stream.
     pub fn generate(config: &SimConfig, seed: u64, iteration: u64) -> Self {
@@ -86,14 +99,7 @@ impl CameraSet {
     /// path in order is a few hundred nanoseconds.
     pub fn regenerate(&mut self, config: &SimConfig, seed: u64, iteration: u64) {
         let mut rng = stream(seed, iteration, CAMERA_STREAM);
-        let mut block = Block {
-            bits: [[0; WORDS]; BLOCK],
-            x2: [[0.0; BLOCK]; 2],
-            d1: [[0.0; BLOCK]; 3],
-            x3: [[0.0; BLOCK]; 2],
-            energy3: [0.0; BLOCK],
-            reached: [false; BLOCK],
-        };
+        let mut block = Block::empty();
         let total = config.camera_paths as usize;
         self.paths.clear();
         self.paths.reserve(total);
@@ -211,14 +217,7 @@ mod tests {
         };
         assert_eq!(bits(&a), bits(&fresh));
         let mut rng = stream(3, 5, CAMERA_STREAM);
-        let mut block = Block {
-            bits: [[0; WORDS]; BLOCK],
-            x2: [[0.0; BLOCK]; 2],
-            d1: [[0.0; BLOCK]; 3],
-            x3: [[0.0; BLOCK]; 2],
-            energy3: [0.0; BLOCK],
-            reached: [false; BLOCK],
-        };
+        let mut block = Block::empty();
         trace(&config, &mut rng, &mut block, BLOCK);
         let x3 = block.x3;
         trace_block(&config, &mut block);

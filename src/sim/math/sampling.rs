@@ -57,12 +57,12 @@ pub fn deflect(axis: &Vector3<f64>, theta: f64, psi: f64) -> Vector3<f64> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::sim::math::rng::stream;
 
-    /// Mean and standard error of f over n samples.
-    fn mean_se(n: usize, mut f: impl FnMut() -> f64) -> (f64, f64) {
+    /// Mean and standard error of f over n samples (also used by the scene's sampler tests).
+    pub(crate) fn mean_se(n: usize, mut f: impl FnMut() -> f64) -> (f64, f64) {
         let (mut s1, mut s2) = (0.0, 0.0);
         for _ in 0..n {
             let x = f();
@@ -73,7 +73,8 @@ mod tests {
         (m, ((s2 / n as f64 - m * m) / n as f64).sqrt())
     }
 
-    fn assert_close(what: &str, (m, se): (f64, f64), exact: f64) {
+    /// Asserts that an estimate is within 4 standard errors of the exact value.
+    pub(crate) fn assert_close(what: &str, (m, se): (f64, f64), exact: f64) {
         assert!((m - exact).abs() < 4.0 * se, "{what}: {m} ± {se} vs exact {exact}");
     }
 

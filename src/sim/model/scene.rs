@@ -127,22 +127,7 @@ mod tests {
     use super::*;
     use crate::sim::math::rng::stream;
     use crate::sim::math::sampling::orthonormal_basis;
-
-    /// Mean and standard error of f over n samples.
-    fn mean_se(n: usize, mut f: impl FnMut() -> f64) -> (f64, f64) {
-        let (mut s1, mut s2) = (0.0, 0.0);
-        for _ in 0..n {
-            let x = f();
-            s1 += x;
-            s2 += x * x;
-        }
-        let m = s1 / n as f64;
-        (m, ((s2 / n as f64 - m * m) / n as f64).sqrt())
-    }
-
-    fn assert_close(what: &str, (m, se): (f64, f64), exact: f64) {
-        assert!((m - exact).abs() < 4.0 * se, "{what}: {m} ± {se} vs exact {exact}");
-    }
+    use crate::sim::math::sampling::tests::{assert_close, mean_se};
 
     #[test]
     fn lobe_bound_matches_the_smallest_uniform() {
