@@ -26,6 +26,7 @@ use super::grid::MergeGrid;
 use crate::sim::math::fastmath::{ln, sincos, sincos_turn};
 use crate::sim::math::rng::{CAMERA_STREAM, StreamRng, stream, unit52};
 use crate::sim::model::config::SimConfig;
+use crate::sim::model::scene::advance;
 
 /// One camera path's vertices and what merging with them needs.
 #[derive(Debug, Clone, Copy)]
@@ -162,7 +163,7 @@ fn trace_block(config: &SimConfig, b: &mut Block) {
         let (sin1, cos1) = (s2.sqrt(), c2.sqrt());
         let (sp, cp) = sincos_turn((w1 >> 32) as u32);
         let (dx, dy, dz) = (sin1 * cp, sin1 * sp, cos1);
-        // x2c = L2·tan θ1·(cos φ, sin φ) (L2 along d1 from the pixel).
+        // x2c = L2·tan θ1·(cos φ, sin φ): `advance` from the pixel by L2, in polar form.
         let lateral = l2 * (s2 / c2).sqrt();
         let (x2x, x2y) = (lateral * cp, lateral * sp);
         // The lobe (`sample_lobe`): ϑ = β√(−2 ln u) with u = 1 − unit52 in (0, 1] (so ϑ ≤ 8.5β),
@@ -188,8 +189,7 @@ fn trace_block(config: &SimConfig, b: &mut Block) {
         b.d1[0][i] = dx;
         b.d1[1][i] = dy;
         b.d1[2][i] = dz;
-        b.x3[0][i] = x2x + l3 * ex / ez;
-        b.x3[1][i] = x2y + l3 * ey / ez;
+        [b.x3[0][i], b.x3[1][i]] = advance([x2x, x2y], &Vector3::new(ex, ey, ez), l3);
         b.energy3[i] = if reached { ez / dz / over_sin } else { 0.0 };
         b.reached[i] = reached;
     }

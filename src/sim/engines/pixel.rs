@@ -15,7 +15,7 @@ use crate::sim::engines::merge::within;
 use crate::sim::math::rng::{StreamRng, uniform, uniform_open0};
 use crate::sim::math::sampling::deflect;
 use crate::sim::model::config::SimConfig;
-use crate::sim::model::scene::LOBE_MAX_SIGMAS;
+use crate::sim::model::scene::{LOBE_MAX_SIGMAS, advance};
 
 /// Constants of the light-path loop's pixel tests, derived once per configuration.
 #[derive(Debug, Clone, Copy)]
@@ -198,7 +198,7 @@ pub fn deflect_onto_pixel(
     if out.z >= 0.0 {
         return None;
     }
-    let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+    let x1 = advance(x2, &out, -l2);
     within(x1, [0.0, 0.0], config.merge_radius).then_some(x1)
 }
 
@@ -241,7 +241,7 @@ mod tests {
             if out.z >= 0.0 {
                 continue;
             }
-            let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+            let x1 = advance(x2, &out, -l2);
             if x1[0].hypot(x1[1]) <= r {
                 hits += 1;
                 assert!(cone.may_reach(x2[0], x2[1], d.x, d.y, -d.z, l2), "cone rejected a hit at {x2:?}");

@@ -87,6 +87,22 @@ pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     libm::atan2(a.cross(b).norm(), a.dot(b))
 }
 
+/// Where the line through `x`, a point of one plane, with direction `d` meets the plane `dz`
+/// higher: x + (dz / d.z)·(d.x, d.y), for `d.z ≠ 0`.
+///
+/// The one plane-to-plane step of both engines. Heights grow along +z in the frames above (plane 1
+/// at 0, plane 2 at L2, plane 3 at L2 + L3) whatever the direction of travel, so every caller
+/// names its target plane the same way: plane 2 → 3 is `dz = +L3`, 3 → 2 is `−L3`, 2 → 1 is `−L2`,
+/// and the sign of `d.z` never enters the call. Evaluated as (dz·d_x)/d_z so that the forms the
+/// engines used before (`x2 − L2·out_x/out_z`, `x2 + L3·e_x/e_z`) give the same bits. The two
+/// vectorised loops that know tan θ and the azimuth already (the brute force's light paths, the
+/// camera's first segment) use the polar form x + dz·tan θ·(cos φ, sin φ) of the same step;
+/// `advance_matches_the_polar_form` checks that they agree.
+#[inline(always)]
+pub fn advance(x: [f64; 2], d: &Vector3<f64>, dz: f64) -> [f64; 2] {
+    [x[0] + dz * d.x / d.z, x[1] + dz * d.y / d.z]
+}
+
 /// The scene with its derived constants.
 #[derive(Debug, Clone)]
 pub struct Scene {
@@ -125,9 +141,35 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::math::rng::stream;
+    use crate::sim::math::rng::{stream, uniform};
     use crate::sim::math::sampling::orthonormal_basis;
     use crate::sim::math::sampling::tests::{assert_close, mean_se};
+
+    /// `advance` lands on the target plane (the point is on the line through x along d, `dz`
+    /// higher), goes back where it came from, and agrees with the polar form the vectorised loops
+    /// use, x + dz·tan θ·(cos φ, sin φ) for d = (sin θ cos φ, sin θ sin φ, ±cos θ), to rounding.
+    #[test]
+    fn advance_matches_the_polar_form() {
+        let mut rng = stream(6, 1, 3);
+        for _ in 0..100_000 {
+            let (s2, turn) = (uniform(&mut rng), uniform(&mut rng));
+            let (c2, (sp, cp)) = (1.0 - s2, libm::sincos(std::f64::consts::TAU * turn));
+            let tan = (s2 / c2).sqrt();
+            let (x, dz) = ([uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5], 3.0 * uniform(&mut rng) - 1.5);
+            for z_sign in [1.0, -1.0] {
+                let d = Vector3::new(s2.sqrt() * cp, s2.sqrt() * sp, z_sign * c2.sqrt());
+                let y = advance(x, &d, dz);
+                let polar = [x[0] + z_sign * dz * tan * cp, x[1] + z_sign * dz * tan * sp];
+                let scale = 1.0 + (dz * tan).abs();
+                assert!((y[0] - polar[0]).abs() <= 1e-14 * scale && (y[1] - polar[1]).abs() <= 1e-14 * scale);
+                // On the line: (y − x) ∥ d_xy with the length dz/d.z along d.
+                let t = dz / d.z;
+                assert!((y[0] - x[0] - t * d.x).abs() <= 1e-14 * scale);
+                let back = advance(y, &d, -dz);
+                assert!((back[0] - x[0]).abs() <= 1e-13 * scale && (back[1] - x[1]).abs() <= 1e-13 * scale);
+            }
+        }
+    }
 
     #[test]
     fn lobe_bound_matches_the_smallest_uniform() {

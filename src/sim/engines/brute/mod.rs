@@ -200,7 +200,7 @@ fn trace_blocks<const AVX2: bool>(
 
         // Cosine directions (Malley's method in polar form): sin² θ uniform, φ uniform. Travel is
         // downwards, d = (sin θ cos φ, sin θ sin φ, −cos θ), and reaches plane 2 after a lateral
-        // L3·tan θ. cos² θ = 1 − sin² θ is exact and ≥ 2⁻⁵², so tan θ is finite.
+        // L3·tan θ (`advance(x3, d, −L3)` in polar form). cos² θ = 1 − sin² θ is exact and ≥ 2⁻⁵², so tan θ is finite.
         let [x3x, x3y] = &b.x3;
         let [x2x, x2y] = &mut b.x2;
         let [sin2, cos_phi, sin_phi] = &mut b.dir;

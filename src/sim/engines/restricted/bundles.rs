@@ -19,7 +19,7 @@ use crate::sim::math::rng::{StreamRng, uniform, uniform_open0};
 use crate::sim::math::sampling::{cosine_direction, disc_point};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::illumination::Ring;
-use crate::sim::model::scene::sample_lobe;
+use crate::sim::model::scene::{advance, sample_lobe};
 
 /// A light path being drawn: its vertices, its direction into x2, and (once known) x1 and ϑ.
 struct Candidate {
@@ -122,14 +122,14 @@ pub(super) fn plane1_bundle(
                 let cos_g = 1.0 - uniform(rng);
                 let sin_g = (1.0 - cos_g * cos_g).sqrt();
                 let (sin_p, cos_p) = libm::sincos(TAU * uniform(rng));
-                let x2 = [x1[0] + l2 * sin_g / cos_g * cos_p, x1[1] + l2 * sin_g / cos_g * sin_p];
                 let out = Vector3::new(-sin_g * cos_p, -sin_g * sin_p, -cos_g);
+                let x2 = advance(x1, &out, l2);
                 let (d, theta) = sample_lobe(&config.scene.lobe, &out, rng);
                 // μ = 0 for a direction that does not point down; otherwise thin by cos θ3.
                 if d.z >= 0.0 || uniform(rng) >= -d.z {
                     return;
                 }
-                let x3 = [x2[0] - l3 * d.x / -d.z, x2[1] - l3 * d.y / -d.z];
+                let x3 = advance(x2, &d, l3);
                 if !in_ring(&layer.ring, x3) {
                     return;
                 }
@@ -195,11 +195,12 @@ pub(super) fn plane2_bundle(
         let (x3, d) = match kind {
             Kind::Reverse => {
                 let up = cosine_direction(rng);
-                let x3 = [x2[0] - l3 / up.z * up.x, x2[1] - l3 / up.z * up.y];
+                let d = Vector3::new(up.x, up.y, -up.z);
+                let x3 = advance(x2, &d, l3);
                 if !in_ring(&layer.ring, x3) {
                     return;
                 }
-                (x3, Vector3::new(up.x, up.y, -up.z))
+                (x3, d)
             }
             Kind::Forward | Kind::ForwardBulk | Kind::ForwardTail => {
                 let x3 = ring_point(rng, &layer.ring);
@@ -255,8 +256,8 @@ pub(super) fn plane3_bundle(
             return;
         }
         let dir = cosine_direction(rng);
-        let x2 = [x3[0] + l3 / dir.z * dir.x, x3[1] + l3 / dir.z * dir.y];
         let d = Vector3::new(dir.x, dir.y, -dir.z);
+        let x2 = advance(x3, &d, -l3);
         let candidate = Candidate { x3, x2, d, x1: pixel_hit(config, &plan.cone, &plan.angle, &d, x2, rng) };
         if !it.in_earlier_component(&candidate, Component::Plane3(j)) {
             tally(config, cameras, &candidate, scratch);

@@ -211,7 +211,7 @@ mod tests {
     use crate::sim::engines::merge::within;
     use crate::sim::math::rng::stream;
     use crate::sim::math::sampling::disc_point;
-    use crate::sim::model::scene::sample_lobe;
+    use crate::sim::model::scene::{advance, sample_lobe};
     use nalgebra::Vector3;
 
     /// The forward reach bound is conservative: lobe-free straight rays (ϑ = 0 is within every
@@ -231,7 +231,7 @@ mod tests {
             let d = Vector3::new(x2[0] - x3[0], x2[1] - x3[1], -l3).normalize();
             let (out, _) = sample_lobe(&lobe, &d, &mut rng);
             if out.z < 0.0 {
-                let x1 = [x2[0] - l2 * out.x / out.z, x2[1] - l2 * out.y / out.z];
+                let x1 = advance(x2, &out, -l2);
                 if within(x1, [0.0, 0.0], r) {
                     hits += 1;
                     max_hit = max_hit.max(x2[0].hypot(x2[1]));
