@@ -44,12 +44,36 @@ async fn submit_poll_and_read_the_result() {
             "rms_percent",
             "rms_percent_stderr",
             "lambda",
-            "holdout_rms_percent",
+            "in_sample",
+            "in_sample_luminance",
+            "in_sample_luminance_stderr",
+            "in_sample_rms_percent",
             "error",
         ] {
             assert!(row.get(key).is_some(), "row {row} lacks {key}");
         }
+        assert_eq!(row["in_sample"], row["strategy"] == "optimal", "only the paper's procedure is in-sample");
     }
+    // The recommendation names the cross-validated optimum, and the weights table shows it.
+    assert_eq!(result["recommended"]["strategy"], "optimal_cv");
+    assert_eq!(result["weights_fit"]["strategy"], "optimal_cv");
+    assert_eq!(result["weights_fit"]["lambda"], result["recommended"]["lambda"]);
+    assert_eq!(result["folds"], 10);
+    assert!(result["warnings"].as_array().unwrap().iter().any(|w| w["code"] == "too_few_iterations"), "12 iterations");
+    assert!(result["weights"][0].get("w1_stderr").is_some());
+    // The paper's λ = 0 in-sample table on request, and a bad λ named.
+    let in_sample = server.get_json(&format!("/v1/jobs/{id}/result?lambda=0")).await;
+    assert_eq!(
+        in_sample["weights_fit"],
+        json!({ "strategy": "optimal", "lambda": 0.0, "fitted_on_all_iterations": true })
+    );
+    assert_eq!(in_sample["noise_table"], result["noise_table"], "the noise table does not depend on the weights shown");
+    let bad = assert_problem(server.get(&format!("/v1/jobs/{id}/result?lambda=-1")).await, 422);
+    assert!(bad.to_string().contains("lambda"), "{bad}");
+    let unknown = assert_problem(server.get(&format!("/v1/jobs/{id}/result?lamda=1")).await, 422);
+    assert!(unknown["detail"].as_str().unwrap().contains("lamda"), "{unknown}");
+    let job = server.job(id).await;
+    assert_eq!(job["warnings"], result["warnings"], "the job resource carries the latest checkpoint's warnings");
     let weights = result["weights"].as_array().unwrap();
     assert_eq!(weights.len(), 52);
     assert_eq!(weights[25]["r3"], json!([0.05, null]), "the tail cell's upper bound is null");
@@ -265,9 +289,13 @@ async fn solve_recomputes_from_the_stored_moments() {
     assert_eq!(same, stored, "an empty patch reproduces the stored result");
     let smooth = server.solve(id, &json!({ "lambda": 10 })).await.json();
     assert_eq!(smooth["noise_table"][0], stored["noise_table"][0], "fixed strategies do not change");
-    assert_ne!(smooth["weights"], stored["weights"]);
+    assert_eq!(smooth["weights"], stored["weights"], "the recommended weights come from the λ grid, not from λ");
+    assert_ne!(smooth["noise_table"][4], stored["noise_table"][4]);
     let optimal = |r: &Value| r["noise_table"][4]["lambda"].clone();
     assert_eq!(optimal(&smooth), 10.0);
+    let grid = server.solve(id, &json!({ "cv_lambdas": [10] })).await.json();
+    assert_eq!(grid["recommended"]["lambda"], 10.0);
+    assert_ne!(grid["weights"], stored["weights"]);
     let free = server.solve(id, &json!({ "fixed": { "w0": null }, "lambda": 1e-3 })).await.json();
     assert!(free["weights"].as_array().unwrap().iter().any(|w| w["w0"] != 0.0), "w0 is fitted once freed");
     let unchanged = server.result(id).await;

@@ -83,11 +83,16 @@ fn four_shards_merged_equal_a_single_run() {
     );
     assert!(!dir.path().join("bad.json").exists());
 
-    // A report with other solver options.
+    // A report with other solver options: they change the rows fitted at the spec's λ; the weights
+    // table is the recommended one unless a λ is asked for.
     let tables =
         String::from_utf8(ok(optimis(dir.path(), &["report", "study.json", "--solver", r#"{"lambda": 0.5}"#], &[])))
             .unwrap();
-    assert!(tables.contains("optimal weights (λ = 0.5)"), "{tables}");
+    assert!(tables.contains("λ = 0.5, in-sample (optimistic)"), "{tables}");
+    assert!(tables.contains("recommended weights (optimal_cv"), "{tables}");
+    let in_sample =
+        String::from_utf8(ok(optimis(dir.path(), &["report", "study.json", "--weights-lambda", "0.5"], &[]))).unwrap();
+    assert!(in_sample.contains("weights fitted on all iterations at λ = 0.5"), "{in_sample}");
 }
 
 /// `optimis bench | head -1` and friends: the reader closing the pipe is not an error (exit 0, no

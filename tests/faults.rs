@@ -51,10 +51,11 @@ async fn a_corrupted_checkpoint_fails_only_its_job() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_failed_solve_still_reports_the_fixed_strategies() {
     let server = TestServer::start().await;
-    // Both w0 and w1 free in 52 cells, λ = 0 and 10 iterations: more unknowns than iterations.
+    // Both w0 and w1 free in 52 cells, λ = 0 (also the only λ of the grid) and 10 iterations:
+    // more unknowns than iterations, so neither the in-sample fit nor any cross-fit exists.
     let id = server
         .submit(&json!({ "engine": "brute", "light_paths": 1_000_000, "camera_paths": 1000, "merge_radius": 0.02, "iterations": 10,
-            "solver": { "fixed": { "w0": null } } }))
+            "solver": { "fixed": { "w0": null }, "cv_lambdas": [0] } }))
         .await;
     server.wait_for_state(id, "succeeded").await;
     let result = server.result(id).await;

@@ -168,6 +168,17 @@ pub struct ListQuery {
     cursor: Option<String>,
 }
 
+/// Query of a job's result.
+#[derive(Debug, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ResultQuery {
+    /// Show the weights fitted in-sample on all iterations at this λ (e.g. `0`, the paper's
+    /// procedure) instead of the recommended weights; the noise table is the same.
+    #[param(minimum = 0.0, maximum = 1e12)]
+    lambda: Option<f64>,
+}
+
 fn location(id: i64) -> HeaderValue {
     HeaderValue::from_str(&format!("/v1/jobs/{id}")).expect("an ASCII path")
 }
@@ -278,16 +289,25 @@ pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json
 
 /// The job's noise and weights tables from its latest checkpoint (`partial` until it succeeded).
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
         (status = 200, description = "Results", body = JobResult),
+        (status = 400, description = "A bad query", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn result(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.result(id).await?))
+pub async fn result(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    query: Result<Query<ResultQuery>, QueryRejection>,
+) -> Result<Json<JobResult>, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    Ok(Json(match q.lambda {
+        None => state.jobs.result(id).await?,
+        Some(lambda) => state.jobs.solve(id, &serde_json::json!({}), Some(lambda)).await?,
+    }))
 }
 
 /// Re-solve the stored moments with other solver options; nothing is re-run or stored.
@@ -309,7 +329,7 @@ pub async fn solve(
     JobId(id): JobId,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.solve(id, &patch).await?))
+    Ok(Json(state.jobs.solve(id, &patch, None).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.

@@ -10,9 +10,14 @@ use super::run::write_atomically;
 use super::{CliError, table};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{MomentsDocument, merge_documents};
+use crate::sim::model::params::check;
+use crate::sim::solve::crossfit::{CrossFitting, nested_selection};
+use crate::sim::solve::noise::NoiseRow;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::solve::report::build_report;
+use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::SpecError;
+
 #[derive(Debug, Args)]
 pub struct MergeArgs {
     /// Moments documents (from `optimis run --out` or `GET /v1/jobs/{id}/moments`).
@@ -33,6 +38,14 @@ pub struct ReportArgs {
     /// Solver options to change, as JSON (e.g. '{"lambda": 0.1}' or '{"fixed": {"w0": null}}').
     #[arg(long, value_name = "JSON")]
     pub solver: Option<String>,
+    /// Show the weights fitted in-sample on all iterations at this λ (e.g. 0, the paper's
+    /// procedure) instead of the recommended weights.
+    #[arg(long, value_name = "LAMBDA")]
+    pub weights_lambda: Option<f64>,
+    /// Also measure how optimistic the cross-validated choice of λ is, by nested cross-validation
+    /// (K λ searches: slower than the report itself).
+    #[arg(long)]
+    pub nested_cv: bool,
 }
 
 /// Reads and verifies a moments document.
@@ -66,8 +79,27 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let job = doc.spec.validate()?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
     let reference = reference_luminance(&job.config.scene).ok();
-    let report = build_report(&doc.moments, &job.config.cells, &solver, reference);
+    if let Some(l) = args.weights_lambda {
+        check(l.is_finite() && (0.0..=1e12).contains(&l), "--weights-lambda", || {
+            format!("must be in [0, 1e12], got {l}")
+        })?;
+    }
+    let report = build_report(&doc.moments, &job.config.cells, &solver, reference, args.weights_lambda);
     let mut out = std::io::stdout().lock();
+    if args.nested_cv {
+        let cf = CrossFitting::new(&doc.moments);
+        let [m, s1, s2] = nested_selection(&cf, &job.config.cells, &solver.fixed, &solver.cv_lambdas)
+            .map_err(|e| SpecError::new("--nested-cv", e))?;
+        let nested = NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None);
+        let selected = report.noise_table.iter().find(|r| r.strategy == Strategy::OptimalCv);
+        eprintln!(
+            "nested cross-validation of optimal_cv (λ chosen inside each outer fold): L·10⁵ = {:.4} ± {:.4}, RMS {:.2}%; optimal_cv's cross-fitted RMS at the λ chosen on all folds: {:.2}%",
+            nested.luminance.unwrap_or(f64::NAN) * 1e5,
+            nested.luminance_stderr.unwrap_or(f64::NAN) * 1e5,
+            nested.rms_percent.unwrap_or(f64::NAN),
+            selected.and_then(|r| r.rms_percent).unwrap_or(f64::NAN)
+        );
+    }
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
         writeln!(out)?;

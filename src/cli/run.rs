@@ -138,7 +138,7 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     if let Some(path) = &args.out {
         write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
     }
-    let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene).ok());
+    let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene).ok(), None);
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;

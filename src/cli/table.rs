@@ -47,16 +47,25 @@ pub fn write_report(
     writeln!(out)?;
     writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
     for row in &report.noise_table {
-        let mut note = String::new();
+        let mut notes = Vec::new();
         if let Some(l) = row.lambda {
-            note.push_str(&format!("λ = {l:e}"));
+            notes.push(format!("λ = {l}"));
         }
-        if let Some(h) = row.holdout_rms_percent {
-            note.push_str(&format!(", hold-out RMS {h:.1}%"));
+        if row.in_sample {
+            notes.push("in-sample (optimistic)".to_string());
+        } else if row.lambda.is_some() {
+            notes.push(format!("{}-fold cross-fitted", report.folds));
+        }
+        if let Some(h) = row.in_sample_rms_percent {
+            notes.push(format!("in-sample RMS {h:.1}%"));
+        }
+        if report.recommended.is_some_and(|r| r.strategy == row.strategy) {
+            notes.push("recommended".to_string());
         }
         if let Some(e) = &row.error {
-            note.push_str(e);
+            notes.push(e.clone());
         }
+        let note = notes.join(", ");
         writeln!(
             out,
             "{:<16} {} {} {} {}  {}",
@@ -74,28 +83,60 @@ pub fn write_report(
         "\nmerge events per iteration: plane 1 {:.4} ± {:.4}, plane 2 {:.3} ± {:.3}, plane 3 {:.3} ± {:.3}",
         m.plane1.mean, m.plane1.stderr, m.plane2.mean, m.plane2.stderr, m.plane3.mean, m.plane3.stderr
     )?;
+    if let Some(g) = &report.gain {
+        let se = g.stderr.map_or_else(|| "?".to_string(), |s| format!("{s:.2}"));
+        writeln!(
+            out,
+            "gain: Var({}) / Var({}, cross-fitted) = {:.2} ± {se} (jackknife over the folds)",
+            g.versus, g.strategy, g.value
+        )?;
+    }
+    for w in &report.warnings {
+        let code = serde_json::to_value(w.code).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
+        writeln!(out, "warning [{code}]: {}", w.message)?;
+        if !w.cells.is_empty() {
+            let cells: Vec<String> = w.cells.iter().map(ToString::to_string).collect();
+            writeln!(out, "  cells: {}", cells.join(", "))?;
+        }
+    }
     writeln!(out)?;
     if let Some(e) = &report.solve_error {
         return writeln!(out, "optimal weights: not available: {e}");
     }
-    writeln!(out, "optimal weights (λ = {}):", spec.solver.lambda)?;
+    match &report.weights_fit {
+        Some(f) if report.recommended.is_some_and(|r| r.strategy == f.strategy && r.lambda == f.lambda) => writeln!(
+            out,
+            "recommended weights ({}, λ = {} chosen by cross-validation, fitted on all iterations; ± jackknife SE over the folds):",
+            f.strategy, f.lambda
+        )?,
+        Some(f) => {
+            writeln!(out, "weights fitted on all iterations at λ = {} (± jackknife SE over the folds):", f.lambda)?
+        }
+        None => {}
+    }
     writeln!(
         out,
-        "{:<16} {:<18} {:<14} {:>8} {:>8} {:>8} {:>9}  status",
-        "r2", "r3", "φ", "w0", "w1", "w2", "samples"
+        "{:>4} {:<12} {:<16} {:<14} {:>16} {:>16} {:>16} {:>9}  status",
+        "cell", "r2", "r3", "φ", "w0", "w1", "w2", "samples"
     )?;
-    for w in &report.weights {
+    let with_se = |w: f64, se: Option<f64>| match se {
+        Some(se) => format!("{w:.4} ± {se:.4}"),
+        None => format!("{w:.4}"),
+    };
+    for (alpha, w) in report.weights.iter().enumerate() {
+        let status =
+            serde_json::to_value(w.status).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
         writeln!(
             out,
-            "{:<16} {:<18} {:<14} {:>8.4} {:>8.4} {:>8.4} {:>9}  {:?}",
+            "{:>4} {:<12} {:<16} {:<14} {:>16} {:>16} {:>16} {:>9}  {status}",
+            alpha,
             format!("[{}, {})", bound(w.r2[0]), bound(w.r2[1])),
             format!("[{}, {})", bound(w.r3[0]), bound(w.r3[1])),
             format!("[{:.3}, {:.3})", w.phi[0].unwrap_or(0.0), w.phi[1].unwrap_or(0.0)),
-            w.w0,
-            w.w1,
-            w.w2,
+            with_se(w.w0, w.w0_stderr),
+            with_se(w.w1, w.w1_stderr),
+            with_se(w.w2, w.w2_stderr),
             w.samples,
-            w.status
         )?;
     }
     Ok(())

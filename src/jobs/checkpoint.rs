@@ -59,7 +59,7 @@ pub(crate) fn decode_checkpoint(
 /// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
 /// them with the job's solver options.
 pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference);
+    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference, None);
     let best = best_strategy(&report.noise_table);
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
     let history: Vec<StrategyPoint> = report
@@ -74,6 +74,7 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option
         moments: bytes,
         result: serde_json::to_string(&report).map_err(internal)?,
         best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
+        warnings: Some(serde_json::to_string(&report.warnings).map_err(internal)?),
         history: serde_json::to_string(&history).map_err(internal)?,
     })
 }

@@ -23,6 +23,7 @@ use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
 use super::state::{ActiveJob, Inner, StopReason};
 use crate::sim::runner::{RunError, run_iterations};
 use crate::sim::solve::noise::path_rows;
+use crate::sim::solve::warnings::Warning;
 use crate::sim::stats::moments::Moments;
 
 /// How often progress is published to the job's watchers.
@@ -213,6 +214,8 @@ fn write_checkpoint(
     let started = Instant::now();
     let checkpoint = checkpoint_of(moments, &job.job, reference)?;
     let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<BestStrategy>(b).ok());
+    let warnings: Vec<Warning> =
+        checkpoint.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default();
     let mut now = now_ms();
     let stored = persist(inner, job, "write a checkpoint", || {
         now = now_ms();
@@ -228,6 +231,7 @@ fn write_checkpoint(
         r.progress.iterations_checkpointed = checkpoint.iterations_done;
         r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);
         r.progress.best = best.clone();
+        r.warnings = warnings.clone();
         r.updated_at = rfc3339(now);
     });
     tracing::debug!(

@@ -7,13 +7,14 @@ use utoipa::ToSchema;
 use super::error::JobError;
 use crate::sim::solve::noise::NoiseRow;
 use crate::sim::solve::strategy::Strategy;
+use crate::sim::solve::warnings::Warning;
 use crate::sim::spec::JobSpec;
 use crate::store::JobRow;
 
 pub use crate::store::JobState;
 
-/// The strategy with the lowest RMS so far, among the per-path strategies and the hold-out
-/// optimum (in-sample fits are optimistic and left out).
+/// The strategy with the lowest RMS so far, on honest figures: the per-path strategies and the
+/// cross-fitted optima (the in-sample `optimal` row is optimistic and left out).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BestStrategy {
     pub strategy: Strategy,
@@ -57,6 +58,8 @@ pub struct JobResource {
     /// True when the job holds statistics merged from other runs (shards, peers, documents);
     /// such a job is complete and cannot be extended.
     pub merged: bool,
+    /// What the data of the latest checkpoint cannot support (see the result's `warnings`).
+    pub warnings: Vec<Warning>,
 }
 
 /// Unix milliseconds now.
@@ -99,15 +102,16 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
         fingerprint: row.fingerprint.clone(),
         reference_luminance: row.reference_luminance,
         merged: row.merged,
+        warnings: row.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default(),
     })
 }
 
-/// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample
-/// `optimal` and `optimal_cv` rows are evaluated on the data they were fitted to, so they are left
-/// out (`optimal_holdout` stays).
+/// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample `optimal`
+/// row is scored on the data it was fitted to, so it is left out; every other row competes on its
+/// honest figure (the fitted `optimal_holdout` and `optimal_cv` on their cross-fitted RMS).
 pub(crate) fn best_strategy(rows: &[NoiseRow]) -> Option<BestStrategy> {
     rows.iter()
-        .filter(|r| !r.strategy.is_in_sample())
+        .filter(|r| !r.in_sample)
         .filter_map(|r| match (r.luminance, r.rms_percent) {
             (Some(l), Some(rms)) if rms > 0.0 => {
                 Some(BestStrategy { strategy: r.strategy, luminance: l, rms_percent: rms })

@@ -23,6 +23,7 @@ use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
 use crate::sim::math::digest::sha256_hex;
+use crate::sim::model::params::check;
 use crate::sim::solve::report::{RunReport, build_report};
 use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::coverage::Coverage;
@@ -232,8 +233,12 @@ impl JobManager {
     }
 
     /// Re-solves the latest checkpoint with other solver options (a merge patch on the job's
-    /// `solver`), without running anything or storing anything.
-    pub async fn solve(&self, id: i64, patch: &Value) -> Result<JobResult, JobError> {
+    /// `solver`), without running anything or storing anything; with `weights_lambda`, the weights
+    /// table is the in-sample fit at that λ instead of the recommended weights.
+    pub async fn solve(&self, id: i64, patch: &Value, weights_lambda: Option<f64>) -> Result<JobResult, JobError> {
+        if let Some(l) = weights_lambda {
+            check(l.is_finite() && (0.0..=1e12).contains(&l), "lambda", || format!("must be in [0, 1e12], got {l}"))?;
+        }
         let (state, total, spec, merged) = self.state_and_total(id).await?;
         let solver = spec.solver.patched(patch)?;
         let reference = self.get(id).await?.reference_luminance;
@@ -242,7 +247,7 @@ impl JobManager {
         let report = self
             .compute(move || -> Result<RunReport, JobError> {
                 let job = spec.validate()?;
-                Ok(build_report(&moments, &job.config.cells, &solver, reference))
+                Ok(build_report(&moments, &job.config.cells, &solver, reference, weights_lambda))
             })
             .await??;
         let partial = !(state == JobState::Succeeded && done >= total);

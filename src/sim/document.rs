@@ -235,8 +235,12 @@ mod tests {
     use serde_json::json;
 
     fn shard(k: u64, n: u64) -> MomentsDocument {
+        shard_with_folds(k, n, None)
+    }
+
+    fn shard_with_folds(k: u64, n: u64, folds: Option<usize>) -> MomentsDocument {
         let spec = parse_job_spec(&json!({ "light_paths": 20_000, "camera_paths": 100, "merge_radius": 0.02,
-            "iterations": 6, "seed": 2, "shard": { "index": k, "count": n } }))
+            "iterations": 6, "seed": 2, "shard": { "index": k, "count": n }, "folds": folds }))
         .unwrap();
         let job = spec.validate().unwrap();
         let moments = run(&job.config, spec.seed, spec.iteration_range());
@@ -345,8 +349,9 @@ mod tests {
     /// refused (its canonical form could not be read back), and nothing is returned.
     #[test]
     fn merges_that_leave_the_bounds_are_refused() {
-        let a = shard(0, 2);
-        let b = shard(1, 2);
+        // Two folds, so that both shards ([0, 3) and [3, 6)) hold iterations of fold 0.
+        let a = shard_with_folds(0, 2, Some(2));
+        let b = shard_with_folds(1, 2, Some(2));
         let n = 2 * a.moments.cells + 1;
         let huge = |mut doc: MomentsDocument| {
             // An off-diagonal entry of ΣYYᵀ: no Cauchy–Schwarz check applies to it.

@@ -15,7 +15,9 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use crate::sim::model::config::{Engine, Proposals, SimConfig};
+use crate::sim::model::config::{
+    DEFAULT_FOLDS, Engine, MAX_FOLD_SUMS, MAX_FOLDS, MIN_FOLDS, Proposals, SimConfig, folds_allowed,
+};
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
     CellSpec, MIN_LENGTH, SceneSpec, check, count, merge_patch, optional_count, validate_cells, validate_scene,
@@ -56,6 +58,11 @@ pub struct JobSpec {
     #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "optional_count")]
     pub first_iteration: Option<u64>,
     pub cells: CellSpec,
+    /// K, the cross-fitting folds: iteration s is summed into fold s mod K, and every fitted figure
+    /// that is not labelled in-sample is cross-fitted over them. Absent: 10, or the most the grid
+    /// allows (K × the sums of one fold is bounded). Part of the fingerprint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub folds: Option<usize>,
     pub solver: SolverOptions,
     /// How light paths are drawn. Absent in documents stored before engines existed: `brute`.
     #[serde(default)]
@@ -211,9 +218,24 @@ impl JobSpec {
         validate_range(self)?;
         let cells = validate_cells(&self.cells)?;
         validate_solver(&self.solver)?;
+        let allowed = folds_allowed(cells.len());
+        let folds = self.folds.unwrap_or(DEFAULT_FOLDS.min(allowed));
+        check((MIN_FOLDS..=allowed).contains(&folds), "folds", || {
+            format!(
+                "must be in [{MIN_FOLDS}, {allowed}] for a grid of {} cells (at most {MAX_FOLDS}, and K folds of ΣYYᵀ hold at most {MAX_FOLD_SUMS} sums), got {folds}",
+                cells.len()
+            )
+        })?;
         let scene = Scene::from_spec(&self.scene);
-        let config =
-            SimConfig::new(scene, self.merge_radius, self.light_paths, self.camera_paths, cells, self.engine.engine());
+        let config = SimConfig::new(
+            scene,
+            self.merge_radius,
+            self.light_paths,
+            self.camera_paths,
+            cells,
+            self.engine.engine(),
+            folds,
+        );
         Ok(ValidJob { spec: self.clone(), config: Arc::new(config) })
     }
 }

@@ -31,6 +31,8 @@ pub struct JobRow {
     pub reference_luminance: Option<f64>,
     /// JSON of the best strategy at the latest checkpoint.
     pub best: Option<String>,
+    /// JSON list of the latest checkpoint's warnings.
+    pub warnings: Option<String>,
     pub error: Option<String>,
     /// Holds statistics merged from other runs.
     pub merged: bool,
@@ -75,6 +77,8 @@ pub struct Checkpoint {
     pub result: String,
     /// The best strategy (JSON) at this checkpoint, copied to the job row.
     pub best: Option<String>,
+    /// The result's warnings (JSON list), copied to the job row.
+    pub warnings: Option<String>,
     /// Each strategy's luminance and RMS (JSON), appended to the job's history.
     pub history: String,
 }
@@ -82,8 +86,8 @@ pub struct Checkpoint {
 /// The columns of a [`JobRow`], as a literal for `concat!` (queries stay static strings).
 macro_rules! job_columns {
     () => {
-        "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, error, \
-         merged, cancel_requested, created_at, updated_at"
+        "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, warnings, \
+         error, merged, cancel_requested, created_at, updated_at"
     };
 }
 
@@ -106,6 +110,7 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
         reference_luminance: row.try_get("reference_luminance")?,
         best: row.try_get("best")?,
+        warnings: row.try_get("warnings")?,
         error: row.try_get("error")?,
         merged: row.try_get::<i64, _>("merged")? != 0,
         cancel_requested: row.try_get::<i64, _>("cancel_requested")? != 0,
@@ -341,9 +346,10 @@ impl Store {
     async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
         self.transaction(async |tx| {
             upsert_checkpoint(tx, id, checkpoint, now).await?;
-            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, updated_at = ? WHERE id = ?")
+            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, warnings = ?, updated_at = ? WHERE id = ?")
                 .bind(checkpoint.iterations_done as i64)
                 .bind(&checkpoint.best)
+                .bind(&checkpoint.warnings)
                 .bind(now)
                 .bind(id)
                 .execute(&mut *tx)
@@ -362,13 +368,14 @@ impl Store {
                 upsert_checkpoint(tx, id, checkpoint, now).await?;
                 sqlx::query(
                     "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
-                     updated_at = ?4 WHERE id = ?5",
+                     updated_at = ?4, warnings = ?6 WHERE id = ?5",
                 )
                 .bind(checkpoint.iterations_done as i64)
                 .bind(&checkpoint.best)
                 .bind(spec)
                 .bind(now)
                 .bind(id)
+                .bind(&checkpoint.warnings)
                 .execute(&mut *tx)
                 .await?;
                 Ok(())
@@ -390,7 +397,7 @@ impl Store {
         self.transaction(async |tx| {
             let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
-             merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
+             warnings, merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
             job_columns!()
         ))
         .bind(JobState::Succeeded.as_str())
@@ -400,6 +407,7 @@ impl Store {
         .bind(checkpoint.iterations_done as i64)
         .bind(job.reference_luminance)
         .bind(&checkpoint.best)
+        .bind(&checkpoint.warnings)
         .bind(job.now)
         .bind(job.now)
         .fetch_one(&mut *tx)
@@ -424,6 +432,7 @@ impl Store {
                 checksum: row.try_get("checksum")?,
                 result: row.try_get("result")?,
                 best: None,
+                warnings: None,
                 history: String::new(),
             })
         })

@@ -192,6 +192,16 @@ async function checkNoiseTable(page) {
       : luminance > 5 && luminance < 100 && luminanceError > 0 && rms > 0;
     check(plausible, `${row.strategy}: L·10⁵ = ${row.cells[1]}, RMS % = ${row.cells[2]}`);
   }
+  const marks = await page.locator('table.noise-table tbody tr').evaluateAll((trs) => Object.fromEntries(
+    trs.map((tr) => [tr.dataset.strategy, [...tr.querySelectorAll('th span')].map((s) => s.textContent)])));
+  check(marks.optimal.includes('in-sample') && STRATEGIES.every((s) => s === 'optimal' || !marks[s].includes('in-sample')),
+    'only the paper\'s optimal row is marked in-sample');
+  check(marks.optimal_cv.includes('recommended'), 'the cross-validated optimum is marked recommended');
+  const gain = await page.locator('[data-ref="gain"]').textContent();
+  check(gain.includes('variance ratio'), `the gain is shown ("${gain.slice(0, 80)}…")`);
+  const warnings = await page.locator('[data-ref="warnings"] li code').allTextContents();
+  check(warnings.length > 0 && warnings.every((w) => /^[a-z_]+$/.test(w)),
+    `the result's warnings are listed by code (${warnings.join(', ')})`);
   const describes = Object.fromEntries(rows.map((r) => [r.strategy, r.cells[0]]));
   check(describes.plane1 === 'w₀ = 1' && describes.switch.includes('r₃ ≤ a') && describes.optimal.includes('w₀ = 0')
     && describes.optimal_cv.includes('cross-validation'), 'the weights column reads like the paper');
@@ -293,7 +303,7 @@ async function run(browser) {
   const id = await submitJob(page);
   await followProgress(page);
   await checkNoiseTable(page);
-  await checkPlot(page, 'weights-plot', 'weights', ['w₁', 'w₂']);
+  await checkPlot(page, 'weights-plot', 'weights', ['w₁', 'w₂', 'w₁ − 2 SE', 'w₁ + 2 SE']);
   await checkPlot(page, 'history-plot', 'RMS history', STRATEGIES);
   await screenshot(page, 'job-finished.png');
   await checkDirectLoad(page, id);

@@ -85,7 +85,17 @@ function weightSeries(weights) {
         .map((w) => w[component]);
       return values.length ? values.reduce((a, b) => a + b, 0) / values.length : null;
     });
-    return { band, w1: mean('w1'), w2: mean('w2') };
+    const lo = mean('w1').map((w, i) => (w === null ? null : w - 2 * (spread(i) ?? NaN)));
+    const hi = mean('w1').map((w, i) => (w === null ? null : w + 2 * (spread(i) ?? NaN)));
+    // The jackknife SE of w₁ (root mean square over the φ bins), for the ± 2σ lines.
+    function spread(i) {
+      const ses = weights
+        .filter((w) => w.r2[0] === band[0] && w.r3[0] === r3Cells[i][0] && !UNFITTED.has(w.status) && w.w1_stderr !== null)
+        .map((w) => w.w1_stderr);
+      return ses.length ? Math.sqrt(ses.reduce((a, b) => a + b * b, 0) / ses.length) : null;
+    }
+    const finite = (v) => (v === null || Number.isNaN(v) ? null : v);
+    return { band, w1: mean('w1'), w2: mean('w2'), w1lo: lo.map(finite), w1hi: hi.map(finite) };
   });
   return { x, tail: r3Cells.at(-1), tailX: x.at(-1), bands };
 }
@@ -94,7 +104,7 @@ const BAND_DASHES = [[], [8, 4], [2, 3], [12, 3, 2, 3]];
 const W1_COLORS = ['#1f5fa8', '#5b9bd5', '#9cc3e6', '#0b3d6b'];
 const W2_COLORS = ['#c4561d', '#f08c4a', '#f5b88d', '#7a3510'];
 
-export function drawWeights(slot, note, weights, phiBins) {
+export function drawWeights(slot, note, weights, phiBins, fit) {
   if (weights.length === 0) {
     slot.clear('No fitted weights in this result.');
     showMessage(note, '');
@@ -104,12 +114,17 @@ export function drawWeights(slot, note, weights, phiBins) {
   const phi = phiBins > 1 ? ` · mean of ${phiBins} φ bins` : '';
   const series = [{ label: `r₃${phi}`, value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
   const data = [x];
-  bands.forEach(({ band, w1, w2 }, i) => {
+  bands.forEach(({ band, w1, w2, w1lo, w1hi }, i) => {
     const dash = BAND_DASHES[i % BAND_DASHES.length];
     const r2 = `r₂ ${formatInterval(band)}`;
     series.push(weightLine(`w₁, ${r2}`, W1_COLORS[i % W1_COLORS.length], dash));
     series.push(weightLine(`w₂, ${r2}`, W2_COLORS[i % W2_COLORS.length], dash));
     data.push(w1, w2);
+    if (w1lo.some((v) => v !== null)) {
+      series.push(errorLine(`w₁ − 2 SE, ${r2}`, W1_COLORS[i % W1_COLORS.length]));
+      series.push(errorLine(`w₁ + 2 SE, ${r2}`, W1_COLORS[i % W1_COLORS.length]));
+      data.push(w1lo, w1hi);
+    }
   });
   const tailLabel = tail[1] === null ? `; tail r₃ ≥ ${formatParameter(tail[0])} drawn at ${formatParameter(tailX)}` : '';
   slot.draw({
@@ -119,9 +134,18 @@ export function drawWeights(slot, note, weights, phiBins) {
     cursor: { drag: { x: true, y: false } },
   }, data);
   const clipped = data.slice(1).flat().filter((v) => v !== null && (v < WEIGHT_RANGE[0] || v > WEIGHT_RANGE[1])).length;
-  const gaps = 'Gaps are cells without informative samples.';
+  const which = fit
+    ? (fit.strategy === 'optimal'
+      ? `Weights fitted in-sample on all iterations at λ = ${formatParameter(fit.lambda)}. `
+      : `Recommended weights: ${fit.strategy}, λ = ${formatParameter(fit.lambda)} chosen by cross-validation, fitted on all iterations; thin lines: w₁ ± 2 jackknife standard errors. `)
+    : '';
+  const gaps = `${which}Gaps are cells without informative samples.`;
   const cut = clipped ? ` ${clipped} value${clipped > 1 ? 's lie' : ' lies'} outside [${WEIGHT_RANGE.join(', ')}] and ${clipped > 1 ? 'are' : 'is'} cut off (usually cells with few samples).` : '';
   showMessage(note, gaps + cut);
+}
+
+function errorLine(label, stroke) {
+  return { label, stroke, width: 1, dash: [3, 3], points: { show: false }, value: (u, v) => (v === null ? '—' : fixed(v, 3)) };
 }
 
 function weightLine(label, stroke, dash) {

@@ -65,6 +65,8 @@ export class ResultsLoader {
     refs['result-status'].replaceChildren();
     showMessage(refs.reference, '');
     showMessage(refs['solve-error'], '');
+    refs.gain.textContent = '';
+    refs.warnings.hidden = true;
     refs.merges.textContent = '';
     this.weightsPlot.clear('The weights appear after the first checkpoint.');
     this.historyPlot.clear('The RMS history appears after the first checkpoint.');
@@ -81,15 +83,20 @@ export class ResultsLoader {
     showMessage(refs.reference, result.reference_luminance === null ? ''
       : `Reference (quadrature): L·10⁵ = ${formatLuminance(result.reference_luminance)}`);
     const best = this.job.progress.best?.strategy;
-    refs['noise-rows'].replaceChildren(...result.noise_table.map((row) => noiseRow(row, this.job.spec, best)));
+    const recommended = result.recommended?.strategy;
+    refs['noise-rows'].replaceChildren(...result.noise_table.map((row) => noiseRow(row, this.job.spec, best, recommended, result.folds)));
     showMessage(refs['solve-error'], result.solve_error ? `The weight fit failed: ${result.solve_error}` : '');
+    refs.gain.textContent = describeGain(result.gain);
+    refs.warnings.replaceChildren(...result.warnings.map((w) => h('li', { 'data-code': w.code },
+      h('code', {}, w.code), ` ${w.message}`, w.cells?.length ? ` (cells ${w.cells.join(', ')})` : '')));
+    refs.warnings.hidden = result.warnings.length === 0;
     refs.merges.textContent = describeMerges(result.merges_per_iteration);
-    drawWeights(this.weightsPlot, refs['weights-note'], result.weights, this.job.spec.cells.phi_bins);
+    drawWeights(this.weightsPlot, refs['weights-note'], result.weights, this.job.spec.cells.phi_bins, result.weights_fit);
     drawHistory(this.historyPlot, refs['history-note'], history.points);
   }
 }
 
-function noiseRow(row, spec, best) {
+function noiseRow(row, spec, best, recommended, folds) {
   const numbers = row.error
     ? [h('td', { class: 'row-error', colspan: 2 }, row.error)]
     : [
@@ -98,21 +105,23 @@ function noiseRow(row, spec, best) {
     ];
   return h('tr', { 'data-strategy': row.strategy, class: row.strategy === best ? 'best' : null },
     h('th', { scope: 'row' }, h('code', {}, row.strategy),
-      row.strategy === best ? h('span', { class: 'best-mark', title: 'Lowest RMS among strategies that are not in-sample fits' }, 'best') : null),
-    h('td', {}, describeWeights(row, spec)),
+      row.strategy === best ? h('span', { class: 'best-mark', title: 'Lowest honest RMS (in-sample fits are left out)' }, 'best') : null,
+      row.strategy === recommended ? h('span', { class: 'recommended-mark', title: 'The weights table and chart show these weights' }, 'recommended') : null,
+      row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)' }, 'in-sample') : null),
+    h('td', {}, describeWeights(row, spec, folds)),
     ...numbers);
 }
 
 /** The weights of each strategy in words, as in the paper's Table 1. */
-function describeWeights(row, spec) {
+function describeWeights(row, spec, folds) {
   switch (row.strategy) {
     case 'plane1': return 'w₀ = 1';
     case 'plane2': return 'w₁ = 1';
     case 'plane3': return 'w₂ = 1';
     case 'switch': return describeSwitch(spec.scene.illumination);
-    case 'optimal': return `fitted (${describeSolver(spec.solver)})`;
-    case 'optimal_holdout': return 'fitted, 2-fold hold-out';
-    case 'optimal_cv': return describeCrossValidation(row);
+    case 'optimal': return `fitted and scored on all iterations (${describeSolver(spec.solver)})`;
+    case 'optimal_holdout': return `fitted, ${folds}-fold cross-fitted (${describeSolver(spec.solver)})`;
+    case 'optimal_cv': return describeCrossValidation(row, folds);
     case 'balance': return 'balance heuristic';
     case 'power': return 'power heuristic';
     default: return '';
@@ -135,11 +144,17 @@ function describeSolver(solver) {
   return parts.join(', ');
 }
 
-function describeCrossValidation(row) {
+function describeCrossValidation(row, folds) {
   const parts = [];
   if (row.lambda !== null) parts.push(`λ = ${formatParameter(row.lambda)}`);
-  if (row.holdout_rms_percent !== null) parts.push(`hold-out RMS ${formatRms(row.holdout_rms_percent)} %`);
-  return `fitted, λ by cross-validation${parts.length ? ` (${parts.join('; ')})` : ''}`;
+  if (row.in_sample_rms_percent !== null) parts.push(`in-sample RMS ${formatRms(row.in_sample_rms_percent)} %`);
+  return `fitted, λ by cross-validation, ${folds}-fold cross-fitted${parts.length ? ` (${parts.join('; ')})` : ''}`;
+}
+
+function describeGain(gain) {
+  if (!gain) return '';
+  const se = gain.stderr === null ? '' : ` ± ${fixed(gain.stderr, 2)}`;
+  return `Gain of ${gain.strategy} over the best per-path strategy (${gain.versus}): variance ratio ${fixed(gain.value, 2)}${se} (jackknife over the folds).`;
 }
 
 function describeMerges(merges) {

@@ -66,6 +66,7 @@ pub fn iteration_work(config: &SimConfig) -> IterationWork {
         per_set,
         config.cells.clone(),
         config.engine,
+        config.folds,
     );
     let plan = match config.engine {
         Engine::Restricted(proposals) => Some(RestrictedPlan::new(&pilot, proposals)),

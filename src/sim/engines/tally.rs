@@ -38,6 +38,12 @@ impl PathStrategy {
     pub const COUNT: usize = Self::ALL.len();
 
     /// The name used in results.
+    /// Whether this is one of the paper's fixed cases 1–4 (a weight of one on a plane, or the
+    /// switch), as opposed to a heuristic that weighs each merge by its path densities.
+    pub fn is_case(self) -> bool {
+        matches!(self, Self::Plane1 | Self::Plane2 | Self::Plane3 | Self::Switch)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Plane1 => "plane1",

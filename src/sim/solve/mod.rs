@@ -3,12 +3,19 @@
 //!
 //! * [`options`] — how the weights are fitted, and the one way to patch and validate that;
 //! * [`solver`] — the optimal weights by direct minimisation of the variance;
-//! * [`noise`] — luminance and RMS of every strategy, with standard errors and hold-out figures;
+//! * [`crossfit`] — K-fold cross-fitting of fitted weights and the jackknife over the fold fits;
+//! * [`noise`] — luminance and RMS of every strategy with standard errors, the recommended weights
+//!   and the gain;
+//! * [`ystats`] — the moments of a set of iterations as the solver reads them;
+//! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
 //! * [`report`] — the result document of a run.
 
+pub mod crossfit;
 pub mod noise;
 pub mod options;
 pub mod report;
 pub mod solver;
 pub mod strategy;
+pub mod warnings;
+pub mod ystats;

@@ -9,16 +9,22 @@
 //! `rms_percent_stderr` is null.
 //!
 //! Rows, in order: `plane1`, `plane2`, `plane3`, `switch` (the paper's cases 1–4), `optimal` (case
-//! 5: fitted and evaluated on all iterations, as in the paper — optimistic), `optimal_holdout`
-//! (2-fold cross-fitting: weights fitted on even iterations evaluated on odd ones and vice versa,
-//! pooled — the honest figure), `optimal_cv` (λ chosen on a grid by the hold-out variance, then
-//! fitted on all iterations), `balance` and `power` (Veach's heuristics).
+//! 5: fitted and scored on all iterations, as in the paper — labelled `in_sample`, optimistic),
+//! `optimal_holdout` (K-fold cross-fitted at the spec's λ, [`super::crossfit`]), `optimal_cv` (λ
+//! chosen on the grid by the cross-fitted RMS; its figures are the cross-fitted ones at that λ, the
+//! in-sample ones are kept beside them), then the per-path heuristics (`balance`, `power`, …).
+//!
+//! The *recommended* weights are those of `optimal_cv`'s λ fitted on all iterations (what a user
+//! takes into a renderer), with jackknife standard errors; the *gain* compares them with the best
+//! per-path strategy.
 
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-use super::solver::{Fit, SolveError, YStats, fit};
+use super::crossfit::{CrossFit, CrossFitting, cross_fit, jackknife_se, select_lambda};
+use super::solver::{Fit, SolveError, fit};
 use super::strategy::Strategy;
+use super::ystats::YStats;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::options::SolverOptions;
@@ -36,8 +42,21 @@ pub struct NoiseRow {
     pub rms_percent_stderr: Option<f64>,
     /// λ of a fitted strategy (`optimal_cv`: the λ it chose).
     pub lambda: Option<f64>,
-    /// `optimal_cv`: the hold-out RMS% of the chosen λ.
-    pub holdout_rms_percent: Option<f64>,
+    /// Whether the figures are scored on the iterations the weights were fitted to (`optimal`, the
+    /// paper's procedure): then they are optimistic — L biased, its standard error and the RMS too
+    /// small — and the row is never "best".
+    #[serde(default)]
+    pub in_sample: bool,
+    /// `optimal_cv`: L of its weights fitted and scored on all iterations (in-sample, optimistic);
+    /// its `luminance` is the cross-fitted figure.
+    #[serde(default)]
+    pub in_sample_luminance: Option<f64>,
+    /// `optimal_cv`: the in-sample standard error of L (too small).
+    #[serde(default)]
+    pub in_sample_luminance_stderr: Option<f64>,
+    /// `optimal_cv`: the in-sample RMS% (too small).
+    #[serde(default)]
+    pub in_sample_rms_percent: Option<f64>,
     pub error: Option<String>,
 }
 
@@ -50,19 +69,22 @@ impl NoiseRow {
             rms_percent: None,
             rms_percent_stderr: None,
             lambda: None,
-            holdout_rms_percent: None,
+            in_sample: strategy.is_in_sample(),
+            in_sample_luminance: None,
+            in_sample_luminance_stderr: None,
+            in_sample_rms_percent: None,
             error: Some(error),
         }
     }
 
     /// A row from M, Σ C and Σ C² (and, if known, the central moments for the RMS error).
-    fn from_sums(strategy: Strategy, m: f64, s1: f64, s2: f64, higher: Option<(f64, f64)>) -> Self {
+    pub fn from_sums(strategy: Strategy, m: f64, s1: f64, s2: f64, higher: Option<(f64, f64)>) -> Self {
         if m < 2.0 {
             return Self::failed(strategy, format!("at least 2 iterations are needed, got {m}"));
         }
         let mean = s1 / m;
-        let m2 = (s2 / m - mean * mean).max(0.0);
-        let var = m2 * m / (m - 1.0);
+        let var = sample_variance(m, s1, s2);
+        let m2 = var * (m - 1.0) / m;
         let std = var.sqrt();
         // Relative to |mean|: a wildly overfitted hold-out estimate can have a negative mean, and
         // its noise is still a size, not a sign.
@@ -82,14 +104,23 @@ impl NoiseRow {
             rms_percent: rms,
             rms_percent_stderr: rms_se,
             lambda: None,
-            holdout_rms_percent: None,
+            in_sample: strategy.is_in_sample(),
+            in_sample_luminance: None,
+            in_sample_luminance_stderr: None,
+            in_sample_rms_percent: None,
             error: (mean == 0.0).then(|| "the mean is zero: no merge events for this strategy".to_string()),
         }
     }
 }
 
+/// The sample variance (M − 1 normalisation) from M, Σ C and Σ C², never negative.
+pub(crate) fn sample_variance(m: f64, s1: f64, s2: f64) -> f64 {
+    let mean = s1 / m;
+    (s2 / m - mean * mean).max(0.0) * m / (m - 1.0)
+}
+
 /// Central moments m3, m4 from power sums (population normalisation).
-fn central_3_4(m: f64, s: [f64; 4]) -> (f64, f64) {
+pub(crate) fn central_3_4(m: f64, s: [f64; 4]) -> (f64, f64) {
     let mu = s[0] / m;
     let (e2, e3, e4) = (s[1] / m, s[2] / m, s[3] / m);
     let m3 = e3 - 3.0 * mu * e2 + 2.0 * mu.powi(3);
@@ -97,59 +128,67 @@ fn central_3_4(m: f64, s: [f64; 4]) -> (f64, f64) {
     (m3, m4)
 }
 
+/// Position of a per-path strategy in the moments' lists.
+pub(crate) fn path_index(strategy: PathStrategy) -> usize {
+    PathStrategy::ALL.iter().position(|&s| s == strategy).expect("strategy listed")
+}
+
+/// Power sums Σ C^k, k = 1…4, of a per-path strategy in `fold`.
+pub(crate) fn power_sums(fold: &FoldMoments, strategy: PathStrategy) -> [f64; 4] {
+    fold.strategies[path_index(strategy)].clone().map(|x| x.value())
+}
+
 /// The row of a per-path strategy from its power sums.
 fn path_row(fold: &FoldMoments, strategy: PathStrategy) -> NoiseRow {
-    let i = PathStrategy::ALL.iter().position(|&s| s == strategy).expect("strategy listed");
-    let s = fold.strategies[i].clone().map(|x| x.value());
+    let s = power_sums(fold, strategy);
     let m = fold.iterations as f64;
     NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
 }
 
 /// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
 pub fn path_rows(moments: &Moments) -> Vec<NoiseRow> {
-    let [even, odd] = &moments.folds;
-    let m = (even.iterations + odd.iterations) as f64;
-    PathStrategy::ALL
-        .iter()
-        .enumerate()
-        .map(|(i, &strategy)| {
-            let s: [f64; 4] = std::array::from_fn(|k| {
-                let mut sum = even.strategies[i][k].clone();
-                sum.add_sum(&odd.strategies[i][k]);
-                sum.value()
-            });
-            NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
-        })
-        .collect()
+    let pooled = moments.pooled();
+    PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s)).collect()
 }
 
-/// The noise table and the fit behind the `optimal` row.
+/// The weights a result recommends: `optimal_cv`'s λ, fitted on all iterations.
+#[derive(Debug, Clone)]
+pub struct Recommended {
+    pub strategy: Strategy,
+    pub lambda: f64,
+    pub fit: Fit,
+    /// Jackknife standard error of each cell's (w0, w1, w2) (see [`super::crossfit`]).
+    pub stderr: Option<Vec<[f64; 3]>>,
+    /// The cross-fit at λ whose pooled sums are the strategy's honest figures.
+    pub cross_fit: CrossFit,
+}
+
+/// Variance of the best per-path strategy over the recommended weights' cross-fitted variance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct Gain {
+    /// Var(best per-path strategy) / Var(recommended, cross-fitted): how many times fewer
+    /// iterations the recommended weights need for the same noise.
+    pub value: f64,
+    /// Jackknife over the folds: each replicate leaves one fold out of *both* variances, so the
+    /// two stay paired on the same iterations (a fold of unusual iterations moves numerator and
+    /// denominator together). Null with fewer than two folds holding iterations.
+    pub stderr: Option<f64>,
+    /// The per-path strategy compared against (lowest RMS among them).
+    pub versus: Strategy,
+    /// The fitted strategy whose weights are recommended.
+    pub strategy: Strategy,
+}
+
+/// The noise table, the fits behind it and the recommendation.
 #[derive(Debug, Clone)]
 pub struct NoiseTable {
     pub rows: Vec<NoiseRow>,
-    /// The in-sample fit (the weights table of the result).
+    /// The in-sample fit at the spec's λ (the paper's procedure; `?lambda=` weights tables).
     pub optimal: Result<Fit, SolveError>,
-}
-
-/// Hold-out sums: weights fitted on one fold, Σ C and Σ C² evaluated on the other, both ways.
-fn holdout_sums(
-    folds: &[YStats; 2],
-    grid: &CellGrid,
-    solver: &SolverOptions,
-    lambda: f64,
-) -> Result<(f64, f64, f64), SolveError> {
-    let mut total = (0.0, 0.0, 0.0);
-    for (train, test) in [(0, 1), (1, 0)] {
-        let w = fit(&folds[train], grid, &solver.fixed, lambda)?.vector();
-        let (s1, s2) = folds[test].evaluate(&w);
-        total = (total.0 + folds[test].m, total.1 + s1, total.2 + s2);
-    }
-    Ok(total)
-}
-
-/// The hold-out RMS% of pooled hold-out sums.
-fn rms_of(m: f64, s1: f64, s2: f64) -> Option<f64> {
-    NoiseRow::from_sums(Strategy::OptimalHoldout, m, s1, s2, None).rms_percent
+    /// The recommended weights, or why there are none.
+    pub recommended: Result<Recommended, String>,
+    pub gain: Option<Gain>,
 }
 
 /// Computes the noise table of `moments` with the given solver options.
@@ -162,64 +201,109 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
         row(PathStrategy::Plane3),
         row(PathStrategy::Switch),
     ];
-
-    let k = grid.len();
-    let pooled = YStats::from_fold(&pooled_fold, k);
-    let folds = [YStats::from_fold(&moments.folds[0], k), YStats::from_fold(&moments.folds[1], k)];
-    let fitted_row = |name: Strategy, f: &Fit, stats: &YStats| {
-        let (s1, s2) = stats.evaluate(&f.vector());
-        NoiseRow { lambda: Some(f.lambda), ..NoiseRow::from_sums(name, stats.m, s1, s2, None) }
-    };
+    let cf = CrossFitting::new(moments);
 
     // Case 5: fitted and evaluated on all iterations.
-    let optimal = fit(&pooled, grid, &solver.fixed, solver.lambda);
+    let optimal = fit(&cf.all, grid, &solver.fixed, solver.lambda);
     rows.push(match &optimal {
-        Ok(f) => fitted_row(Strategy::Optimal, f, &pooled),
+        Ok(f) => in_sample_row(Strategy::Optimal, f, &cf.all),
         Err(e) => NoiseRow::failed(Strategy::Optimal, e.to_string()),
     });
 
-    // 2-fold cross-fitting with the requested λ.
-    rows.push(match holdout_sums(&folds, grid, solver, solver.lambda) {
-        Ok((m, s1, s2)) => {
-            NoiseRow { lambda: Some(solver.lambda), ..NoiseRow::from_sums(Strategy::OptimalHoldout, m, s1, s2, None) }
-        }
-        Err(e) => NoiseRow::failed(Strategy::OptimalHoldout, format!("a hold-out fit failed: {e}")),
+    // K-fold cross-fitting at the spec's λ.
+    rows.push(match cross_fit(&cf, grid, &solver.fixed, solver.lambda) {
+        Ok(c) => cross_fitted_row(Strategy::OptimalHoldout, &c),
+        Err(e) => NoiseRow::failed(Strategy::OptimalHoldout, format!("a cross-fit failed: {e}")),
     });
 
-    // λ by hold-out variance, then fitted on everything.
-    rows.push(cross_validated(&pooled, &folds, grid, solver, fitted_row));
+    // λ by cross-fitted RMS; its cross-fitted figures, and the all-data fit recommended.
+    let recommended = recommend(&cf, grid, solver);
+    rows.push(match &recommended {
+        Ok(r) => {
+            let inner = in_sample_row(Strategy::OptimalCv, &r.fit, &cf.all);
+            NoiseRow {
+                in_sample_luminance: inner.luminance,
+                in_sample_luminance_stderr: inner.luminance_stderr,
+                in_sample_rms_percent: inner.rms_percent,
+                ..cross_fitted_row(Strategy::OptimalCv, &r.cross_fit)
+            }
+        }
+        Err(e) => NoiseRow::failed(Strategy::OptimalCv, e.clone()),
+    });
 
-    rows.push(row(PathStrategy::Balance));
-    rows.push(row(PathStrategy::Power));
-    NoiseTable { rows, optimal }
+    rows.extend(PathStrategy::ALL.iter().filter(|s| !s.is_case()).map(|&s| row(s)));
+    let gain = recommended.as_ref().ok().and_then(|r| gain(moments, r));
+    NoiseTable { rows, optimal, recommended, gain }
 }
 
-fn cross_validated(
-    pooled: &YStats,
-    folds: &[YStats; 2],
+/// The row of weights `f` scored on the iterations they were fitted to.
+fn in_sample_row(name: Strategy, f: &Fit, stats: &YStats) -> NoiseRow {
+    let (s1, s2) = stats.evaluate(&f.vector());
+    NoiseRow { lambda: Some(f.lambda), ..NoiseRow::from_sums(name, stats.m, s1, s2, None) }
+}
+
+/// The row of a cross-fit's pooled sums.
+fn cross_fitted_row(name: Strategy, c: &CrossFit) -> NoiseRow {
+    let [m, s1, s2] = c.totals();
+    NoiseRow { lambda: Some(c.lambda), ..NoiseRow::from_sums(name, m, s1, s2, None) }
+}
+
+/// Chooses λ on the grid by cross-fitted RMS and fits the recommended weights on all iterations.
+fn recommend(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -> Result<Recommended, String> {
+    let cross_fit = select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas)
+        .map_err(|failures| format!("no λ of the grid could be cross-fitted ({})", failures.join("; ")))?;
+    let lambda = cross_fit.lambda;
+    let fit = fit(&cf.all, grid, &solver.fixed, lambda)
+        .map_err(|e| format!("the final fit with λ = {lambda} failed: {e}"))?;
+    Ok(Recommended { strategy: Strategy::OptimalCv, lambda, fit, stderr: cross_fit.weight_stderr(), cross_fit })
+}
+
+/// The in-sample fit of all iterations at λ with jackknife standard errors (the weights table a
+/// `?lambda=` query asks for).
+pub fn weights_at(
+    moments: &Moments,
     grid: &CellGrid,
     solver: &SolverOptions,
-    fitted_row: impl Fn(Strategy, &Fit, &YStats) -> NoiseRow,
-) -> NoiseRow {
-    let mut best: Option<(f64, f64)> = None; // (hold-out RMS%, λ)
-    let mut failures = Vec::new();
-    for &lambda in &solver.cv_lambdas {
-        match holdout_sums(folds, grid, solver, lambda).map(|(m, s1, s2)| rms_of(m, s1, s2)) {
-            Ok(Some(rms)) if best.is_none_or(|(b, _)| rms.abs() < b.abs()) => best = Some((rms, lambda)),
-            Ok(_) => {}
-            Err(e) => failures.push(format!("λ = {lambda}: {e}")),
+    lambda: f64,
+) -> Result<(Fit, Option<Vec<[f64; 3]>>), SolveError> {
+    let cf = CrossFitting::new(moments);
+    let all = fit(&cf.all, grid, &solver.fixed, lambda)?;
+    let stderr = cross_fit(&cf, grid, &solver.fixed, lambda).ok().and_then(|c| c.weight_stderr());
+    Ok((all, stderr))
+}
+
+/// The gain of the recommended weights over the best per-path strategy, with its jackknife SE.
+fn gain(moments: &Moments, r: &Recommended) -> Option<Gain> {
+    let variance = |[m, s1, s2]: [f64; 3]| (m >= 2.0).then(|| sample_variance(m, s1, s2));
+    let fixed_sums = |s: PathStrategy, left_out: Option<usize>| {
+        let mut t = [0.0; 3];
+        for (f, fold) in moments.folds.iter().enumerate() {
+            if Some(f) != left_out {
+                let p = power_sums(fold, s);
+                t = [t[0] + fold.iterations as f64, t[1] + p[0], t[2] + p[1]];
+            }
         }
-    }
-    let Some((holdout_rms, lambda)) = best else {
-        return NoiseRow::failed(
-            Strategy::OptimalCv,
-            format!("no λ of the grid could be evaluated ({})", failures.join("; ")),
-        );
+        t
     };
-    match fit(pooled, grid, &solver.fixed, lambda) {
-        Ok(f) => NoiseRow { holdout_rms_percent: Some(holdout_rms), ..fitted_row(Strategy::OptimalCv, &f, pooled) },
-        Err(e) => NoiseRow::failed(Strategy::OptimalCv, format!("the final fit with λ = {lambda} failed: {e}")),
-    }
+    // The best per-path strategy: the lowest relative noise on all iterations.
+    let relative = |s: PathStrategy| {
+        let t = fixed_sums(s, None);
+        variance(t).filter(|_| t[1] != 0.0).map(|v| v / (t[1] / t[0]).powi(2))
+    };
+    let versus = PathStrategy::ALL
+        .iter()
+        .filter_map(|&s| relative(s).filter(|v| v.is_finite()).map(|v| (s, v)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?
+        .0;
+    let ratio = |left_out: Option<usize>| {
+        let opt = variance(r.cross_fit.totals_except(left_out))?;
+        let fixed = variance(fixed_sums(versus, left_out))?;
+        (opt > 0.0).then(|| fixed / opt)
+    };
+    let value = ratio(None)?;
+    let replicates: Option<Vec<f64>> = r.cross_fit.folds.iter().map(|(f, _, _)| ratio(Some(*f))).collect();
+    let stderr = replicates.filter(|x| x.len() >= 2).map(|x| jackknife_se(x.iter().copied()));
+    Some(Gain { value, stderr, versus: Strategy::of_path(versus), strategy: r.strategy })
 }
 
 /// Mean and standard error of merge events per iteration, per plane.

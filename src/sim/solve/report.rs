@@ -1,13 +1,17 @@
 //! The result document of a run: noise table, weights table, merge rates and the analytic reference.
 //!
 //! Its field names are a stable interface (scripts and dashboards read them): `iterations`,
-//! `reference_luminance`, `noise_table` (rows of [`NoiseRow`]), `weights` (rows of [`WeightRow`]),
-//! `solve_error`, `merges_per_iteration`, `fingerprint`, `coverage`.
+//! `reference_luminance`, `noise_table` (rows of [`NoiseRow`]), `recommended`, `weights` (rows of
+//! [`WeightRow`]: the recommended weights with standard errors unless a λ was asked for),
+//! `weights_fit`, `gain`, `warnings`, `solve_error`, `merges_per_iteration`, `fingerprint`,
+//! `coverage`.
 
 use serde::{Deserialize, Serialize};
 
-use super::noise::{MergeRate, NoiseRow, merge_rates, noise_table};
-use super::solver::CellStatus;
+use super::noise::{Gain, MergeRate, NoiseRow, merge_rates, noise_table, weights_at};
+use super::solver::{CellStatus, Fit};
+use super::strategy::Strategy;
+use super::warnings::{Warning, warnings};
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::stats::coverage::Coverage;
@@ -24,6 +28,11 @@ pub struct WeightRow {
     pub w0: f64,
     pub w1: f64,
     pub w2: f64,
+    /// Jackknife standard errors over the K fold fits (null when fewer than two folds hold
+    /// iterations or a fold fit failed; 0 for a fixed weight).
+    pub w0_stderr: Option<f64>,
+    pub w1_stderr: Option<f64>,
+    pub w2_stderr: Option<f64>,
     /// Merge events in the cell (all planes) over all iterations.
     pub samples: u64,
     pub status: CellStatus,
@@ -38,60 +47,120 @@ pub struct MergesPerIteration {
     pub plane3: MergeRate,
 }
 
+/// Which fit a weights table shows.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct WeightsFit {
+    /// `optimal_cv` for the recommended weights; `optimal` for a table asked for at a given λ.
+    pub strategy: Strategy,
+    pub lambda: f64,
+    /// Always true: a weights table is fitted on all iterations (the figures that say how good
+    /// the weights are, in the noise table, are the cross-fitted ones).
+    pub fitted_on_all_iterations: bool,
+}
+
+/// The recommendation: which strategy's weights to take into a renderer.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct RecommendedWeights {
+    pub strategy: Strategy,
+    /// The λ chosen by cross-validation.
+    pub lambda: f64,
+}
+
 /// The result of a run (or of a re-solve of stored moments).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RunReport {
     pub iterations: u64,
+    /// The cross-fitting folds K of the moments.
+    pub folds: usize,
     /// The quadrature value of L (R → 0); null when the quadrature did not converge within its
     /// evaluation budget (extreme geometry).
     pub reference_luminance: Option<f64>,
     pub noise_table: Vec<NoiseRow>,
-    /// Weights of the `optimal` fit; empty when it failed (see `solve_error`).
+    /// The recommended weights (`optimal_cv`'s λ fitted on all iterations); null when no λ of the
+    /// grid could be cross-fitted (see `solve_error`).
+    pub recommended: Option<RecommendedWeights>,
+    /// The weights table: the recommended weights, or the in-sample fit at the λ asked for; empty
+    /// when that fit failed (see `solve_error`).
     pub weights: Vec<WeightRow>,
+    pub weights_fit: Option<WeightsFit>,
+    /// Var(best per-path strategy) / Var(recommended weights, cross-fitted), with a jackknife SE.
+    pub gain: Option<Gain>,
+    /// What the data cannot support (empty when nothing is wrong).
+    pub warnings: Vec<Warning>,
     pub solve_error: Option<String>,
     pub merges_per_iteration: MergesPerIteration,
     pub fingerprint: String,
     pub coverage: Coverage,
 }
 
-/// Builds the report of `moments` with the given solver options.
+/// The rows of a weights table.
+fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> Vec<WeightRow> {
+    fit.cells
+        .iter()
+        .enumerate()
+        .map(|(alpha, c)| {
+            let b = grid.bounds(alpha);
+            let se = |m: usize| stderr.map(|s| s[alpha][m]);
+            WeightRow {
+                r2: b.r2,
+                r3: b.r3,
+                phi: b.phi,
+                w0: c.w[0],
+                w1: c.w[1],
+                w2: c.w[2],
+                w0_stderr: se(0),
+                w1_stderr: se(1),
+                w2_stderr: se(2),
+                samples: c.samples,
+                status: c.status,
+            }
+        })
+        .collect()
+}
+
+/// Builds the report of `moments` with the given solver options. The weights table holds the
+/// recommended weights, or with `weights_lambda` the in-sample fit of all iterations at that λ.
 pub fn build_report(
     moments: &Moments,
     grid: &CellGrid,
     solver: &SolverOptions,
     reference_luminance: Option<f64>,
+    weights_lambda: Option<f64>,
 ) -> RunReport {
     let table = noise_table(moments, grid, solver);
-    let (weights, solve_error) = match &table.optimal {
-        Ok(fit) => (
-            fit.cells
-                .iter()
-                .enumerate()
-                .map(|(alpha, c)| {
-                    let b = grid.bounds(alpha);
-                    WeightRow {
-                        r2: b.r2,
-                        r3: b.r3,
-                        phi: b.phi,
-                        w0: c.w[0],
-                        w1: c.w[1],
-                        w2: c.w[2],
-                        samples: c.samples,
-                        status: c.status,
-                    }
-                })
-                .collect(),
+    let warnings = warnings(moments, &table);
+    let recommended =
+        table.recommended.as_ref().ok().map(|r| RecommendedWeights { strategy: r.strategy, lambda: r.lambda });
+    let (weights, weights_fit, solve_error) = match (weights_lambda, &table.recommended) {
+        (Some(lambda), _) => match weights_at(moments, grid, solver, lambda) {
+            Ok((fit, se)) => (
+                weight_rows(grid, &fit, se.as_deref()),
+                Some(WeightsFit { strategy: Strategy::Optimal, lambda, fitted_on_all_iterations: true }),
+                None,
+            ),
+            Err(e) => (Vec::new(), None, Some(e.to_string())),
+        },
+        (None, Ok(r)) => (
+            weight_rows(grid, &r.fit, r.stderr.as_deref()),
+            Some(WeightsFit { strategy: r.strategy, lambda: r.lambda, fitted_on_all_iterations: true }),
             None,
         ),
-        Err(e) => (Vec::new(), Some(e.to_string())),
+        (None, Err(e)) => (Vec::new(), None, Some(e.clone())),
     };
     let [plane1, plane2, plane3] = merge_rates(moments);
     RunReport {
         iterations: moments.iterations(),
+        folds: moments.fold_count(),
         reference_luminance,
         noise_table: table.rows,
+        recommended,
         weights,
+        weights_fit,
+        gain: table.gain,
+        warnings,
         solve_error,
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },
         fingerprint: moments.fingerprint.clone(),

@@ -23,9 +23,11 @@ pub enum Strategy {
     Switch,
     /// Case 5: the optimal weights, fitted and scored on all iterations (the paper's procedure).
     Optimal,
-    /// The optimal weights at the spec's λ, cross-fitted (fitted on one fold, scored on the other).
+    /// The optimal weights at the spec's λ, K-fold cross-fitted (each fold scored with the weights
+    /// fitted on the others).
     OptimalHoldout,
-    /// λ chosen on the grid by the hold-out variance, then fitted on all iterations.
+    /// λ chosen on the grid by the cross-fitted RMS; cross-fitted figures at that λ (the
+    /// recommended weights are this λ fitted on all iterations).
     OptimalCv,
     /// Veach's balance heuristic with VCM pdfs.
     Balance,
@@ -47,9 +49,10 @@ impl Strategy {
     }
 
     /// Whether the row's figures are scored on the iterations its weights were fitted to, and so
-    /// optimistic: such rows are never "best".
+    /// optimistic: such rows are labelled `in_sample` and never "best". Only `optimal` (the paper's
+    /// procedure): every other fitted row is cross-fitted.
     pub fn is_in_sample(self) -> bool {
-        matches!(self, Self::Optimal | Self::OptimalCv)
+        matches!(self, Self::Optimal)
     }
 
     /// The name results use.

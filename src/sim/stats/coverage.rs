@@ -90,13 +90,15 @@ impl Coverage {
         self.0.iter().flat_map(|s| &s.ranges).map(|r| u128::from(r[1].saturating_sub(r[0]))).sum()
     }
 
-    /// Iterations covered with an even and with an odd index.
-    pub fn parity_counts(&self) -> (u128, u128) {
-        self.0.iter().flat_map(|s| &s.ranges).fold((0, 0), |(e, o), r| {
-            let len = r[1].saturating_sub(r[0]);
-            let evens = len / 2 + u64::from(len % 2 == 1 && r[0] % 2 == 0);
-            (e + u128::from(evens), o + u128::from(len - evens))
-        })
+    /// Iterations covered in each residue class of the index mod `k` (the folds of the moments):
+    /// entry r counts the covered s with s ≡ r (mod k).
+    pub fn residue_counts(&self, k: u64) -> Vec<u128> {
+        assert!(k > 0, "at least one fold");
+        // Indices s < x with s ≡ r (mod k): ⌈(x − r)/k⌉ for x ≥ r, i.e. ⌊(x + k − 1 − r)/k⌋.
+        let below = |x: u64, r: u64| (u128::from(x) + u128::from(k - 1 - r)) / u128::from(k);
+        (0..k)
+            .map(|r| self.0.iter().flat_map(|s| &s.ranges).map(|g| below(g[1], r).saturating_sub(below(g[0], r))).sum())
+            .collect()
     }
 
     /// Whether iteration `s` of `seed` is covered.
@@ -269,7 +271,20 @@ mod tests {
         c.insert(1, 30, 40);
         c.insert(2, 0, 5);
         assert_eq!(c.iterations(), 35);
-        assert_eq!(c.parity_counts(), (18, 17));
+        let counts = c.residue_counts(2);
+        assert_eq!(counts, vec![18, 17]);
+        // Against counting by hand, for several K (the folds of the moments).
+        for k in [1u64, 3, 7, 10] {
+            let mut by_hand = vec![0u128; k as usize];
+            for seed in c.seeds() {
+                for r in &seed.ranges {
+                    for s in r[0]..r[1] {
+                        by_hand[(s % k) as usize] += 1;
+                    }
+                }
+            }
+            assert_eq!(c.residue_counts(k), by_hand, "K = {k}");
+        }
         assert_eq!(c.seeds()[0].ranges, vec![[0, 20], [30, 40]]);
         assert!(c.contains(1, 19) && !c.contains(1, 20) && c.contains(2, 4) && !c.contains(3, 0));
         let other = Coverage::range(1, 15, 35);

@@ -1,7 +1,9 @@
 //! The statistics of a run: exact, mergeable sums over iterations and which iterations they hold.
 //!
+//! * [`bounded`] — list deserialisation bounded by the largest valid value;
 //! * [`coverage`] — the (seed, iteration range) pairs a moments value holds;
 //! * [`moments`] — the additive sufficient statistics, their checks and merges.
 
+pub mod bounded;
 pub mod coverage;
 pub mod moments;

@@ -6,8 +6,11 @@
 //! strategy (for their noise and the standard error of their RMS), merge counts, and per-cell event
 //! counts.
 //!
-//! Sums are kept separately for even and odd iterations (two *folds*), so that the optimal weights
-//! can be fitted on one half and evaluated on the other without storing any iteration.
+//! Sums are kept separately for the K *folds* of iterations (iteration s in fold s mod K), so that
+//! the optimal weights can be fitted on K − 1 folds and evaluated on the remaining one
+//! (cross-fitting, `solve::noise`) without storing any iteration. Folding by the index, not by the
+//! order of arrival, keeps shards and merges exact: a shard's iterations land in the same folds as
+//! they would in one uninterrupted run.
 //!
 //! Every sum is an [`ExactSum`], so merging is addition in any order and grouping with a
 //! bit-identical result; the [`Coverage`] records which (seed, iteration) pairs are included so that
@@ -24,13 +27,15 @@
 //! Merges add counters with checked arithmetic and check, before changing anything, that no exact
 //! sum can overflow: a refused merge leaves the target as it was.
 
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
+
+use super::bounded::bounded;
 
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
 use crate::sim::engines::tally::{IterationTally, PathStrategy};
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use crate::sim::model::cells::MAX_CELLS;
-use crate::sim::model::config::{MOMENTS_FORMAT_VERSION, SimConfig};
+use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 
 /// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
 pub const MAX_TALLY_VALUE: f64 = 1e70;
@@ -42,39 +47,7 @@ const MAX_PACKED: usize = MAX_DIMENSION * (MAX_DIMENSION + 1) / 2;
 /// Longest per-slot list (three planes per cell).
 const MAX_SLOTS: usize = 3 * MAX_CELLS;
 
-/// Deserialises a list of at most `MAX` elements, failing at the first one too many (before it is
-/// allocated), so that the size of what a document makes us allocate is set by the largest grid,
-/// not by the length of the body.
-fn bounded<'de, D, T, const MAX: usize>(deserializer: D) -> Result<Vec<T>, D::Error>
-where
-    D: Deserializer<'de>,
-    T: Deserialize<'de>,
-{
-    struct Bounded<T, const MAX: usize>(std::marker::PhantomData<T>);
-
-    impl<'de, T: Deserialize<'de>, const MAX: usize> serde::de::Visitor<'de> for Bounded<T, MAX> {
-        type Value = Vec<T>;
-
-        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            write!(f, "a list of at most {MAX} entries")
-        }
-
-        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<T>, A::Error> {
-            let mut out = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(MAX).min(4096));
-            while let Some(x) = seq.next_element()? {
-                if out.len() == MAX {
-                    return Err(serde::de::Error::custom(format!("more than {MAX} entries")));
-                }
-                out.push(x);
-            }
-            Ok(out)
-        }
-    }
-
-    deserializer.deserialize_seq(Bounded::<T, MAX>(std::marker::PhantomData))
-}
-
-/// Sums over the iterations of one parity.
+/// Sums over the iterations of one fold.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
@@ -105,10 +78,6 @@ pub fn packed_index(n: usize, i: usize, j: usize) -> usize {
     debug_assert!(i <= j && j < n);
     // Rows 0..i hold n, n−1, …, n−i+1 entries: i·n − i(i−1)/2 in all; then j − i into row i.
     i * n - i * (i + 1) / 2 + j
-}
-
-fn packed_len(n: usize) -> usize {
-    n * (n + 1) / 2
 }
 
 impl FoldMoments {
@@ -308,14 +277,17 @@ pub struct Moments {
     pub cells: usize,
     /// The (seed, iteration) pairs included.
     pub coverage: Coverage,
-    /// Sums over even (index 0) and odd (index 1) iterations.
-    pub folds: [FoldMoments; 2],
+    /// Sums over the iterations of each fold: `folds[f]` holds the iterations s ≡ f (mod K).
+    #[serde(deserialize_with = "bounded::<_, _, MAX_FOLDS>")]
+    pub folds: Vec<FoldMoments>,
 }
 
 /// Why two moments values cannot be merged (or a document cannot be used).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum MergeError {
-    #[error("moments format {found} is not supported (this build reads format {expected})")]
+    #[error(
+        "moments format {found} is not supported (this build reads format {expected}; format 1, written before K-fold cross-fitting, holds two folds of even and odd iterations that cannot be split into K folds: run the iterations again with this build)"
+    )]
     Format { found: u32, expected: u32 },
     #[error(
         "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
@@ -343,13 +315,18 @@ impl Moments {
             fingerprint: config.fingerprint().to_string(),
             cells: k,
             coverage: Coverage::new(),
-            folds: [FoldMoments::empty(k), FoldMoments::empty(k)],
+            folds: vec![FoldMoments::empty(k); config.folds],
         }
     }
 
     /// Total iterations M.
     pub fn iterations(&self) -> u64 {
-        self.folds[0].iterations + self.folds[1].iterations
+        self.folds.iter().map(|f| f.iterations).sum()
+    }
+
+    /// The number of folds K.
+    pub fn fold_count(&self) -> usize {
+        self.folds.len()
     }
 
     /// Adds iteration `tally.iteration` of `seed`.
@@ -358,7 +335,8 @@ impl Moments {
         if self.coverage.contains(seed, s) {
             return Err(MergeError::Overlap(vec![Overlap { seed, range: [s, s + 1] }]));
         }
-        self.folds[(s % 2) as usize].add_iteration(self.cells, tally)?;
+        let k = self.folds.len() as u64;
+        self.folds[(s % k) as usize].add_iteration(self.cells, tally)?;
         self.coverage.insert(seed, s, s + 1);
         Ok(())
     }
@@ -377,7 +355,7 @@ impl Moments {
             return Err(overflow("iteration count"));
         }
         // The pooled folds (what the noise table adds) must fit as well.
-        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+        if !counters_fit(&self.folds.iter().chain(&other.folds).collect::<Vec<_>>()) {
             return Err(overflow("pooled counts"));
         }
         Ok(())
@@ -405,7 +383,7 @@ impl Moments {
     /// checked; nothing changes on a refusal.
     pub(crate) fn absorb(&mut self, other: &Moments) -> Result<(), MergeError> {
         self.check_same_configuration_and_new(other)?;
-        if !counters_fit(&[&self.folds[0], &self.folds[1], &other.folds[0], &other.folds[1]]) {
+        if !counters_fit(&self.folds.iter().chain(&other.folds).collect::<Vec<_>>()) {
             return Err(overflow("pooled counts"));
         }
         debug_assert!(self.folds.iter().zip(&other.folds).all(|(a, b)| a.check_add(b).is_ok()));
@@ -419,7 +397,7 @@ impl Moments {
     /// What every merge needs: the same configuration, and no iteration of `other` counted here
     /// already.
     fn check_same_configuration_and_new(&self, other: &Moments) -> Result<(), MergeError> {
-        if other.fingerprint != self.fingerprint || other.cells != self.cells {
+        if other.fingerprint != self.fingerprint || other.cells != self.cells || other.folds.len() != self.folds.len() {
             return Err(MergeError::Fingerprint {
                 found: other.fingerprint.clone(),
                 expected: self.fingerprint.clone(),
@@ -441,6 +419,12 @@ impl Moments {
         if self.cells == 0 || self.cells > MAX_CELLS {
             return Err(MergeError::Malformed(format!("{} cells; a grid has 1 to {MAX_CELLS}", self.cells)));
         }
+        if !(MIN_FOLDS..=MAX_FOLDS).contains(&self.folds.len()) {
+            return Err(MergeError::Malformed(format!(
+                "{} folds; moments have {MIN_FOLDS} to {MAX_FOLDS}",
+                self.folds.len()
+            )));
+        }
         if !self.folds.iter().all(|f| f.has_shape(self.cells)) {
             return Err(MergeError::Malformed(format!("array lengths do not match {} cells", self.cells)));
         }
@@ -448,17 +432,19 @@ impl Moments {
         if self.coverage.iterations() > u128::from(MAX_ITERATION_INDEX) {
             return Err(MergeError::Malformed("the coverage holds more than 2^62 iterations".into()));
         }
-        let (even, odd) = self.coverage.parity_counts();
-        if even != u128::from(self.folds[0].iterations) || odd != u128::from(self.folds[1].iterations) {
-            return Err(MergeError::Malformed(format!(
-                "coverage has {even} even and {odd} odd iterations but the sums count {} and {}",
-                self.folds[0].iterations, self.folds[1].iterations
-            )));
+        let k = self.folds.len();
+        for (f, (covered, fold)) in self.coverage.residue_counts(k as u64).into_iter().zip(&self.folds).enumerate() {
+            if covered != u128::from(fold.iterations) {
+                return Err(MergeError::Malformed(format!(
+                    "coverage has {covered} iterations s ≡ {f} (mod {k}) but fold {f} counts {}",
+                    fold.iterations
+                )));
+            }
         }
-        // The two folds' counters must pool without overflow (the noise table adds them; their sums
+        // The folds' counters must pool without overflow (the noise table adds them; their sums
         // pool safely: moments from outside are below 2^1000, merged ones are checked).
-        if !counters_fit(&[&self.folds[0], &self.folds[1]]) {
-            return Err(MergeError::Malformed("the two folds' counts overflow when pooled".into()));
+        if !counters_fit(&self.folds.iter().collect::<Vec<_>>()) {
+            return Err(MergeError::Malformed("the folds' counts overflow when pooled".into()));
         }
         Ok(())
     }
@@ -468,9 +454,7 @@ impl Moments {
     pub fn check_well_formed(&self) -> Result<(), MergeError> {
         self.check_shape()?;
         for (f, fold) in self.folds.iter().enumerate() {
-            fold.check_consistent(self.cells).map_err(|e| {
-                MergeError::Malformed(format!("{} iterations: {e}", if f == 0 { "even" } else { "odd" }))
-            })?;
+            fold.check_consistent(self.cells).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
         }
         Ok(())
     }
@@ -486,11 +470,20 @@ impl Moments {
         Ok(())
     }
 
-    /// Both folds added together (they always fit: moments from outside are checked for it, and
+    /// All folds added together (they always fit: moments from outside are checked for it, and
     /// merges check the pooled totals).
     pub fn pooled(&self) -> FoldMoments {
-        let mut all = self.folds[0].clone();
-        all.add(&self.folds[1]);
+        self.pooled_except(None)
+    }
+
+    /// All folds but `left_out` added together: the training data of a cross-fit.
+    pub fn pooled_except(&self, left_out: Option<usize>) -> FoldMoments {
+        let mut all = FoldMoments::empty(self.cells);
+        for (f, fold) in self.folds.iter().enumerate() {
+            if Some(f) != left_out {
+                all.add(fold);
+            }
+        }
         all
     }
 }
