@@ -15,3 +15,23 @@ fn packed_index_enumerates_the_upper_triangle() {
         assert_eq!(expected, packed_len(n));
     }
 }
+
+/// Moments of the two-fold format 1 (written before K-fold cross-fitting) are refused, and the
+/// message says why and what to do; so are fold counts outside [2, 20] and coverage that does not
+/// match the folds.
+#[test]
+fn old_formats_and_foreign_fold_layouts_are_refused() {
+    let spec = crate::sim::spec::parse_job_spec(&serde_json::json!({ "folds": 3 })).unwrap();
+    let config = spec.validate().unwrap().config;
+    let mut old = Moments::new(&config);
+    old.format_version = 1;
+    let message = old.check_well_formed().unwrap_err().to_string();
+    assert!(message.contains("format 1") && message.contains("K folds") && message.contains("again"), "{message}");
+    let mut one_fold = Moments::new(&config);
+    one_fold.folds.truncate(1);
+    assert!(matches!(one_fold.check_well_formed(), Err(MergeError::Malformed(_))));
+    let mut other = Moments::new(&config);
+    other.coverage.insert(1, 0, 1); // iteration 0 belongs to fold 0, which counts none
+    let message = other.check_well_formed().unwrap_err().to_string();
+    assert!(message.contains("≡ 0 (mod 3)"), "{message}");
+}
