@@ -191,6 +191,7 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
 
     rows.push(row(PathStrategy::Balance));
     rows.push(row(PathStrategy::Power));
+    rows.push(row(PathStrategy::CorrelationAware));
     NoiseTable { rows, optimal }
 }
 
