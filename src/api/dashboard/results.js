@@ -115,6 +115,7 @@ function describeWeights(row, spec) {
     case 'optimal_cv': return describeCrossValidation(row);
     case 'balance': return 'balance heuristic';
     case 'power': return 'power heuristic';
+    case 'correlation_aware': return 'correlation-aware heuristic';
     default: return '';
   }
 }

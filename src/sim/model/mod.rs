@@ -7,7 +7,8 @@
 //! * [`illumination`] — the radial light profile and its samplers;
 //! * [`scene`] — the three planes and the lobe, with the lobe's sampler;
 //! * [`cells`] — the cell grid over the join path's (r2, r3, φ);
-//! * [`heuristics`] — Veach's balance and power heuristics with VCM pdfs;
+//! * [`heuristics`] — Veach's balance and power heuristics with VCM pdfs, and the
+//!   correlation-aware heuristic derived for the iteration's N_F × N_B pairs;
 //! * [`densities`] — where light vertices fall, in closed form (light start and plane-2 arrival);
 //! * [`config`] — everything that changes the law of an iteration, and its fingerprint.
 
