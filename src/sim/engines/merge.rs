@@ -2,7 +2,7 @@
 //!
 //! Given a light path's vertices, each function tests the camera vertices the spatial grid offers
 //! with the exact distance test and records every merge's contribution and per-path strategy
-//! weights (model.md):
+//! weights (docs/model.md §4):
 //!
 //! * plane 3: C2 = E_c(x3c)·E_l·K/π, join path (x2c, x3c);
 //! * plane 2: C1 = E_l·K·f2(x3l→x2l, x2c→x1c), join path (x2c, x3l);

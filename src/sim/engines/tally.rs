@@ -5,8 +5,8 @@
 //! scratch and hand over only the cells they touched; an iteration adds its chunks' tallies in
 //! chunk order, so the floating-point sums do not depend on which thread ran which chunk.
 //!
-//! Contributions are tallied without the 1/(N_F·N_B) of model.md's C_s; [`IterationTally`] applies
-//! it once per iteration.
+//! Contributions are tallied without the 1/(N_F·N_B) of docs/model.md's C_s; [`IterationTally`]
+//! applies it once per iteration.
 
 use serde::{Deserialize, Serialize};
 
@@ -56,8 +56,8 @@ impl PathStrategy {
     }
 }
 
-/// The three merge techniques, by the plane where the merge happens (model.md: the weights w0, w1,
-/// w2 and the contributions C0, C1, C2 are indexed the same way).
+/// The three merge techniques, by the plane where the merge happens (docs/model.md: the weights w0,
+/// w1, w2 and the contributions C0, C1, C2 are indexed the same way).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(usize)]
 pub enum Technique {
@@ -265,8 +265,9 @@ impl IterationTally {
         self.merges = merges;
     }
 
-    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of model.md as sparse (index, value) pairs in index
-    /// order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at 2K.
+    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of docs/model.md as sparse (index, value) pairs in
+    /// index order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at
+    /// 2K.
     pub fn moment_vector(&self, cells: usize) -> Vec<(usize, f64)> {
         let c = |m: usize, a: usize| self.cell_values[m * cells + a];
         let mut y = Vec::new();

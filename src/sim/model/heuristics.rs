@@ -96,8 +96,9 @@
 //! * CAMIS's ratio, c = P_c/(P_c + P_l − P_c P_l) with count N·c, is a heuristic for one camera
 //!   prefix merged with N light paths (one camera path per pixel). Here N_B camera paths through
 //!   one pixel share every light path as well, and the count above is the hit-or-miss model's own
-//!   for the crossed design (with N_B = 1 it is N_F(1 − P_c P_l)/[(1 − P_c P_l) + (N_F − 1)P_l(1 − P_c)],
-//!   which equals CAMIS's N_F·c where N_F − 1 = (1 − P_c P_l)/P_c).
+//!   for the crossed design. With N_B = 1 it is
+//!   N_F(1 − P_c P_l)/[(1 − P_c P_l) + (N_F − 1)P_l(1 − P_c)], which moves as c does (up with P_c,
+//!   down with P_l) and equals CAMIS's N_F·c where N_F − 1 = (1 − P_c P_l)/P_c.
 //! * CAMIS treats merges at the primary hit as uncorrelated (c = 1); here the primary hit is the
 //!   pixel itself, and plane 1 is the most correlated technique.
 //! * Footprint: SeeSharp's surrogate radius is the primary-hit distance × tan 1°; the pixel here is
@@ -109,7 +110,8 @@
 //!   ≈ 600×): evaluated at x3c, the weights of the plane-2 and plane-3 merges of light paths near the
 //!   edge would not sum to 1 and the estimate would be biased by O(R/a), as `switch` is
 //!   (docs/results.md). Evaluated at x3l, the jump sits where the emission's own jump is, which the
-//!   kernel blurs only on the smooth camera side.
+//!   kernel blurs only on the smooth camera side. Measured on the paper scene of
+//!   `tests/simulation.rs` (R = a = 0.02): +2.6% off the quadrature at x3c (6.3 SE), +0.04% at x3l.
 //! * The count assumes N_F light paths, as the brute force draws them; the restricted engine's
 //!   Poisson number of paths would give N_F N_B/[1 + (N_B − 1)P_c + N_F P_l (1 − P_c)], which differs
 //!   by a relative O(P). Both engines apply the same function of the path, so they estimate the

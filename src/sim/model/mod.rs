@@ -1,7 +1,7 @@
-//! The model of the paper's scene (model.md): its parameters as documents spell them, the light's
-//! profile, the planes and the lobe, the cell grid of the weights, the per-path MIS heuristics,
-//! the closed-form densities of light vertices, and the validated configuration with its
-//! fingerprint.
+//! The model of the paper's scene (docs/model.md): its parameters as documents spell them, the
+//! light's profile, the planes and the lobe, the cell grid of the weights, the per-path MIS
+//! heuristics, the closed-form densities of light vertices, and the validated configuration with
+//! its fingerprint.
 //!
 //! * [`params`] — the plain parameter types and their validation (the ranges, named per field);
 //! * [`illumination`] — the radial light profile and its samplers;
