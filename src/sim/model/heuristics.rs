@@ -71,9 +71,9 @@
 //!
 //! n_m = N_F N_B·(1 − P_c P_l) / [(1 − P_c P_l) + (N_B − 1)·P_c (1 − P_l) + (N_F − 1)·P_l (1 − P_c)]
 //!
-//! (P = P_c,m, P_l,m), and the weights are w_m = n_m p_m / Σ_k n_k p_k. For plane 3, (N_F − 1)·P_l,2
-//! is the expected number of *other* light paths merging with the camera vertex x3c — the light
-//! paths that re-use its prefix. Properties (tested below):
+//! (P_c = P_c,m, P_l = P_l,m), and the weights are w_m = n_m p_m / Σ_k n_k p_k. For plane 3,
+//! (N_F − 1)·P_l,2 is the expected number of *other* light paths merging with the camera vertex
+//! x3c — the light paths that re-use its prefix. Properties (tested below):
 //!
 //! * N_F = N_B = 1 (nothing re-used): every n_m = 1, the balance heuristic;
 //! * plane 1: P_c,0 = 1 gives n_0 = N_F exactly, whatever P_l,0;
@@ -88,7 +88,7 @@
 //! * the weights sum to 1.
 //!
 //! At the paper's values (N_F = 10⁷, N_B = 100, R = 0.003) the plane-3 count falls ≈ 750× inside
-//! the spot and ≈ 1.2× outside it, the plane-2 count by < 0.2%, and plane 1 keeps N_F = N_F N_B/100:
+//! the spot and ≈ 1.2× outside it, the plane-2 count by < 0.2%, and plane 1 keeps N_F = N_F N_B/N_B:
 //! inside the spot the heuristic moves weight from plane 3 to plane 2, as the paper's case 4 does.
 //!
 //! Where this differs from the published heuristic, and why:
