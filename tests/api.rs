@@ -35,7 +35,18 @@ async fn submit_poll_and_read_the_result() {
         result["noise_table"].as_array().unwrap().iter().map(|r| r["strategy"].as_str().unwrap()).collect();
     assert_eq!(
         names,
-        ["plane1", "plane2", "plane3", "switch", "optimal", "optimal_holdout", "optimal_cv", "balance", "power"]
+        [
+            "plane1",
+            "plane2",
+            "plane3",
+            "switch",
+            "optimal",
+            "optimal_holdout",
+            "optimal_cv",
+            "balance",
+            "power",
+            "correlation_aware"
+        ]
     );
     for row in result["noise_table"].as_array().unwrap() {
         for key in [

@@ -63,7 +63,7 @@ async fn a_failed_solve_still_reports_the_fixed_strategies() {
     assert!(reason.contains("singular"), "{reason}");
     assert!(result["weights"].as_array().unwrap().is_empty());
     let rows = result["noise_table"].as_array().unwrap();
-    for name in ["plane1", "plane2", "plane3", "switch", "balance", "power"] {
+    for name in ["plane1", "plane2", "plane3", "switch", "balance", "power", "correlation_aware"] {
         let row = rows.iter().find(|r| r["strategy"] == name).unwrap();
         assert!(row["luminance"].as_f64().is_some() && row["rms_percent"].as_f64().is_some(), "{row}");
     }

@@ -64,7 +64,7 @@ fn paper_scene_means_match_the_quadrature() {
             "preset": "paper-table1", "light_paths": 200_000, "camera_paths": 2000,
             "merge_radius": 0.02, "iterations": 2000, "seed": 11
         }),
-        &["plane1", "plane2", "plane3", "balance", "power"],
+        &["plane1", "plane2", "plane3", "balance", "power", "correlation_aware"],
     );
 }
 
@@ -77,7 +77,7 @@ fn uniform_scene_means_match_the_quadrature() {
             "preset": "uniform-illumination", "light_paths": 100_000, "camera_paths": 100,
             "merge_radius": 0.05, "iterations": 1500, "seed": 12
         }),
-        &["plane1", "plane2", "plane3", "switch", "balance", "power", "optimal_holdout"],
+        &["plane1", "plane2", "plane3", "switch", "balance", "power", "correlation_aware", "optimal_holdout"],
     );
 }
 

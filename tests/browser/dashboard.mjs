@@ -13,9 +13,9 @@ import { mkdir } from 'node:fs/promises';
 import path from 'node:path';
 import { chromium } from 'playwright-core';
 
-const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power'];
+const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware'];
 // Strategies with fixed per-path weights: they always have numbers (fits may fail on little data).
-const PER_PATH = new Set(['plane1', 'plane2', 'plane3', 'switch', 'balance', 'power']);
+const PER_PATH = new Set(['plane1', 'plane2', 'plane3', 'switch', 'balance', 'power', 'correlation_aware']);
 // Weights fitted on one half and evaluated on the other: far off on little data (even negative).
 const NOISY = new Set(['optimal_holdout']);
 // Big enough to be seen running for a few seconds on two cores, small enough to finish quickly.
@@ -178,7 +178,7 @@ async function checkNoiseTable(page) {
     cells: [...tr.querySelectorAll('td')].map((td) => td.textContent.trim()),
     error: tr.querySelector('.row-error')?.textContent,
   })));
-  check(JSON.stringify(rows.map((r) => r.strategy)) === JSON.stringify(STRATEGIES), 'the noise table has the 9 strategies in order');
+  check(JSON.stringify(rows.map((r) => r.strategy)) === JSON.stringify(STRATEGIES), `the noise table has the ${STRATEGIES.length} strategies in order`);
   for (const row of rows) {
     check(row.cells[0].length > 0, `${row.strategy}: its weights are described ("${row.cells[0]}")`);
     if (row.error) {

@@ -5,10 +5,12 @@
 
 import { fixed, formatCount, formatParameter, formatRms, h, showMessage } from './format.js';
 
-const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power'];
+const STRATEGIES = [
+  'plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware',
+];
 const STRATEGY_COLORS = {
   plane1: '#8c564b', plane2: '#1f77b4', plane3: '#2ca02c', switch: '#9467bd', optimal: '#d62728',
-  optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', balance: '#17becf', power: '#7f7f7f',
+  optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', balance: '#17becf', power: '#7f7f7f', correlation_aware: '#bcbd22',
 };
 // The weights plot clips the y axis to this range: with few samples a cell's fitted weights can be
 // in the hundreds, which would flatten every other cell to a line.

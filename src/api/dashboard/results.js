@@ -124,6 +124,7 @@ function describeWeights(row, spec, folds) {
     case 'optimal_cv': return describeCrossValidation(row, folds);
     case 'balance': return 'balance heuristic';
     case 'power': return 'power heuristic';
+    case 'correlation_aware': return 'correlation-aware heuristic';
     default: return '';
   }
 }

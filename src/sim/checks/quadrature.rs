@@ -364,7 +364,7 @@ mod tests {
         }
     }
 
-    /// The paper's scene: model.md expects L ≈ 26.3·10⁻⁵.
+    /// The paper's scene: docs/model.md expects L ≈ 26.3·10⁻⁵.
     #[test]
     fn paper_scene_reference_is_near_the_papers_value() {
         let s = scene(3.0, IlluminationSpec::Spot { a: 0.02, r_ls: 20.0, contrast: 1e6 / 300.0 });

@@ -1,9 +1,9 @@
 //! The N_B camera paths of one iteration and the merge grids of their vertices on planes 2 and 3.
 //!
-//! A camera path (model.md) starts at the pixel x1c = 0, leaves plane 1 in a cosine-distributed
-//! direction (Lambert transmission) to x2c, is deflected by the plane-2 lobe around its continuing
-//! direction and reaches x3c — or not, if the deflection turned it back towards plane 1 (ϑ can reach
-//! 8.5β, so a grazing path can be lost; its x3c merges with nothing).
+//! A camera path (docs/model.md §3) starts at the pixel x1c = 0, leaves plane 1 in a
+//! cosine-distributed direction (Lambert transmission) to x2c, is deflected by the plane-2 lobe
+//! around its continuing direction and reaches x3c — or not, if the deflection turned it back
+//! towards plane 1 (ϑ can reach 8.5β, so a grazing path can be lost; its x3c merges with nothing).
 //!
 //! Importance (camera energy): E_c(x1c) = E_c(x2c) = 1 (the cosine pdf cancels plane 1's BDF and
 //! the cosine of the pixel's measurement). At x3c: f2·cos θ_in / pdf_w(ω) = (cos θ_in / cos γ_out)

@@ -2,7 +2,7 @@
 //!
 //! Given a light path's vertices, each function tests the camera vertices the spatial grid offers
 //! with the exact distance test and records every merge's contribution and per-path strategy
-//! weights (model.md):
+//! weights (docs/model.md §4):
 //!
 //! * plane 3: C2 = E_c(x3c)·E_l·K/π, join path (x2c, x3c);
 //! * plane 2: C1 = E_l·K·f2(x3l→x2l, x2c→x1c), join path (x2c, x3l);
@@ -45,7 +45,7 @@ pub(crate) fn merge_plane3(
         let Some(x3c) = cam.x3 else { continue };
         if within(x3l, x3c, config.merge_radius) {
             let c = cam.energy3 * kernel(config) / PI;
-            let weights = strategy_weights(&config.scene, Technique::Plane3, cam.x2, x3c);
+            let weights = strategy_weights(config, Technique::Plane3, cam.x2, x3c, x3l);
             scratch.record(Technique::Plane3, config.cells.index(cam.x2, x3c), k, c, &weights);
             scratch.count_merge(Technique::Plane3);
         }
@@ -69,7 +69,7 @@ pub(crate) fn merge_plane2(
             // the direction to the pixel; γ is that direction's angle to the normal.
             let theta = angle_between(d, &cam.to_pixel);
             let c = kernel(config) * config.scene.lobe.bdf(theta, cam.cos1);
-            let weights = strategy_weights(&config.scene, Technique::Plane2, cam.x2, x3l);
+            let weights = strategy_weights(config, Technique::Plane2, cam.x2, x3l, x3l);
             scratch.record(Technique::Plane2, config.cells.index(cam.x2, x3l), k, c, &weights);
             scratch.count_merge(Technique::Plane2);
         }
@@ -81,7 +81,7 @@ pub(crate) fn merge_plane1(config: &SimConfig, theta: f64, x2l: [f64; 2], x3l: [
     // pixel, so the pair sum over j is N_B times one contribution.
     let energy = 1.0 / theta_over_sin(theta);
     let c = energy * kernel(config) / PI * config.camera_paths as f64;
-    let weights = strategy_weights(&config.scene, Technique::Plane1, x2l, x3l);
+    let weights = strategy_weights(config, Technique::Plane1, x2l, x3l, x3l);
     scratch.record(Technique::Plane1, config.cells.index(x2l, x3l), config.cells.len(), c, &weights);
     scratch.count_merge(Technique::Plane1);
 }

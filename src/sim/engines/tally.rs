@@ -5,13 +5,15 @@
 //! scratch and hand over only the cells they touched; an iteration adds its chunks' tallies in
 //! chunk order, so the floating-point sums do not depend on which thread ran which chunk.
 //!
-//! Contributions are tallied without the 1/(N_F·N_B) of model.md's C_s; [`IterationTally`] applies
-//! it once per iteration.
+//! Contributions are tallied without the 1/(N_F·N_B) of docs/model.md's C_s; [`IterationTally`]
+//! applies it once per iteration.
 
 use serde::{Deserialize, Serialize};
 
-use crate::sim::model::heuristics::{balance, power, technique_densities};
-use crate::sim::model::scene::Scene;
+use std::f64::consts::PI;
+
+use crate::sim::model::config::SimConfig;
+use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -30,20 +32,23 @@ pub enum PathStrategy {
     Balance,
     /// Veach's power heuristic (exponent 2) with VCM pdfs.
     Power,
+    /// The correlation-aware balance heuristic (Grittmann et al. 2021), its effective sample counts
+    /// derived for the N_F × N_B pairs of an iteration (`model::heuristics`).
+    CorrelationAware,
 }
 
 impl PathStrategy {
-    pub const ALL: [PathStrategy; 6] =
-        [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power];
+    pub const ALL: [PathStrategy; 7] =
+        [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power, Self::CorrelationAware];
     pub const COUNT: usize = Self::ALL.len();
 
-    /// The name used in results.
     /// Whether this is one of the paper's fixed cases 1–4 (a weight of one on a plane, or the
     /// switch), as opposed to a heuristic that weighs each merge by its path densities.
     pub fn is_case(self) -> bool {
         matches!(self, Self::Plane1 | Self::Plane2 | Self::Plane3 | Self::Switch)
     }
 
+    /// The name used in results.
     pub fn name(self) -> &'static str {
         match self {
             Self::Plane1 => "plane1",
@@ -52,12 +57,13 @@ impl PathStrategy {
             Self::Switch => "switch",
             Self::Balance => "balance",
             Self::Power => "power",
+            Self::CorrelationAware => "correlation_aware",
         }
     }
 }
 
-/// The three merge techniques, by the plane where the merge happens (model.md: the weights w0, w1,
-/// w2 and the contributions C0, C1, C2 are indexed the same way).
+/// The three merge techniques, by the plane where the merge happens (docs/model.md: the weights w0,
+/// w1, w2 and the contributions C0, C1, C2 are indexed the same way).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(usize)]
 pub enum Technique {
@@ -77,9 +83,19 @@ impl Technique {
     }
 }
 
-/// Weights every per-path strategy gives a merge by `technique` on the join path (x2, x3).
+/// Weights every per-path strategy gives a merge by `technique` on the join path (x2, x3), whose
+/// light path starts at `x3_light` (x3 itself, except for a plane-3 merge, whose join path takes
+/// the camera's x3c: the correlation-aware weights read the light's density where its path starts,
+/// see `model::heuristics`).
 #[inline]
-pub fn strategy_weights(scene: &Scene, technique: Technique, x2: [f64; 2], x3: [f64; 2]) -> [f64; PathStrategy::COUNT] {
+pub fn strategy_weights(
+    config: &SimConfig,
+    technique: Technique,
+    x2: [f64; 2],
+    x3: [f64; 2],
+    x3_light: [f64; 2],
+) -> [f64; PathStrategy::COUNT] {
+    let scene = &config.scene;
     let plane = technique.index();
     let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
     let inside = x3[0].hypot(x3[1]) <= scene.illumination.switch_radius();
@@ -88,8 +104,13 @@ pub fn strategy_weights(scene: &Scene, technique: Technique, x2: [f64; 2], x3: [
         2 if !inside => 1.0,
         _ => 0.0,
     };
-    let p = technique_densities(scene, x2, x3);
-    [one_hot(0), one_hot(1), one_hot(2), switch, balance(p)[plane], power(p)[plane]]
+    let geometry = JoinGeometry::new(scene, x2, x3);
+    let p = geometry.technique_densities(scene);
+    let light_start = scene.illumination.density(x3_light[0].hypot(x3_light[1]));
+    let area = PI * config.merge_radius * config.merge_radius;
+    let sharing = Sharing::new(&geometry.vertex_densities(scene), light_start, area);
+    let correlated = correlation_aware(p, &sharing, config.light_paths as f64, config.camera_paths as f64);
+    [one_hot(0), one_hot(1), one_hot(2), switch, balance(p)[plane], power(p)[plane], correlated[plane]]
 }
 
 /// Dense per-chunk accumulator, reused across chunks by one worker.
@@ -250,8 +271,9 @@ impl IterationTally {
         self.merges = merges;
     }
 
-    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of model.md as sparse (index, value) pairs in index
-    /// order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at 2K.
+    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of docs/model.md as sparse (index, value) pairs in
+    /// index order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at
+    /// 2K.
     pub fn moment_vector(&self, cells: usize) -> Vec<(usize, f64)> {
         let c = |m: usize, a: usize| self.cell_values[m * cells + a];
         let mut y = Vec::new();
@@ -278,21 +300,21 @@ mod tests {
     #[test]
     fn chunks_reduce_in_order_and_normalise() {
         let cells = 2;
-        let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25];
+        let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25, 0.125];
         let mut scratch = ChunkScratch::new(cells);
         scratch.record(Technique::Plane1, 1, cells, 4.0, &w);
         scratch.count_merge(Technique::Plane1);
-        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875]);
         scratch.count_merge(Technique::Plane3);
         let a = scratch.take();
         assert_eq!(a.entries, vec![(1, 4.0, 1), (4, 2.0, 1)], "slots sorted, counts kept");
         assert_eq!(scratch.take(), ChunkTally::default(), "take resets the scratch");
-        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75]);
+        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875]);
         let b = scratch.take();
         let t = IterationTally::from_chunks(3, cells, 0.5, [&a, &b]);
         assert_eq!(t.cell_values, vec![0.0, 2.0, 0.0, 0.0, 4.0, 0.0]);
         assert_eq!(t.cell_counts, vec![0, 1, 0, 0, 2, 0]);
-        assert_eq!(t.strategies, [2.0, 0.0, 4.0, 4.0, 3.0, 3.5]);
+        assert_eq!(t.strategies, [2.0, 0.0, 4.0, 4.0, 3.0, 3.5, 3.75]);
         assert_eq!(t.merges, [1, 0, 1]);
         // Y = (A0, A1, B): A0 = C0 − C2 = (0 − 4, 2 − 0), A1 = (0 − 4, 0), B = 4.
         assert_eq!(t.moment_vector(cells), vec![(0, -4.0), (1, 2.0), (2, -4.0), (4, 4.0)]);

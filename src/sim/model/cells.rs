@@ -1,10 +1,10 @@
 //! The cell grid over join paths: which cell α a join path (x2, x3) falls in, and each cell's
 //! bounds and neighbours.
 //!
-//! Axes (model.md): r2 = |x2|, r3 = |x3|, and φ = the angle between the vectors x2 and x3, folded to
-//! [0, π] (φ and 2π − φ give the same cell). Each radial axis is a list of edges starting at 0;
-//! cell k covers [e_k, e_{k+1}) and the last covers [e_last, ∞) (the tail cell). φ has equal bins.
-//! Cells are numbered α = (i2·n3 + i3)·nφ + iφ.
+//! Axes (docs/model.md §7): r2 = |x2|, r3 = |x3|, and φ = the angle between the vectors x2 and x3,
+//! folded to [0, π] (φ and 2π − φ give the same cell). Each radial axis is a list of edges starting
+//! at 0; cell k covers [e_k, e_{k+1}) and the last covers [e_last, ∞) (the tail cell). φ has equal
+//! bins. Cells are numbered α = (i2·n3 + i3)·nφ + iφ.
 
 /// Most cells a grid may have: the moments hold a dense (2K+1)² matrix per fold.
 pub const MAX_CELLS: usize = 256;

@@ -1,7 +1,7 @@
 //! The light's radial profile on plane 3: its density, its sampling, and its bright core.
 //!
 //! Every profile (spot, uniform, rings) is stored as rings: level `level` for r_in ≤ r < r_out.
-//! The emitted flux is normalised to Φ = 1 (model.md), so a light path's start x3l has the
+//! The emitted flux is normalised to Φ = 1 (docs/model.md), so a light path's start x3l has the
 //! density `I(|x3|)/Φ` and carries energy 1.
 //!
 //! Two samplers draw from that density: [`Illumination::sample`], one point at a time by

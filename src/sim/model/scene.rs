@@ -1,10 +1,10 @@
-//! The model scene of model.md: three parallel diffusely transmitting planes, the sharp plane-2
-//! lobe, and the light's profile on plane 3.
+//! The model scene of docs/model.md: three parallel diffusely transmitting planes, the sharp
+//! plane-2 lobe, and the light's profile on plane 3.
 //!
 //! Frames and units: plane 1 is z = 0, plane 2 is z = L2, plane 3 is z = L2 + L3; positions on a
 //! plane are 2-D `(x, y)`; directions are unit 3-D vectors of *travel* (a light particle going from
 //! plane 3 to plane 2 has a negative z component). Angles are in radians inside the core (the spec
-//! gives β in degrees). Flux is normalised to Φ = 1 (model.md, "decision").
+//! gives β in degrees). Flux is normalised to Φ = 1 (docs/model.md §2, a decision).
 
 use std::f64::consts::PI;
 
@@ -17,7 +17,7 @@ use crate::sim::math::sampling::deflect;
 
 /// The plane-2 transmission lobe.
 ///
-/// BDF (model.md): f2(ω_in, ω_out) = g(ϑ) / cos γ with g(ϑ) = exp(−ϑ²/2β²) / (2πβ²), ϑ the angle
+/// BDF (docs/model.md §1): f2(ω_in, ω_out) = g(ϑ) / cos γ with g(ϑ) = exp(−ϑ²/2β²) / (2πβ²), ϑ the angle
 /// between the incident and the scattered direction of travel, γ the angle between the scattered
 /// direction and the normal.
 ///
@@ -25,7 +25,7 @@ use crate::sim::math::sampling::deflect;
 /// around the incident direction: ϑ has the Rayleigh density (ϑ/β²)·exp(−ϑ²/2β²), so the exact
 /// solid-angle pdf of the sampled direction is `pdf_w(ϑ) = g(ϑ)·ϑ/sin ϑ`. A particle scattered this
 /// way carries the throughput f2·cos γ / pdf_w = sin ϑ/ϑ (≈ 1 − ϑ²/6): we keep this exact factor
-/// rather than model.md's "energy 1", which is its small-angle limit.
+/// rather than the "energy 1" of the model's first reading, its small-angle limit (docs/model.md §3).
 #[derive(Debug, Clone, Copy)]
 pub struct Lobe {
     /// β in radians.

@@ -12,7 +12,8 @@
 //! 5: fitted and scored on all iterations, as in the paper — labelled `in_sample`, optimistic),
 //! `optimal_holdout` (K-fold cross-fitted at the spec's λ, [`super::crossfit`]), `optimal_cv` (λ
 //! chosen on the grid by the cross-fitted RMS; its figures are the cross-fitted ones at that λ, the
-//! in-sample ones are kept beside them), then the per-path heuristics (`balance`, `power`, …).
+//! in-sample ones are kept beside them), then the per-path heuristics (`balance`, `power`,
+//! `correlation_aware`).
 //!
 //! The *recommended* weights are those of `optimal_cv`'s λ fitted on all iterations (what a user
 //! takes into a renderer), with jackknife standard errors; the *gain* compares them with the best

@@ -33,6 +33,8 @@ pub enum Strategy {
     Balance,
     /// Veach's power heuristic with VCM pdfs.
     Power,
+    /// The correlation-aware balance heuristic (Grittmann et al. 2021) for this estimator.
+    CorrelationAware,
 }
 
 impl Strategy {
@@ -45,6 +47,7 @@ impl Strategy {
             PathStrategy::Switch => Self::Switch,
             PathStrategy::Balance => Self::Balance,
             PathStrategy::Power => Self::Power,
+            PathStrategy::CorrelationAware => Self::CorrelationAware,
         }
     }
 
@@ -67,6 +70,7 @@ impl Strategy {
             Self::OptimalCv => "optimal_cv",
             Self::Balance => "balance",
             Self::Power => "power",
+            Self::CorrelationAware => "correlation_aware",
         }
     }
 }
@@ -83,7 +87,14 @@ mod tests {
 
     #[test]
     fn names_are_the_serialised_names_and_path_strategies_keep_theirs() {
-        for s in [Strategy::Plane1, Strategy::Switch, Strategy::OptimalHoldout, Strategy::OptimalCv, Strategy::Power] {
+        for s in [
+            Strategy::Plane1,
+            Strategy::Switch,
+            Strategy::OptimalHoldout,
+            Strategy::OptimalCv,
+            Strategy::Power,
+            Strategy::CorrelationAware,
+        ] {
             assert_eq!(serde_json::to_value(s).unwrap(), s.name());
         }
         for p in PathStrategy::ALL {

@@ -115,10 +115,15 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
         && g.value - 1.0 < 2.0 * g.stderr.unwrap_or(f64::INFINITY)
     {
         let se = g.stderr.map_or("unknown".to_string(), |s| format!("{s:.2}"));
+        let verdict = if g.value + 2.0 * g.stderr.unwrap_or(f64::INFINITY) < 1.0 {
+            "noisier than"
+        } else {
+            "not measurably better than"
+        };
         out.push(Warning {
             code: WarningCode::NoGain,
             message: format!(
-                "the recommended weights ({}) are not measurably better than {}: variance ratio {:.2} ± {se}, not 2 standard errors above 1",
+                "the recommended weights ({}) are {verdict} {}: variance ratio {:.2} ± {se}, not 2 standard errors above 1",
                 g.strategy, g.versus, g.value
             ),
             strategy: Some(g.strategy),

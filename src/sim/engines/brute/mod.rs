@@ -1,10 +1,10 @@
 //! The streamed light paths of one chunk: the hot loop of optimis.
 //!
-//! Each light path (model.md) starts at x3l with density I/Φ, leaves plane 3 in a cosine-distributed
-//! direction to x2l, is deflected by the plane-2 lobe and reaches plane 1 at x1l. Its energy is 1
-//! up to x2l, and sin ϑ/ϑ after the lobe (the exact-pdf throughput, see [`super::scene::Lobe`]).
-//! It merges with every camera vertex within R (the contributions are in [`super::merge`]). Paths
-//! are never stored: each is generated, tested and dropped.
+//! Each light path (docs/model.md §3) starts at x3l with density I/Φ, leaves plane 3 in a
+//! cosine-distributed direction to x2l, is deflected by the plane-2 lobe and reaches plane 1 at
+//! x1l. Its energy is 1 up to x2l, and sin ϑ/ϑ after the lobe (the exact-pdf throughput, see
+//! [`super::scene::Lobe`]). It merges with every camera vertex within R (the contributions are in
+//! [`super::merge`]). Paths are never stored: each is generated, tested and dropped.
 //!
 //! Speed: the loop allocates nothing, takes no lock and dispatches nothing dynamically. Paths go in
 //! blocks of `BLOCK` laid out as arrays, and everything that every path needs is branch-free
