@@ -152,6 +152,9 @@ pub fn path_rows(moments: &Moments) -> Vec<NoiseRow> {
     PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s)).collect()
 }
 
+/// Jackknife standard errors of each cell's (w0, w1, w2).
+pub type WeightErrors = Vec<[f64; 3]>;
+
 /// The weights a result recommends: `optimal_cv`'s λ, fitted on all iterations.
 #[derive(Debug, Clone)]
 pub struct Recommended {
@@ -159,7 +162,7 @@ pub struct Recommended {
     pub lambda: f64,
     pub fit: Fit,
     /// Jackknife standard error of each cell's (w0, w1, w2) (see [`super::crossfit`]).
-    pub stderr: Option<Vec<[f64; 3]>>,
+    pub stderr: Option<WeightErrors>,
     /// The cross-fit at λ whose pooled sums are the strategy's honest figures.
     pub cross_fit: CrossFit,
 }
@@ -266,7 +269,7 @@ pub fn weights_at(
     grid: &CellGrid,
     solver: &SolverOptions,
     lambda: f64,
-) -> Result<(Fit, Option<Vec<[f64; 3]>>), SolveError> {
+) -> Result<(Fit, Option<WeightErrors>), SolveError> {
     let cf = CrossFitting::new(moments);
     let all = fit(&cf.all, grid, &solver.fixed, lambda)?;
     let stderr = cross_fit(&cf, grid, &solver.fixed, lambda).ok().and_then(|c| c.weight_stderr());

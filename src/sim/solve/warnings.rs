@@ -97,7 +97,7 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
         }
         if let Some(se) = &r.stderr {
             let unstable: Vec<usize> =
-                (0..se.len()).filter(|&a| se[a].iter().any(|&s| !(s <= UNSTABLE_STDERR))).collect();
+                (0..se.len()).filter(|&a| se[a].iter().any(|&s| s > UNSTABLE_STDERR || s.is_nan())).collect();
             if !unstable.is_empty() {
                 out.push(Warning {
                     code: WarningCode::UnstableFit,
