@@ -43,8 +43,11 @@ const MAX_BATCH_CAMERAS: u64 = 1 << 20;
 /// to report progress and honour cancellation promptly, and few enough camera paths in memory.
 fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     if let Engine::Restricted(_) = config.engine {
-        // Tens of microseconds per iteration: batches of 256 still report many times a second.
-        return 256;
+        // Tens of microseconds per iteration: batches of 1024 still report many times a second
+        // (about 30 ms each on two cores), and each batch's pieces cost a fresh moments value and
+        // an exact merge of its K folds — with K = 10 at 256 iterations a batch that overhead was
+        // a third of the run (docs/results.md §6).
+        return 1024;
     }
     let chunks = config.chunks().max(1);
     let wanted = (4 * threads as u64).div_ceil(chunks);
@@ -164,7 +167,7 @@ fn restricted_batch(
     // and a fresh worker.
     (0..(batch.end - batch.start) as usize)
         .into_par_iter()
-        .with_min_len(16)
+        .with_min_len(64)
         .try_fold(
             || (Moments::new(config), worker()),
             |(mut moments, mut w), i| {
