@@ -87,8 +87,9 @@ function weightSeries(weights) {
         .map((w) => w[component]);
       return values.length ? values.reduce((a, b) => a + b, 0) / values.length : null;
     });
-    const lo = mean('w1').map((w, i) => (w === null ? null : w - 2 * (spread(i) ?? NaN)));
-    const hi = mean('w1').map((w, i) => (w === null ? null : w + 2 * (spread(i) ?? NaN)));
+    const w1 = mean('w1');
+    const lo = w1.map((w, i) => (w === null ? null : w - 2 * (spread(i) ?? NaN)));
+    const hi = w1.map((w, i) => (w === null ? null : w + 2 * (spread(i) ?? NaN)));
     // The jackknife SE of w₁ (root mean square over the φ bins), for the ± 2σ lines.
     function spread(i) {
       const ses = weights
@@ -97,7 +98,7 @@ function weightSeries(weights) {
       return ses.length ? Math.sqrt(ses.reduce((a, b) => a + b * b, 0) / ses.length) : null;
     }
     const finite = (v) => (v === null || Number.isNaN(v) ? null : v);
-    return { band, w1: mean('w1'), w2: mean('w2'), w1lo: lo.map(finite), w1hi: hi.map(finite) };
+    return { band, w1, w2: mean('w2'), w1lo: lo.map(finite), w1hi: hi.map(finite) };
   });
   return { x, tail: r3Cells.at(-1), tailX: x.at(-1), bands };
 }

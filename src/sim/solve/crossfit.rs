@@ -19,7 +19,7 @@ use super::options::FixedWeights;
 use super::solver::{Fit, SolveError, fit};
 use super::ystats::YStats;
 use crate::sim::model::cells::CellGrid;
-use crate::sim::stats::moments::Moments;
+use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// The moments as the cross-fits need them: all iterations, each fold, and each fold's complement.
 #[derive(Debug, Clone)]
@@ -32,9 +32,10 @@ pub struct CrossFitting {
 }
 
 impl CrossFitting {
-    pub fn new(moments: &Moments) -> Self {
+    /// From `moments` and their folds added together (`pooled`, which the caller has anyway).
+    pub fn new(moments: &Moments, pooled: &FoldMoments) -> Self {
         let cells = moments.cells;
-        let all = YStats::from_fold(&moments.pooled(), cells);
+        let all = YStats::from_fold(pooled, cells);
         let test: Vec<YStats> = moments.folds.iter().map(|f| YStats::from_fold(f, cells)).collect();
         // The complements in floating point: each is ≥ (K − 1)/K of the total, so the subtraction
         // loses nothing the covariance's own cancellation does not.

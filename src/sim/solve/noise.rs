@@ -19,7 +19,6 @@
 //! takes into a renderer), with jackknife standard errors; the *gain* compares them with the best
 //! per-path strategy.
 
-use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::{CrossFit, CrossFitting, cross_fit, jackknife_se, select_lambda};
@@ -193,19 +192,23 @@ pub struct NoiseTable {
     /// The recommended weights, or why there are none.
     pub recommended: Result<Recommended, String>,
     pub gain: Option<Gain>,
+    /// All folds added together, and the cross-fitting sets: kept for the report's warnings, merge
+    /// rates and `?lambda=` weights, so that nothing pools the folds twice.
+    pub pooled: FoldMoments,
+    pub cross_fitting: CrossFitting,
 }
 
 /// Computes the noise table of `moments` with the given solver options.
 pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -> NoiseTable {
-    let pooled_fold = moments.pooled();
-    let row = |s| path_row(&pooled_fold, s);
+    let pooled = moments.pooled();
+    let row = |s| path_row(&pooled, s);
     let mut rows = vec![
         row(PathStrategy::Plane1),
         row(PathStrategy::Plane2),
         row(PathStrategy::Plane3),
         row(PathStrategy::Switch),
     ];
-    let cf = CrossFitting::new(moments);
+    let cf = CrossFitting::new(moments, &pooled);
 
     // Case 5: fitted and evaluated on all iterations.
     let optimal = fit(&cf.all, grid, &solver.fixed, solver.lambda);
@@ -237,7 +240,7 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
 
     rows.extend(PathStrategy::ALL.iter().filter(|s| !s.is_case()).map(|&s| row(s)));
     let gain = recommended.as_ref().ok().and_then(|r| gain(moments, r));
-    NoiseTable { rows, optimal, recommended, gain }
+    NoiseTable { rows, optimal, recommended, gain, pooled, cross_fitting: cf }
 }
 
 /// The row of weights `f` scored on the iterations they were fitted to.
@@ -265,14 +268,13 @@ fn recommend(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -> Resu
 /// The in-sample fit of all iterations at λ with jackknife standard errors (the weights table a
 /// `?lambda=` query asks for).
 pub fn weights_at(
-    moments: &Moments,
+    cf: &CrossFitting,
     grid: &CellGrid,
     solver: &SolverOptions,
     lambda: f64,
 ) -> Result<(Fit, Option<WeightErrors>), SolveError> {
-    let cf = CrossFitting::new(moments);
     let all = fit(&cf.all, grid, &solver.fixed, lambda)?;
-    let stderr = cross_fit(&cf, grid, &solver.fixed, lambda).ok().and_then(|c| c.weight_stderr());
+    let stderr = cross_fit(cf, grid, &solver.fixed, lambda).ok().and_then(|c| c.weight_stderr());
     Ok((all, stderr))
 }
 
@@ -320,20 +322,17 @@ pub struct MergeRate {
 
 /// Merge events per iteration at planes 1, 2, 3.
 pub fn merge_rates(moments: &Moments) -> [MergeRate; 3] {
-    let f = moments.pooled();
+    merge_rates_of(&moments.pooled())
+}
+
+/// Merge events per iteration at planes 1, 2, 3 of pooled folds.
+pub fn merge_rates_of(f: &FoldMoments) -> [MergeRate; 3] {
     let m = f.iterations as f64;
     std::array::from_fn(|p| {
         let mean = f.merges[p] as f64 / m;
         let var = (f.merges_sq[p] as f64 / m - mean * mean).max(0.0) * m / (m - 1.0).max(1.0);
         MergeRate { mean, stderr: (var / m).sqrt() }
     })
-}
-
-/// Evaluates weights `w` (length 2K) on the pooled moments: (M, Σ C, Σ C²).
-pub fn evaluate_weights(moments: &Moments, w: &DVector<f64>) -> (f64, f64, f64) {
-    let stats = YStats::from_fold(&moments.pooled(), moments.cells);
-    let (s1, s2) = stats.evaluate(w);
-    (stats.m, s1, s2)
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::noise::{Gain, MergeRate, NoiseRow, merge_rates, noise_table, weights_at};
+use super::noise::{Gain, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
 use super::warnings::{Warning, warnings};
@@ -135,7 +135,7 @@ pub fn build_report(
     let recommended =
         table.recommended.as_ref().ok().map(|r| RecommendedWeights { strategy: r.strategy, lambda: r.lambda });
     let (weights, weights_fit, solve_error) = match (weights_lambda, &table.recommended) {
-        (Some(lambda), _) => match weights_at(moments, grid, solver, lambda) {
+        (Some(lambda), _) => match weights_at(&table.cross_fitting, grid, solver, lambda) {
             Ok((fit, se)) => (
                 weight_rows(grid, &fit, se.as_deref()),
                 Some(WeightsFit { strategy: Strategy::Optimal, lambda, fitted_on_all_iterations: true }),
@@ -150,7 +150,7 @@ pub fn build_report(
         ),
         (None, Err(e)) => (Vec::new(), None, Some(e.clone())),
     };
-    let [plane1, plane2, plane3] = merge_rates(moments);
+    let [plane1, plane2, plane3] = merge_rates_of(&table.pooled);
     RunReport {
         iterations: moments.iterations(),
         folds: moments.fold_count(),

@@ -10,7 +10,7 @@ use super::noise::{NoiseRow, NoiseTable, central_3_4, power_sums};
 use super::solver::CellStatus;
 use super::strategy::Strategy;
 use crate::sim::engines::tally::PathStrategy;
-use crate::sim::stats::moments::Moments;
+use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// What a warning is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -130,22 +130,21 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
             cells: Vec::new(),
         });
     }
-    out.extend(heavy_tails(moments, &table.rows));
+    out.extend(heavy_tails(&table.pooled, &table.rows));
     out.extend(in_sample_gap(&table.rows));
     out
 }
 
 /// A [`WarningCode::HeavyTail`] for every per-path strategy whose RMS (and so its SE) is too
 /// uncertain.
-fn heavy_tails(moments: &Moments, rows: &[NoiseRow]) -> Vec<Warning> {
-    let pooled = moments.pooled();
+fn heavy_tails(pooled: &FoldMoments, rows: &[NoiseRow]) -> Vec<Warning> {
     let m = pooled.iterations as f64;
     PathStrategy::ALL
         .iter()
         .filter_map(|&s| {
             let row = rows.iter().find(|r| r.strategy == Strategy::of_path(s))?;
             let relative = row.rms_percent_stderr? / row.rms_percent?;
-            let sums = power_sums(&pooled, s);
+            let sums = power_sums(pooled, s);
             let mean = sums[0] / m;
             let m2 = sums[1] / m - mean * mean;
             let (_, m4) = central_3_4(m, sums);
