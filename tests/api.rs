@@ -81,6 +81,8 @@ async fn submit_poll_and_read_the_result() {
     assert_eq!(in_sample["noise_table"], result["noise_table"], "the noise table does not depend on the weights shown");
     let bad = assert_problem(server.get(&format!("/v1/jobs/{id}/result?lambda=-1")).await, 422);
     assert!(bad.to_string().contains("lambda"), "{bad}");
+    let unparsable = assert_problem(server.get(&format!("/v1/jobs/{id}/result?lambda=abc")).await, 422);
+    assert_eq!(unparsable["field"], "lambda", "{unparsable}");
     let unknown = assert_problem(server.get(&format!("/v1/jobs/{id}/result?lamda=1")).await, 422);
     assert!(unknown["detail"].as_str().unwrap().contains("lamda"), "{unknown}");
     let job = server.job(id).await;

@@ -239,7 +239,7 @@ fn query_problem(rejection: QueryRejection) -> ApiError {
     let text = rejection.body_text();
     let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
     match reason.split_once(": ") {
-        Some((name, message)) if ["state", "limit", "cursor"].contains(&name) => {
+        Some((name, message)) if ["state", "limit", "cursor", "lambda"].contains(&name) => {
             ApiError::Invalid { field: name.into(), message: message.into() }
         }
         _ => ApiError::Invalid { field: "query".into(), message: reason.into() },
@@ -292,9 +292,9 @@ pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json
     get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
         (status = 200, description = "Results", body = JobResult),
-        (status = 400, description = "A bad query", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]

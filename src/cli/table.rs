@@ -62,6 +62,9 @@ pub fn write_report(
         if report.recommended.is_some_and(|r| r.strategy == row.strategy) {
             notes.push("recommended".to_string());
         }
+        if !row.respects_fixed {
+            notes.push("outside the fixed weights".to_string());
+        }
         if let Some(e) = &row.error {
             notes.push(e.clone());
         }

@@ -106,12 +106,14 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
     })
 }
 
-/// The strategy with the lowest RMS among `rows` whose figures are honest: the in-sample `optimal`
-/// row is scored on the data it was fitted to, so it is left out; every other row competes on its
-/// honest figure (the fitted `optimal_holdout` and `optimal_cv` on their cross-fitted RMS).
+/// The strategy with the lowest RMS among `rows` whose figures are honest and whose weights keep the
+/// solver's fixed weights: the in-sample `optimal` row is scored on the data it was fitted to, so it
+/// is left out, and so is a heuristic that uses merges the fixed weights exclude (it answers another
+/// question; a `fixed_weights_cost` warning reports it when it is less noisy); every other row
+/// competes on its honest figure (`optimal_holdout` and `optimal_cv` on their cross-fitted RMS).
 pub(crate) fn best_strategy(rows: &[NoiseRow]) -> Option<BestStrategy> {
     rows.iter()
-        .filter(|r| !r.in_sample)
+        .filter(|r| !r.in_sample && r.respects_fixed)
         .filter_map(|r| match (r.luminance, r.rms_percent) {
             (Some(l), Some(rms)) if rms > 0.0 => {
                 Some(BestStrategy { strategy: r.strategy, luminance: l, rms_percent: rms })
@@ -124,6 +126,24 @@ pub(crate) fn best_strategy(rows: &[NoiseRow]) -> Option<BestStrategy> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn best_leaves_out_in_sample_rows_and_rows_outside_the_fixed_weights() {
+        use crate::sim::solve::strategy::Strategy;
+        let row = |strategy, rms, in_sample, respects_fixed| NoiseRow {
+            in_sample,
+            respects_fixed,
+            ..NoiseRow::from_sums(strategy, 4.0, 4.0, 4.0 * (1.0 + 0.75 * rms * rms), None)
+        };
+        let rows = [
+            row(Strategy::Switch, 3.0, false, true),
+            row(Strategy::Optimal, 1.0, true, true),
+            row(Strategy::OptimalCv, 2.0, false, true),
+            row(Strategy::CorrelationAware, 0.5, false, false),
+        ];
+        assert!(rows[3].rms_percent < rows[2].rms_percent && rows[1].rms_percent < rows[2].rms_percent);
+        assert_eq!(best_strategy(&rows).unwrap().strategy, Strategy::OptimalCv);
+    }
 
     #[test]
     fn timestamps_are_rfc3339_utc() {

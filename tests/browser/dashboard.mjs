@@ -197,6 +197,10 @@ async function checkNoiseTable(page) {
   check(marks.optimal.includes('in-sample') && STRATEGIES.every((s) => s === 'optimal' || !marks[s].includes('in-sample')),
     'only the paper\'s optimal row is marked in-sample');
   check(marks.optimal_cv.includes('recommended'), 'the cross-validated optimum is marked recommended');
+  const outside = STRATEGIES.filter((s) => marks[s].includes('outside fixed weights'));
+  check(outside.join() === 'plane1,balance,power,correlation_aware',
+    `the rows that merge at the pixel are marked outside the fixed weights w0 = 0 (${outside.join(', ')})`);
+  check(!outside.some((s) => marks[s].includes('best')), 'no row outside the fixed weights is marked best');
   const gain = await page.locator('[data-ref="gain"]').textContent();
   check(gain.includes('variance ratio'), `the gain is shown ("${gain.slice(0, 80)}…")`);
   const warnings = await page.locator('[data-ref="warnings"] li code').allTextContents();

@@ -105,9 +105,10 @@ function noiseRow(row, spec, best, recommended, folds) {
     ];
   return h('tr', { 'data-strategy': row.strategy, class: row.strategy === best ? 'best' : null },
     h('th', { scope: 'row' }, h('code', {}, row.strategy),
-      row.strategy === best ? h('span', { class: 'best-mark', title: 'Lowest honest RMS (in-sample fits are left out)' }, 'best') : null,
+      row.strategy === best ? h('span', { class: 'best-mark', title: "Lowest honest RMS among the rows that keep the solver's fixed weights (in-sample fits are left out)" }, 'best') : null,
       row.strategy === recommended ? h('span', { class: 'recommended-mark', title: 'The weights table and chart show these weights' }, 'recommended') : null,
-      row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)' }, 'in-sample') : null),
+      row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)' }, 'in-sample') : null,
+      row.respects_fixed === false ? h('span', { class: 'outside-mark', title: "Does not keep the solver's fixed weights: shown for comparison, never best" }, 'outside fixed weights') : null),
     h('td', {}, describeWeights(row, spec, folds)),
     ...numbers);
 }
@@ -155,7 +156,7 @@ function describeCrossValidation(row, folds) {
 function describeGain(gain) {
   if (!gain) return '';
   const se = gain.stderr === null ? '' : ` ± ${fixed(gain.stderr, 2)}`;
-  return `Gain of ${gain.strategy} over the best per-path strategy (${gain.versus}): variance ratio ${fixed(gain.value, 2)}${se} (jackknife over the folds).`;
+  return `Gain of ${gain.strategy} over the best per-path strategy within the fixed weights (${gain.versus}): variance ratio ${fixed(gain.value, 2)}${se} (jackknife over the folds).`;
 }
 
 function describeMerges(merges) {

@@ -87,7 +87,7 @@ pub fn measure(config: &SimConfig, seed: u64, first: u64, blocks: u64, block_len
     for b in 0..blocks {
         let range: Range<u64> = first + b * block_len..first + (b + 1) * block_len;
         let block = run(config, seed, range);
-        per_block.push(path_rows(&block));
+        per_block.push(path_rows(&block, &Default::default()));
         block_merges.push(merge_rates(&block).map(|r| r.mean));
         total.merge(&block).expect("consecutive blocks of one run merge");
     }

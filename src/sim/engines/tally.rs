@@ -48,6 +48,20 @@ impl PathStrategy {
         matches!(self, Self::Plane1 | Self::Plane2 | Self::Plane3 | Self::Switch)
     }
 
+    /// The weights (w0, w1, w2) this strategy gives every join path, where they do not depend on
+    /// the path (`None` where they do): what decides whether it keeps a solver's fixed weights.
+    /// The switch never merges at the pixel (w0 = 0) but chooses w1 or w2 by r3; the heuristics
+    /// give every technique a share that depends on the path.
+    pub fn constant_weights(self) -> [Option<f64>; 3] {
+        match self {
+            Self::Plane1 => [Some(1.0), Some(0.0), Some(0.0)],
+            Self::Plane2 => [Some(0.0), Some(1.0), Some(0.0)],
+            Self::Plane3 => [Some(0.0), Some(0.0), Some(1.0)],
+            Self::Switch => [Some(0.0), None, None],
+            Self::Balance | Self::Power | Self::CorrelationAware => [None, None, None],
+        }
+    }
+
     /// The name used in results.
     pub fn name(self) -> &'static str {
         match self {

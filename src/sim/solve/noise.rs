@@ -27,7 +27,7 @@ use super::strategy::Strategy;
 use super::ystats::YStats;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
-use crate::sim::solve::options::SolverOptions;
+use crate::sim::solve::options::{FixedWeights, SolverOptions};
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// One row of the noise table. Keys are stable (dashboards depend on them); a value that cannot be
@@ -57,7 +57,24 @@ pub struct NoiseRow {
     /// `optimal_cv`: the in-sample RMS% (too small).
     #[serde(default)]
     pub in_sample_rms_percent: Option<f64>,
+    /// Whether the row's weights keep the solver's fixed weights (`solver.fixed`). A per-path
+    /// strategy that does not — e.g. `balance`, which merges at the pixel while the paper fixes
+    /// w0 = 0 — is shown for comparison but is neither "best" nor the gain's reference: it answers
+    /// another question than the one the fixed weights ask (a `fixed_weights_cost` warning says when
+    /// it is less noisy). Fitted rows keep them by construction.
+    #[serde(default = "keeps")]
+    pub respects_fixed: bool,
     pub error: Option<String>,
+}
+
+fn keeps() -> bool {
+    true
+}
+
+/// Whether `strategy` gives every join path the weights `fixed` fixes.
+pub fn respects_fixed(strategy: PathStrategy, fixed: &FixedWeights) -> bool {
+    let constant = strategy.constant_weights();
+    [fixed.w0, fixed.w1, fixed.w2].iter().zip(constant).all(|(want, has)| want.is_none() || *want == has)
 }
 
 impl NoiseRow {
@@ -73,6 +90,7 @@ impl NoiseRow {
             in_sample_luminance: None,
             in_sample_luminance_stderr: None,
             in_sample_rms_percent: None,
+            respects_fixed: true,
             error: Some(error),
         }
     }
@@ -108,6 +126,7 @@ impl NoiseRow {
             in_sample_luminance: None,
             in_sample_luminance_stderr: None,
             in_sample_rms_percent: None,
+            respects_fixed: true,
             error: (mean == 0.0).then(|| "the mean is zero: no merge events for this strategy".to_string()),
         }
     }
@@ -139,16 +158,19 @@ pub(crate) fn power_sums(fold: &FoldMoments, strategy: PathStrategy) -> [f64; 4]
 }
 
 /// The row of a per-path strategy from its power sums.
-fn path_row(fold: &FoldMoments, strategy: PathStrategy) -> NoiseRow {
+fn path_row(fold: &FoldMoments, strategy: PathStrategy, fixed: &FixedWeights) -> NoiseRow {
     let s = power_sums(fold, strategy);
     let m = fold.iterations as f64;
-    NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+    NoiseRow {
+        respects_fixed: respects_fixed(strategy, fixed),
+        ..NoiseRow::from_sums(Strategy::of_path(strategy), m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+    }
 }
 
 /// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
-pub fn path_rows(moments: &Moments) -> Vec<NoiseRow> {
+pub fn path_rows(moments: &Moments, fixed: &FixedWeights) -> Vec<NoiseRow> {
     let pooled = moments.pooled();
-    PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s)).collect()
+    PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s, fixed)).collect()
 }
 
 /// Jackknife standard errors of each cell's (w0, w1, w2).
@@ -166,7 +188,8 @@ pub struct Recommended {
     pub cross_fit: CrossFit,
 }
 
-/// Variance of the best per-path strategy over the recommended weights' cross-fitted variance.
+/// Variance of the best per-path strategy (of those keeping the solver's fixed weights) over the
+/// recommended weights' cross-fitted variance.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Gain {
@@ -177,7 +200,8 @@ pub struct Gain {
     /// two stay paired on the same iterations (a fold of unusual iterations moves numerator and
     /// denominator together). Null with fewer than two folds holding iterations.
     pub stderr: Option<f64>,
-    /// The per-path strategy compared against (lowest RMS among them).
+    /// The per-path strategy compared against (lowest RMS among those that keep the solver's fixed
+    /// weights, `respects_fixed` in the noise table).
     pub versus: Strategy,
     /// The fitted strategy whose weights are recommended.
     pub strategy: Strategy,
@@ -191,7 +215,10 @@ pub struct NoiseTable {
     pub optimal: Result<Fit, SolveError>,
     /// The recommended weights, or why there are none.
     pub recommended: Result<Recommended, String>,
+    /// Against the best per-path strategy that keeps the solver's fixed weights.
     pub gain: Option<Gain>,
+    /// Against the best per-path strategy that does not (what the fixed weights cost).
+    pub unconstrained: Option<Gain>,
     /// All folds added together, and the cross-fitting sets: kept for the report's warnings, merge
     /// rates and `?lambda=` weights, so that nothing pools the folds twice.
     pub pooled: FoldMoments,
@@ -201,7 +228,7 @@ pub struct NoiseTable {
 /// Computes the noise table of `moments` with the given solver options.
 pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -> NoiseTable {
     let pooled = moments.pooled();
-    let row = |s| path_row(&pooled, s);
+    let row = |s| path_row(&pooled, s, &solver.fixed);
     let mut rows = vec![
         row(PathStrategy::Plane1),
         row(PathStrategy::Plane2),
@@ -239,8 +266,10 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
     });
 
     rows.extend(PathStrategy::ALL.iter().filter(|s| !s.is_case()).map(|&s| row(s)));
-    let gain = recommended.as_ref().ok().and_then(|r| gain(moments, r));
-    NoiseTable { rows, optimal, recommended, gain, pooled, cross_fitting: cf }
+    let keeps = |s: PathStrategy| respects_fixed(s, &solver.fixed);
+    let against = |inside: bool| recommended.as_ref().ok().and_then(|r| gain(moments, r, |s| keeps(s) == inside));
+    let (gain, unconstrained) = (against(true), against(false));
+    NoiseTable { rows, optimal, recommended, gain, unconstrained, pooled, cross_fitting: cf }
 }
 
 /// The row of weights `f` scored on the iterations they were fitted to.
@@ -278,8 +307,9 @@ pub fn weights_at(
     Ok((all, stderr))
 }
 
-/// The gain of the recommended weights over the best per-path strategy, with its jackknife SE.
-fn gain(moments: &Moments, r: &Recommended) -> Option<Gain> {
+/// The gain of the recommended weights over the best per-path strategy among `candidates`, with its
+/// jackknife SE.
+fn gain(moments: &Moments, r: &Recommended, candidates: impl Fn(PathStrategy) -> bool) -> Option<Gain> {
     let variance = |[m, s1, s2]: [f64; 3]| (m >= 2.0).then(|| sample_variance(m, s1, s2));
     let fixed_sums = |s: PathStrategy, left_out: Option<usize>| {
         let mut t = [0.0; 3];
@@ -298,6 +328,7 @@ fn gain(moments: &Moments, r: &Recommended) -> Option<Gain> {
     };
     let versus = PathStrategy::ALL
         .iter()
+        .filter(|&&s| candidates(s))
         .filter_map(|&s| relative(s).filter(|v| v.is_finite()).map(|v| (s, v)))
         .min_by(|a, b| a.1.total_cmp(&b.1))?
         .0;
@@ -372,6 +403,21 @@ mod tests {
             (mean_se / spread - 1.0).abs() < 4.0 / (2.0 * reps as f64).sqrt(),
             "delta SE {mean_se} vs spread {spread}"
         );
+    }
+
+    #[test]
+    fn a_strategy_keeps_fixed_weights_only_if_it_gives_them_to_every_path() {
+        let paper = FixedWeights { w0: Some(0.0), w1: None, w2: None };
+        let keeps: Vec<&str> =
+            PathStrategy::ALL.iter().filter(|&&s| respects_fixed(s, &paper)).map(|s| s.name()).collect();
+        assert_eq!(keeps, ["plane2", "plane3", "switch"]);
+        assert!(PathStrategy::ALL.iter().all(|&s| respects_fixed(s, &FixedWeights::default())));
+        let half = FixedWeights { w0: None, w1: None, w2: Some(0.5) };
+        assert!(PathStrategy::ALL.iter().all(|&s| !respects_fixed(s, &half)));
+        let plane2 = FixedWeights { w0: Some(0.0), w1: Some(1.0), w2: None };
+        let keeps: Vec<&str> =
+            PathStrategy::ALL.iter().filter(|&&s| respects_fixed(s, &plane2)).map(|s| s.name()).collect();
+        assert_eq!(keeps, ["plane2"]);
     }
 
     #[test]

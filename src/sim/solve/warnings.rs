@@ -29,6 +29,9 @@ pub enum WarningCode {
     HeavyTail,
     /// The in-sample `optimal` row is far from its cross-fitted counterpart.
     InSampleOptimistic,
+    /// A per-path strategy outside the solver's fixed weights is measurably less noisy than the
+    /// recommended weights: the constraint costs noise.
+    FixedWeightsCost,
 }
 
 /// One warning.
@@ -127,6 +130,20 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
                 g.strategy, g.versus, g.value
             ),
             strategy: Some(g.strategy),
+            cells: Vec::new(),
+        });
+    }
+    if let Some(g) = table.unconstrained
+        && let Some(se) = g.stderr
+        && g.value + 2.0 * se < 1.0
+    {
+        out.push(Warning {
+            code: WarningCode::FixedWeightsCost,
+            message: format!(
+                "{} does not keep the solver's fixed weights but is less noisy than the recommended weights ({}): variance ratio {:.2} ± {se:.2}; if your renderer can use its merges, free the fixed weights (e.g. \"solver\": {{\"fixed\": {{\"w0\": null}}}})",
+                g.versus, g.strategy, g.value
+            ),
+            strategy: Some(g.versus),
             cells: Vec::new(),
         });
     }
