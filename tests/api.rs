@@ -402,3 +402,41 @@ async fn metrics_show_a_running_job_progressing() {
     assert_eq!(sample(&text, "optimis_jobs{state=\"cancelled\"}"), Some(1.0));
     server.stop().await;
 }
+
+/// Issue 14: `POST /v1/jobs/{id}/predict` answers the noise table at another budget from a job with
+/// noise components, in the shape of a job's noise table; a job without components is a 409 that
+/// says how to get them, and a bad budget a 422 naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn predict_answers_another_budget_from_the_noise_components() {
+    let server = TestServer::start().await;
+    let mut spec = small_job(40, 5);
+    spec["noise_components"] = json!(true);
+    let id = server.submit_and_wait(&spec).await;
+    let reply =
+        server.post(&format!("/v1/jobs/{id}/predict"), &json!({ "light_paths": 40_000, "camera_paths": 100 })).await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    let p = reply.json();
+    assert_eq!(p["job_id"], id);
+    assert_eq!(p["budget"], json!({ "light_paths": 40_000, "camera_paths": 100 }));
+    assert_eq!(p["measured"], json!({ "light_paths": 20_000, "camera_paths": 200 }));
+    let names: Vec<&str> =
+        p["noise_table"].as_array().unwrap().iter().map(|r| r["strategy"].as_str().unwrap()).collect();
+    assert_eq!(names, ["plane1", "plane2", "plane3", "switch", "balance", "power", "correlation_aware", "optimal_cv"]);
+    assert!(p["noise_table"][0]["rms_percent"].as_f64().unwrap() > 0.0);
+    assert!(p["noise_table"][6]["error"].as_str().unwrap().contains("N_F and N_B"));
+
+    let plain = server.submit_and_wait(&small_job(4, 6)).await;
+    let refused = assert_problem(
+        server.post(&format!("/v1/jobs/{plain}/predict"), &json!({ "light_paths": 2, "camera_paths": 2 })).await,
+        409,
+    );
+    assert!(refused["detail"].as_str().unwrap().contains("noise_components"), "{refused}");
+    let bad = assert_problem(
+        server.post(&format!("/v1/jobs/{id}/predict"), &json!({ "light_paths": 0, "camera_paths": 2 })).await,
+        422,
+    );
+    assert_eq!(bad["field"], "light_paths", "{bad}");
+    let unknown =
+        assert_problem(server.post(&format!("/v1/jobs/{id}/predict"), &json!({ "camera_paths": 2 })).await, 422);
+    assert_eq!(unknown["field"], "light_paths", "{unknown}");
+}

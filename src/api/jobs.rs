@@ -13,6 +13,7 @@ use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, typed};
 use crate::jobs::documents::{JobHistory, JobList, JobResult};
+use crate::jobs::prediction::{JobPrediction, PredictRequest};
 use crate::jobs::resource::{JobResource, JobState};
 use crate::sim::document::MomentsDocument;
 use crate::sim::model::params::RingSpec;
@@ -330,6 +331,30 @@ pub async fn solve(
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
     Ok(Json(state.jobs.solve(id, &patch, None).await?))
+}
+
+/// Predict the noise table at another ray budget (N_F, N_B) from the job's latest checkpoint, and
+/// re-fit the optimal weights for it; needs a job run with `"noise_components": true`. Nothing is
+/// run or stored.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/predict", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    request_body(content = PredictRequest, description = "The budget to predict for, and solver options to change"),
+    responses(
+        (status = 200, description = "The predicted noise table and re-fitted weights", body = JobPrediction),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No checkpoint yet, or the job keeps no noise components", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid; `field` names it", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn predict(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    JsonBody(body): JsonBody,
+) -> Result<Json<JobPrediction>, ApiError> {
+    Ok(Json(state.jobs.predict(id, &body).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.

@@ -81,6 +81,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::get, jobs::delete))
         .routes(routes!(jobs::result))
         .routes(routes!(jobs::solve))
+        .routes(routes!(jobs::predict))
         .routes(routes!(jobs::cancel))
         .routes(routes!(jobs::extend))
         .routes(routes!(jobs::moments))

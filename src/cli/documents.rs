@@ -49,7 +49,7 @@ pub struct ReportArgs {
 }
 
 /// Reads and verifies a moments document.
-fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError> {
+pub(super) fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError> {
     let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
     MomentsDocument::from_json(&bytes).map_err(|source| CliError::Document { path: path.clone(), source })
 }
@@ -68,7 +68,7 @@ pub fn merge(args: MergeArgs) -> Result<(), CliError> {
 }
 
 /// The document's solver options changed by `--solver` (see [`SolverOptions::patched`]).
-fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Result<SolverOptions, CliError> {
+pub(super) fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Result<SolverOptions, CliError> {
     let Some(text) = patch else { return Ok(base.clone()) };
     let patch: Value = serde_json::from_str(text).map_err(|e| SpecError::new("--solver", format!("not JSON: {e}")))?;
     Ok(base.patched(&patch)?)

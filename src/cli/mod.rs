@@ -1,8 +1,9 @@
-//! The command line: `optimis run`, `bench`, `merge`, `report`, `serve` and `openapi`, thin shells
+//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `serve` and `openapi`, thin shells
 //! around the library.
 
 mod bench;
 mod documents;
+mod predict;
 mod run;
 #[cfg(feature = "server")]
 mod serve;
@@ -34,6 +35,9 @@ pub enum Command {
     Merge(documents::MergeArgs),
     /// Print the noise and weights tables of a moments document.
     Report(documents::ReportArgs),
+    /// Predict the noise table and re-fit the optimal weights at another N_F and N_B, from a moments
+    /// document with noise components.
+    Predict(predict::PredictArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
     Serve(serve::ServeArgs),
@@ -89,6 +93,7 @@ pub fn main() -> ExitCode {
         Command::Bench(args) => bench::bench(args),
         Command::Merge(args) => documents::merge(args),
         Command::Report(args) => documents::report(args),
+        Command::Predict(args) => predict::predict(args),
         #[cfg(feature = "server")]
         Command::Serve(args) => serve::serve_command(args),
         #[cfg(feature = "server")]

@@ -2,7 +2,8 @@
 
 use std::io::{self, Write};
 
-use crate::sim::solve::report::RunReport;
+use crate::sim::solve::noise::NoiseRow;
+use crate::sim::solve::report::{RecommendedWeights, RunReport, WeightRow};
 use crate::sim::spec::JobSpec;
 
 fn num(x: Option<f64>, scale: f64, width: usize, precision: usize) -> String {
@@ -45,41 +46,7 @@ pub fn write_report(
         None => writeln!(out, "reference (quadrature): did not converge for this geometry")?,
     }
     writeln!(out)?;
-    writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
-    for row in &report.noise_table {
-        let mut notes = Vec::new();
-        if let Some(l) = row.lambda {
-            notes.push(format!("λ = {l}"));
-        }
-        if row.in_sample {
-            notes.push("in-sample (optimistic)".to_string());
-        } else if row.lambda.is_some() {
-            notes.push(format!("{}-fold cross-fitted", report.folds));
-        }
-        if let Some(h) = row.in_sample_rms_percent {
-            notes.push(format!("in-sample RMS {h:.1}%"));
-        }
-        if report.recommended.is_some_and(|r| r.strategy == row.strategy) {
-            notes.push("recommended".to_string());
-        }
-        if !row.respects_fixed {
-            notes.push("outside the fixed weights".to_string());
-        }
-        if let Some(e) = &row.error {
-            notes.push(e.clone());
-        }
-        let note = notes.join(", ");
-        writeln!(
-            out,
-            "{:<16} {} {} {} {}  {}",
-            row.strategy,
-            num(row.luminance, 1e5, 10, 4),
-            num(row.luminance_stderr, 1e5, 9, 4),
-            num(row.rms_percent, 1.0, 9, 1),
-            num(row.rms_percent_stderr, 1.0, 8, 1),
-            note
-        )?;
-    }
+    write_noise_rows(out, &report.noise_table, report.folds, report.recommended.as_ref())?;
     let m = &report.merges_per_iteration;
     writeln!(
         out,
@@ -117,6 +84,57 @@ pub fn write_report(
         }
         None => {}
     }
+    write_weights(out, &report.weights)
+}
+
+/// The noise table's rows with their notes (λ, in-sample or cross-fitted, recommended, outside
+/// the fixed weights, errors).
+pub fn write_noise_rows(
+    out: &mut impl Write,
+    rows: &[NoiseRow],
+    folds: usize,
+    recommended: Option<&RecommendedWeights>,
+) -> io::Result<()> {
+    writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
+    for row in rows {
+        let mut notes = Vec::new();
+        if let Some(l) = row.lambda {
+            notes.push(format!("λ = {l}"));
+        }
+        if row.in_sample {
+            notes.push("in-sample (optimistic)".to_string());
+        } else if row.lambda.is_some() {
+            notes.push(format!("{}-fold cross-fitted", folds));
+        }
+        if let Some(h) = row.in_sample_rms_percent {
+            notes.push(format!("in-sample RMS {h:.1}%"));
+        }
+        if recommended.is_some_and(|r| r.strategy == row.strategy) {
+            notes.push("recommended".to_string());
+        }
+        if !row.respects_fixed {
+            notes.push("outside the fixed weights".to_string());
+        }
+        if let Some(e) = &row.error {
+            notes.push(e.clone());
+        }
+        let note = notes.join(", ");
+        writeln!(
+            out,
+            "{:<16} {} {} {} {}  {}",
+            row.strategy,
+            num(row.luminance, 1e5, 10, 4),
+            num(row.luminance_stderr, 1e5, 9, 4),
+            num(row.rms_percent, 1.0, 9, 1),
+            num(row.rms_percent_stderr, 1.0, 8, 1),
+            note
+        )?;
+    }
+    Ok(())
+}
+
+/// A weights table, each weight with its standard error where there is one.
+pub fn write_weights(out: &mut impl Write, weights: &[WeightRow]) -> io::Result<()> {
     writeln!(
         out,
         "{:>4} {:<12} {:<16} {:<14} {:>16} {:>16} {:>16} {:>9}  status",
@@ -126,7 +144,7 @@ pub fn write_report(
         Some(se) => format!("{w:.4} ± {se:.4}"),
         None => format!("{w:.4}"),
     };
-    for (alpha, w) in report.weights.iter().enumerate() {
+    for (alpha, w) in weights.iter().enumerate() {
         let status =
             serde_json::to_value(w.status).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
         writeln!(

@@ -19,6 +19,7 @@ pub mod error;
 pub mod manager;
 pub mod peers;
 pub mod policy;
+pub mod prediction;
 pub mod resource;
 pub mod scheduler;
 pub mod state;

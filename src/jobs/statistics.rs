@@ -145,7 +145,7 @@ pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
 }
 
 impl JobManager {
-    async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
+    pub(super) async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
         let resource = self.get(id).await?;
         Ok((resource.state, resource.progress.iterations_total, resource.spec, resource.merged))
     }
@@ -216,7 +216,7 @@ impl JobManager {
 
     /// The latest checkpoint's moments, verified against their checksum (and, for a job's own
     /// run, against the range it ran), decoded on the request pool.
-    async fn checkpoint_moments(
+    pub(super) async fn checkpoint_moments(
         &self,
         id: i64,
         spec: &JobSpec,

@@ -113,7 +113,7 @@ fn brute_batch(config: &SimConfig, seed: u64, batch: Range<u64>, cancel: &Atomic
     let tallies: Vec<Option<ChunkTally>> = (0..items)
         .into_par_iter()
         .map_init(
-            || ChunkScratch::new(k),
+            || ChunkScratch::for_config(config),
             |scratch, item| {
                 if cancel.load(Ordering::Relaxed) {
                     return None;
@@ -157,7 +157,7 @@ fn restricted_batch(
 ) -> Result<Moments, RunError> {
     let (k, norm) = (config.cells.len(), tally_norm(config));
     let worker = || RestrictedWorker {
-        scratch: ChunkScratch::new(k),
+        scratch: ChunkScratch::for_config(config),
         buffers: RestrictedScratch::default(),
         cameras: CameraSet::default(),
         chunk: ChunkTally::default(),

@@ -63,6 +63,12 @@ pub struct JobSpec {
     /// allows (K × the sums of one fold is bounded). Part of the fingerprint.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub folds: Option<usize>,
+    /// Keep the noise components of every iteration (its light and camera paths split in halves):
+    /// the moments then predict the noise and the optimal weights at any other N_F and N_B
+    /// (`optimis predict`, `POST /v1/jobs/{id}/predict`). Needs even `light_paths` and
+    /// `camera_paths`; the moments hold four times the sums per fold. Part of the fingerprint.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub noise_components: bool,
     pub solver: SolverOptions,
     /// How light paths are drawn. Absent in documents stored before engines existed: `brute`.
     #[serde(default)]
@@ -218,7 +224,14 @@ impl JobSpec {
         validate_range(self)?;
         let cells = validate_cells(&self.cells)?;
         validate_solver(&self.solver)?;
-        let allowed = folds_allowed(cells.len());
+        if self.noise_components {
+            for (field, n) in [("light_paths", self.light_paths), ("camera_paths", self.camera_paths)] {
+                check(n % 2 == 0, field, || {
+                    format!("must be even with noise_components (its paths are split in two halves), got {n}")
+                })?;
+            }
+        }
+        let allowed = folds_allowed(cells.len(), self.noise_components);
         let folds = self.folds.unwrap_or(DEFAULT_FOLDS.min(allowed));
         check((MIN_FOLDS..=allowed).contains(&folds), "folds", || {
             format!(
@@ -235,7 +248,8 @@ impl JobSpec {
             cells,
             self.engine.engine(),
             folds,
-        );
+        )
+        .with_noise_components(self.noise_components);
         Ok(ValidJob { spec: self.clone(), config: Arc::new(config) })
     }
 }

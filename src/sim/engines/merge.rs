@@ -16,7 +16,7 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 
 use super::camera::CameraSet;
-use super::tally::{ChunkScratch, Technique, strategy_weights};
+use super::tally::{CameraPaths, ChunkScratch, Technique, strategy_weights};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::{angle_between, theta_over_sin};
 
@@ -46,7 +46,7 @@ pub(crate) fn merge_plane3(
         if within(x3l, x3c, config.merge_radius) {
             let c = cam.energy3 * kernel(config) / PI;
             let weights = strategy_weights(config, Technique::Plane3, cam.x2, x3c, x3l);
-            scratch.record(Technique::Plane3, config.cells.index(cam.x2, x3c), k, c, &weights);
+            scratch.record(Technique::Plane3, config.cells.index(cam.x2, x3c), k, c, &weights, CameraPaths::One(j));
             scratch.count_merge(Technique::Plane3);
         }
     }
@@ -70,7 +70,7 @@ pub(crate) fn merge_plane2(
             let theta = angle_between(d, &cam.to_pixel);
             let c = kernel(config) * config.scene.lobe.bdf(theta, cam.cos1);
             let weights = strategy_weights(config, Technique::Plane2, cam.x2, x3l, x3l);
-            scratch.record(Technique::Plane2, config.cells.index(cam.x2, x3l), k, c, &weights);
+            scratch.record(Technique::Plane2, config.cells.index(cam.x2, x3l), k, c, &weights, CameraPaths::One(j));
             scratch.count_merge(Technique::Plane2);
         }
     }
@@ -82,6 +82,6 @@ pub(crate) fn merge_plane1(config: &SimConfig, theta: f64, x2l: [f64; 2], x3l: [
     let energy = 1.0 / theta_over_sin(theta);
     let c = energy * kernel(config) / PI * config.camera_paths as f64;
     let weights = strategy_weights(config, Technique::Plane1, x2l, x3l, x3l);
-    scratch.record(Technique::Plane1, config.cells.index(x2l, x3l), config.cells.len(), c, &weights);
+    scratch.record(Technique::Plane1, config.cells.index(x2l, x3l), config.cells.len(), c, &weights, CameraPaths::All);
     scratch.count_merge(Technique::Plane1);
 }

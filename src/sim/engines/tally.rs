@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use std::f64::consts::PI;
 
+use crate::sim::math::rng::{StreamRng, uniform};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
 
@@ -60,6 +61,14 @@ impl PathStrategy {
             Self::Switch => [Some(0.0), None, None],
             Self::Balance | Self::Power | Self::CorrelationAware => [None, None, None],
         }
+    }
+
+    /// Whether its weights depend on N_F and N_B (so its noise at another budget cannot be
+    /// predicted from the components of a run at this one): the correlation-aware heuristic's
+    /// effective sample counts do; the cases and the VCM balance and power heuristics (whose pdfs
+    /// are the techniques' relative densities) do not.
+    pub fn depends_on_budget(self) -> bool {
+        matches!(self, Self::CorrelationAware)
     }
 
     /// The name used in results.
@@ -127,6 +136,23 @@ pub fn strategy_weights(
     [one_hot(0), one_hot(1), one_hot(2), switch, balance(p)[plane], power(p)[plane], correlated[plane]]
 }
 
+/// The four blocks of an iteration's pairs when its light and camera paths are split in halves
+/// (noise components, `stats::components`): block 2·h_light + h_camera.
+pub const BLOCKS: usize = 4;
+
+/// Per-path strategy sums of each block.
+pub type BlockStrategies = [[f64; PathStrategy::COUNT]; BLOCKS];
+
+/// The camera paths a merge pairs its light path with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraPaths {
+    /// Camera path j (plane 2 and 3 merges).
+    One(u32),
+    /// All N_B at once (a plane-1 merge at the shared pixel): half of its sum goes to each camera
+    /// half, which holds N_B/2 of them.
+    All,
+}
+
 /// Dense per-chunk accumulator, reused across chunks by one worker.
 #[derive(Debug, Clone)]
 pub struct ChunkScratch {
@@ -138,6 +164,13 @@ pub struct ChunkScratch {
     touched: Vec<u32>,
     strategies: [f64; PathStrategy::COUNT],
     merges: [u64; 3],
+    /// With noise components: Σ C per block and slot, at `BLOCKS·slot + block` (empty without).
+    blocks: Vec<f64>,
+    block_strategies: BlockStrategies,
+    /// The half (0 or 1) of the light path being merged.
+    light_half: usize,
+    /// The restricted engine's coin stream of the current iteration (with noise components).
+    coins: Option<StreamRng>,
 }
 
 /// What one chunk hands to its iteration: the touched slots in slot order.
@@ -147,6 +180,9 @@ pub struct ChunkTally {
     pub entries: Vec<(u32, f64, u64)>,
     pub strategies: [f64; PathStrategy::COUNT],
     pub merges: [u64; 3],
+    /// With noise components: the block sums of each entry, in the same order (empty without).
+    pub blocks: Vec<[f64; BLOCKS]>,
+    pub block_strategies: BlockStrategies,
 }
 
 impl ChunkScratch {
@@ -158,11 +194,55 @@ impl ChunkScratch {
             touched: Vec::new(),
             strategies: [0.0; PathStrategy::COUNT],
             merges: [0; 3],
+            blocks: Vec::new(),
+            block_strategies: [[0.0; PathStrategy::COUNT]; BLOCKS],
+            light_half: 0,
+            coins: None,
+        }
+    }
+
+    /// A scratch for `config`'s grid that also sums the noise components' blocks if it keeps them.
+    pub fn for_config(config: &SimConfig) -> Self {
+        let cells = config.cells.len();
+        let mut scratch = Self::new(cells);
+        if config.noise_components {
+            scratch.blocks = vec![0.0; BLOCKS * 3 * cells];
+        }
+        scratch
+    }
+
+    /// The half (0 or 1) of the light path whose merges follow: the brute force alternates by index,
+    /// the restricted engine tosses a fair coin per kept path (which splits its Poisson process
+    /// into two independent ones of half the intensity).
+    #[inline]
+    pub fn set_light_half(&mut self, half: usize) {
+        self.light_half = half & 1;
+    }
+
+    /// Whether this scratch sums the noise components' blocks.
+    pub fn keeps_blocks(&self) -> bool {
+        !self.blocks.is_empty()
+    }
+
+    /// The coin stream for [`ChunkScratch::toss_light_half`] in the iteration that follows.
+    pub fn set_coins(&mut self, coins: Option<StreamRng>) {
+        self.coins = coins;
+    }
+
+    /// Puts the next light path in a half by a fair coin from the coin stream (a no-op without
+    /// one): marking each point of a Poisson process independently with probability ½ gives two
+    /// independent Poisson processes of half the intensity (the marking theorem), which is what
+    /// the noise components' estimators need of the restricted engine's light paths.
+    #[inline]
+    pub fn toss_light_half(&mut self) {
+        if let Some(coins) = &mut self.coins {
+            self.light_half = usize::from(uniform(coins) < 0.5);
         }
     }
 
     /// Records one merge event: contribution `c` by `technique`, in cell `cell` of a grid of
-    /// `cells` cells, with the per-path strategy weights `weights`.
+    /// `cells` cells, with the per-path strategy weights `weights`, pairing the current light path
+    /// with `cameras`.
     #[inline]
     pub fn record(
         &mut self,
@@ -171,6 +251,7 @@ impl ChunkScratch {
         cells: usize,
         c: f64,
         weights: &[f64; PathStrategy::COUNT],
+        cameras: CameraPaths,
     ) {
         let slot = technique.index() * cells + cell;
         if self.counts[slot] == 0 {
@@ -180,6 +261,20 @@ impl ChunkScratch {
         self.counts[slot] += 1;
         for (acc, w) in self.strategies.iter_mut().zip(weights) {
             *acc += w * c;
+        }
+        if !self.blocks.is_empty() {
+            let first = BLOCKS * slot + 2 * self.light_half;
+            // Camera path j is in half j mod 2 (camera paths are i.i.d., so any fixed split is fair).
+            let halves: [(usize, f64); 2] = match cameras {
+                CameraPaths::One(j) => [((j & 1) as usize, c), (0, 0.0)],
+                CameraPaths::All => [(0, 0.5 * c), (1, 0.5 * c)],
+            };
+            for (h, v) in halves {
+                self.blocks[first + h] += v;
+                for (acc, w) in self.block_strategies[2 * self.light_half + h].iter_mut().zip(weights) {
+                    *acc += w * v;
+                }
+            }
         }
     }
 
@@ -201,18 +296,26 @@ impl ChunkScratch {
     /// keeps one across iterations, so that none allocates).
     pub fn take_into(&mut self, tally: &mut ChunkTally) {
         tally.entries.clear();
+        tally.blocks.clear();
         tally.strategies = self.strategies;
         tally.merges = self.merges;
+        tally.block_strategies = self.block_strategies;
         self.touched.sort_unstable();
-        tally.entries.extend(self.touched.drain(..).map(|slot| {
+        let with_blocks = !self.blocks.is_empty();
+        for slot in self.touched.drain(..) {
             let s = slot as usize;
-            let entry = (slot, self.sums[s], self.counts[s]);
+            tally.entries.push((slot, self.sums[s], self.counts[s]));
             self.sums[s] = 0.0;
             self.counts[s] = 0;
-            entry
-        }));
+            if with_blocks {
+                let block = &mut self.blocks[BLOCKS * s..BLOCKS * (s + 1)];
+                tally.blocks.push([block[0], block[1], block[2], block[3]]);
+                block.fill(0.0);
+            }
+        }
         self.strategies = [0.0; PathStrategy::COUNT];
         self.merges = [0; 3];
+        self.block_strategies = [[0.0; PathStrategy::COUNT]; BLOCKS];
     }
 }
 
@@ -229,6 +332,12 @@ pub struct IterationTally {
     pub strategies: [f64; PathStrategy::COUNT],
     /// Merge events per plane (plane-1 hits counted once per light path).
     pub merges: [u64; 3],
+    /// With noise components: each block's C^(m)_α at `block·3K + slot`, normalised as its own
+    /// estimate of the pixel (by 1/((N_F/2)·(N_B/2)), so E of a block's value = E of the
+    /// iteration's); empty without components or merges.
+    pub block_values: Vec<f64>,
+    /// Each block's per-path strategy C_s, normalised the same way.
+    pub block_strategies: BlockStrategies,
 }
 
 impl IterationTally {
@@ -245,6 +354,8 @@ impl IterationTally {
             cell_counts: Vec::new(),
             strategies: [0.0; PathStrategy::COUNT],
             merges: [0; 3],
+            block_values: Vec::new(),
+            block_strategies: [[0.0; PathStrategy::COUNT]; BLOCKS],
         };
         tally.set_from_chunks(iteration, cells, norm, chunks);
         tally
@@ -266,10 +377,26 @@ impl IterationTally {
         cell_counts.resize(3 * cells, 0);
         let mut strategies = [0.0; PathStrategy::COUNT];
         let mut merges = [0u64; 3];
+        let blocks = &mut self.block_values;
+        blocks.clear();
+        let mut block_strategies = [[0.0; PathStrategy::COUNT]; BLOCKS];
         for chunk in chunks {
             for &(slot, sum, count) in &chunk.entries {
                 sums[slot as usize] += sum;
                 cell_counts[slot as usize] += count;
+            }
+            if !chunk.blocks.is_empty() && blocks.is_empty() {
+                blocks.resize(BLOCKS * 3 * cells, 0.0);
+            }
+            for (&(slot, ..), values) in chunk.entries.iter().zip(&chunk.blocks) {
+                for (b, v) in values.iter().enumerate() {
+                    blocks[b * 3 * cells + slot as usize] += v;
+                }
+            }
+            for (acc, chunk_block) in block_strategies.iter_mut().zip(&chunk.block_strategies) {
+                for (a, v) in acc.iter_mut().zip(chunk_block) {
+                    *a += v;
+                }
             }
             for (acc, v) in strategies.iter_mut().zip(chunk.strategies) {
                 *acc += v;
@@ -283,14 +410,36 @@ impl IterationTally {
         }
         self.strategies = strategies.map(|s| s * norm);
         self.merges = merges;
+        // A block pairs N_F/2 light paths with N_B/2 camera paths: 4× the iteration's norm.
+        for v in blocks.iter_mut() {
+            *v *= 4.0 * norm;
+        }
+        self.block_strategies = block_strategies.map(|b| b.map(|v| v * 4.0 * norm));
     }
 
     /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of docs/model.md as sparse (index, value) pairs in
     /// index order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at
     /// 2K.
     pub fn moment_vector(&self, cells: usize) -> Vec<(usize, f64)> {
-        let c = |m: usize, a: usize| self.cell_values[m * cells + a];
         let mut y = Vec::new();
+        moment_vector_into(&self.cell_values, cells, &mut y);
+        y
+    }
+
+    /// The moment vector of block `b` (noise components), into `y`: empty when the iteration
+    /// kept no blocks (no components, or no merge).
+    pub fn block_moment_vector(&self, b: usize, cells: usize, y: &mut Vec<(usize, f64)>) {
+        y.clear();
+        if !self.block_values.is_empty() {
+            moment_vector_into(&self.block_values[b * 3 * cells..(b + 1) * 3 * cells], cells, y);
+        }
+    }
+}
+
+/// Y = (A⁽⁰⁾, A⁽¹⁾, B) from per-slot values C⁽ᵐ⁾_α (see [`IterationTally::moment_vector`]).
+fn moment_vector_into(values: &[f64], cells: usize, y: &mut Vec<(usize, f64)>) {
+    {
+        let c = |m: usize, a: usize| values[m * cells + a];
         for m in 0..2 {
             for a in 0..cells {
                 let v = c(m, a) - c(2, a);
@@ -303,7 +452,6 @@ impl IterationTally {
         if b != 0.0 {
             y.push((2 * cells, b));
         }
-        y
     }
 }
 
@@ -316,14 +464,14 @@ mod tests {
         let cells = 2;
         let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25, 0.125];
         let mut scratch = ChunkScratch::new(cells);
-        scratch.record(Technique::Plane1, 1, cells, 4.0, &w);
+        scratch.record(Technique::Plane1, 1, cells, 4.0, &w, CameraPaths::All);
         scratch.count_merge(Technique::Plane1);
-        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875]);
+        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875], CameraPaths::One(0));
         scratch.count_merge(Technique::Plane3);
         let a = scratch.take();
         assert_eq!(a.entries, vec![(1, 4.0, 1), (4, 2.0, 1)], "slots sorted, counts kept");
         assert_eq!(scratch.take(), ChunkTally::default(), "take resets the scratch");
-        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875]);
+        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875], CameraPaths::One(1));
         let b = scratch.take();
         let t = IterationTally::from_chunks(3, cells, 0.5, [&a, &b]);
         assert_eq!(t.cell_values, vec![0.0, 2.0, 0.0, 0.0, 4.0, 0.0]);

@@ -46,9 +46,20 @@ pub const fn packed_len(n: usize) -> usize {
     n * (n + 1) / 2
 }
 
-/// Most folds a grid of `cells` cells may have (at least [`MIN_FOLDS`]).
-pub fn folds_allowed(cells: usize) -> usize {
-    (MAX_FOLD_SUMS / packed_len(2 * cells + 1)).clamp(MIN_FOLDS, MAX_FOLDS)
+/// Index of (i, j), i ≤ j, in a packed upper triangle of side n.
+#[inline]
+pub fn packed_index(n: usize, i: usize, j: usize) -> usize {
+    debug_assert!(i <= j && j < n);
+    // Rows 0..i hold n, n−1, …, n−i+1 entries: i·n − i(i−1)/2 in all; then j − i into row i.
+    i * n - i * (i + 1) / 2 + j
+}
+
+/// Most folds a grid of `cells` cells may have (at least [`MIN_FOLDS`]); with noise components
+/// every fold holds four packed matrices instead of one (ΣYYᵀ and the three component sums of
+/// `stats::components`), so a quarter as many.
+pub fn folds_allowed(cells: usize, noise_components: bool) -> usize {
+    let per_fold = packed_len(2 * cells + 1) * if noise_components { 4 } else { 1 };
+    (MAX_FOLD_SUMS / per_fold).clamp(MIN_FOLDS, MAX_FOLDS)
 }
 
 /// Light paths per chunk: the unit of parallel work and of random streams (stream c of an
@@ -90,6 +101,10 @@ pub struct SimConfig {
     pub engine: Engine,
     /// K: iteration s is summed into fold s mod K (cross-fitting, `solve::noise`).
     pub folds: usize,
+    /// Whether the moments also keep the noise components of every iteration (light and camera
+    /// paths split in halves, `stats::components`), from which `solve::predict` predicts the noise
+    /// at any other N_F and N_B.
+    pub noise_components: bool,
     fingerprint: String,
 }
 
@@ -107,6 +122,9 @@ struct FingerprintInput<'a> {
     camera_paths: u64,
     cells: CellSpec,
     folds: usize,
+    /// Absent unless set, so the fingerprints of configurations without components are unchanged.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    noise_components: bool,
 }
 
 impl SimConfig {
@@ -120,6 +138,31 @@ impl SimConfig {
         engine: Engine,
         folds: usize,
     ) -> Self {
+        let mut config = Self {
+            scene,
+            merge_radius,
+            light_paths,
+            camera_paths,
+            cells,
+            engine,
+            folds,
+            noise_components: false,
+            fingerprint: String::new(),
+        };
+        config.fingerprint = config.compute_fingerprint();
+        config
+    }
+
+    /// This configuration with noise components kept (or not): another fingerprint.
+    pub fn with_noise_components(mut self, on: bool) -> Self {
+        self.noise_components = on;
+        self.fingerprint = self.compute_fingerprint();
+        self
+    }
+
+    fn compute_fingerprint(&self) -> String {
+        let Self { scene, merge_radius, light_paths, camera_paths, cells, engine, folds, noise_components, .. } =
+            self.clone();
         let input = FingerprintInput {
             format: MOMENTS_FORMAT_VERSION,
             generator: GENERATOR_ID,
@@ -134,10 +177,10 @@ impl SimConfig {
                 phi_bins: cells.phi_bins(),
             },
             folds,
+            noise_components,
         };
         let canonical = serde_json::to_vec(&input).expect("a fingerprint input always serialises");
-        let fingerprint = sha256_hex(&canonical);
-        Self { scene, merge_radius, light_paths, camera_paths, cells, engine, folds, fingerprint }
+        sha256_hex(&canonical)
     }
 
     /// The same configuration drawn by another engine (its own fingerprint).
@@ -151,6 +194,7 @@ impl SimConfig {
             engine,
             self.folds,
         )
+        .with_noise_components(self.noise_components)
     }
 
     /// The configuration fingerprint (hex SHA-256).

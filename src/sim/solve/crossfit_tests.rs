@@ -52,6 +52,8 @@ fn iteration(cells: usize, s: u64, rng: &mut StreamRng) -> IterationTally {
         cell_counts: vec![1; 3 * cells],
         strategies: [plane3; PathStrategy::COUNT],
         merges: [1; 3],
+        block_values: Vec::new(),
+        block_strategies: Default::default(),
     }
 }
 

@@ -9,11 +9,14 @@
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
-//! * [`report`] — the result document of a run.
+//! * [`report`] — the result document of a run;
+//! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
+//!   noise components.
 
 pub mod crossfit;
 pub mod noise;
 pub mod options;
+pub mod predict;
 pub mod report;
 pub mod solver;
 pub mod strategy;

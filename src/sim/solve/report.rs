@@ -97,7 +97,7 @@ pub struct RunReport {
 }
 
 /// The rows of a weights table.
-fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> Vec<WeightRow> {
+pub(crate) fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> Vec<WeightRow> {
     fit.cells
         .iter()
         .enumerate()

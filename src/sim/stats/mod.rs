@@ -5,5 +5,7 @@
 //! * [`moments`] — the additive sufficient statistics, their checks and merges.
 
 pub mod bounded;
+pub mod components;
 pub mod coverage;
+mod fold_checks;
 pub mod moments;

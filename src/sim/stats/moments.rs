@@ -31,10 +31,12 @@ use serde::{Deserialize, Serialize};
 
 use super::bounded::bounded;
 
+use super::components::ComponentSums;
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
 use crate::sim::engines::tally::{IterationTally, PathStrategy};
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use crate::sim::model::cells::MAX_CELLS;
+pub use crate::sim::model::config::packed_index;
 use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 
 /// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
@@ -70,18 +72,13 @@ pub struct FoldMoments {
     /// Merge events per slot m·K + α (the samples behind each cell's weights).
     #[serde(deserialize_with = "bounded::<_, _, MAX_SLOTS>")]
     pub cell_counts: Vec<u64>,
-}
-
-/// Index of (i, j), i ≤ j, in a packed upper triangle of side n.
-#[inline]
-pub fn packed_index(n: usize, i: usize, j: usize) -> usize {
-    debug_assert!(i <= j && j < n);
-    // Rows 0..i hold n, n−1, …, n−i+1 entries: i·n − i(i−1)/2 in all; then j − i into row i.
-    i * n - i * (i + 1) / 2 + j
+    /// The noise components' sums, when the configuration keeps them (`noise_components`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub components: Option<ComponentSums>,
 }
 
 impl FoldMoments {
-    fn empty(cells: usize) -> Self {
+    fn empty(cells: usize, components: bool) -> Self {
         let n = 2 * cells + 1;
         Self {
             iterations: 0,
@@ -91,6 +88,7 @@ impl FoldMoments {
             merges: [0; 3],
             merges_sq: [0; 3],
             cell_counts: vec![0; 3 * cells],
+            components: components.then(|| ComponentSums::empty(n)),
         }
     }
 
@@ -137,13 +135,20 @@ impl FoldMoments {
         for (acc, &c) in self.cell_counts.iter_mut().zip(&tally.cell_counts) {
             *acc += c;
         }
+        if let Some(components) = &mut self.components {
+            components.add_iteration(cells, tally);
+        }
         self.iterations += 1;
         Ok(())
     }
 
     /// The sums in one list, for checks that treat them alike.
-    fn sums(&self) -> impl Iterator<Item = &ExactSum> {
-        self.sum_y.iter().chain(&self.sum_yy).chain(self.strategies.iter().flatten())
+    pub(super) fn sums(&self) -> impl Iterator<Item = &ExactSum> {
+        self.sum_y
+            .iter()
+            .chain(&self.sum_yy)
+            .chain(self.strategies.iter().flatten())
+            .chain(self.components.iter().flat_map(ComponentSums::sums))
     }
 
     /// Checks, without changing anything, that [`FoldMoments::add`] of `other` cannot overflow:
@@ -185,69 +190,18 @@ impl FoldMoments {
         for (a, b) in self.cell_counts.iter_mut().zip(&other.cell_counts) {
             *a += b;
         }
+        if let (Some(a), Some(b)) = (&mut self.components, &other.components) {
+            a.add(b);
+        }
     }
 
     fn has_shape(&self, cells: usize) -> bool {
         let n = 2 * cells + 1;
         self.sum_y.len() == n
             && self.sum_yy.len() == packed_len(n)
+            && self.components.as_ref().is_none_or(|c| c.has_shape(n))
             && self.strategies.len() == PathStrategy::COUNT
             && self.cell_counts.len() == 3 * cells
-    }
-
-    /// What a parser cannot check: that the sums agree with their counts. Fails with the first
-    /// contradiction found.
-    fn check_consistent(&self, cells: usize) -> Result<(), String> {
-        let n = 2 * cells + 1;
-        if let Some(bad) = self.sums().position(|s| !(s.is_finite() && s.value().abs() <= MAX_MAGNITUDE)) {
-            return Err(format!("sum #{bad} is not finite or exceeds 2^1000"));
-        }
-        for m in 0..3 {
-            let per_cell = self.cell_counts[m * cells..(m + 1) * cells]
-                .iter()
-                .try_fold(0u64, |acc, &c| acc.checked_add(c))
-                .ok_or("cell event counts overflow")?;
-            if per_cell != self.merges[m] {
-                return Err(format!(
-                    "plane {} has {} merge events but its cells count {per_cell}",
-                    m + 1,
-                    self.merges[m]
-                ));
-            }
-            // For counts c_s ≥ 0: Σc ≤ Σc² ≤ (Σc)².
-            let (total, squares) = (u128::from(self.merges[m]), self.merges_sq[m]);
-            if squares < total || squares > total * total {
-                return Err(format!(
-                    "plane {}'s sum of squared merge counts {squares} contradicts its total {total}",
-                    m + 1
-                ));
-            }
-        }
-        if self.iterations == 0 {
-            if self.sums().any(|s| s.value() != 0.0) || self.merges != [0; 3] {
-                return Err("a fold without iterations holds non-zero sums".into());
-            }
-            return Ok(());
-        }
-        // Sums of squares and fourth powers are ≥ 0, and (Σx)² ≤ M·Σx² (Cauchy–Schwarz; a relative
-        // slack of 10⁻⁹ covers the rounding of the values compared).
-        let m = self.iterations as f64;
-        let cauchy = |sum: &ExactSum, squares: &ExactSum| {
-            let (a, q) = (sum.value(), squares.value());
-            q >= 0.0 && a * a <= m * q * (1.0 + 1e-9) + f64::MIN_POSITIVE
-        };
-        for i in 0..n {
-            if !cauchy(&self.sum_y[i], &self.sum_yy[packed_index(n, i, i)]) {
-                return Err(format!("ΣY[{i}] and ΣY[{i}]² contradict each other over {} iterations", self.iterations));
-            }
-        }
-        for (k, powers) in self.strategies.iter().enumerate() {
-            let name = PathStrategy::ALL[k].name();
-            if !cauchy(&powers[0], &powers[1]) || !cauchy(&powers[1], &powers[3]) {
-                return Err(format!("the power sums of strategy {name} contradict each other"));
-            }
-        }
-        Ok(())
     }
 }
 
@@ -315,13 +269,18 @@ impl Moments {
             fingerprint: config.fingerprint().to_string(),
             cells: k,
             coverage: Coverage::new(),
-            folds: vec![FoldMoments::empty(k); config.folds],
+            folds: vec![FoldMoments::empty(k, config.noise_components); config.folds],
         }
     }
 
     /// Total iterations M.
     pub fn iterations(&self) -> u64 {
         self.folds.iter().map(|f| f.iterations).sum()
+    }
+
+    /// Whether these moments keep the noise components (`stats::components`).
+    pub fn has_components(&self) -> bool {
+        self.folds.first().is_some_and(|f| f.components.is_some())
     }
 
     /// The number of folds K.
@@ -428,6 +387,9 @@ impl Moments {
         if !self.folds.iter().all(|f| f.has_shape(self.cells)) {
             return Err(MergeError::Malformed(format!("array lengths do not match {} cells", self.cells)));
         }
+        if !self.folds.iter().all(|f| f.components.is_some() == self.folds[0].components.is_some()) {
+            return Err(MergeError::Malformed("some folds keep noise components and some do not".into()));
+        }
         self.coverage.check().map_err(|e| MergeError::Malformed(e.to_string()))?;
         if self.coverage.iterations() > u128::from(MAX_ITERATION_INDEX) {
             return Err(MergeError::Malformed("the coverage holds more than 2^62 iterations".into()));
@@ -478,7 +440,7 @@ impl Moments {
 
     /// All folds but `left_out` added together: the training data of a cross-fit.
     pub fn pooled_except(&self, left_out: Option<usize>) -> FoldMoments {
-        let mut all = FoldMoments::empty(self.cells);
+        let mut all = FoldMoments::empty(self.cells, self.has_components());
         for (f, fold) in self.folds.iter().enumerate() {
             if Some(f) != left_out {
                 all.add(fold);

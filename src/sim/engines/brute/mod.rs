@@ -238,6 +238,9 @@ fn trace_blocks<const AVX2: bool>(
             let i = flagged.trailing_zeros() as usize;
             flagged &= flagged - 1;
             let (x3, x2) = ([x3x[i], x3y[i]], [x2x[i], x2y[i]]);
+            // Noise components: light path k is in half k mod 2 (chunks and blocks have even
+            // lengths, so i's parity is the path's), N_F/2 paths each.
+            scratch.set_light_half(i);
             trace_flagged(setup, b.flags[i], x3, x2, [sin2[i], cos_phi[i], sin_phi[i]], rng, scratch);
         }
     }

@@ -277,6 +277,7 @@ fn thin_by_distance(rng: &mut StreamRng, x3: [f64; 2], x2: [f64; 2], l3: f64, d_
 
 /// Every merge of a kept path, exactly as the brute force records them.
 fn tally(config: &SimConfig, cameras: &CameraSet, c: &Candidate, scratch: &mut ChunkScratch) {
+    scratch.toss_light_half();
     merge_plane3(config, cameras, cameras.plane3.candidates(c.x3), c.x3, scratch);
     merge_plane2(config, cameras, cameras.plane2.candidates(c.x2), c.x2, c.x3, &c.d, scratch);
     if let Some((_, theta)) = c.x1 {

@@ -80,6 +80,11 @@ pub use plan::{RestrictedPlan, RestrictedScratch, forward_reach};
 /// brute force's chunks 0, 1, 2, …).
 pub const RESTRICTED_STREAM: u64 = u64::MAX - 1;
 
+/// Stream index of the coins that split an iteration's kept light paths in halves (noise
+/// components only): a stream of its own, so the paths drawn do not depend on whether components
+/// are kept.
+pub const COIN_STREAM: u64 = u64::MAX - 2;
+
 /// Candidates drawn between two looks at the stop flag: an iteration of a huge configuration
 /// (millions of candidates) stops within milliseconds of a cancel, and the paper's ~50 candidates
 /// never look at it.
@@ -100,6 +105,7 @@ pub fn trace_restricted(
     tally: &mut ChunkTally,
 ) -> bool {
     let mut rng = stream(seed, iteration, RESTRICTED_STREAM);
+    scratch.set_coins(scratch.keeps_blocks().then(|| stream(seed, iteration, COIN_STREAM)));
     let it = Iteration { config, plan, cameras, cancel };
     let complete = plane1_bundle(&it, &mut rng, scratch, buffers)
         && plane2_bundle(&it, &mut rng, scratch, buffers)

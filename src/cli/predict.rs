@@ -1,0 +1,76 @@
+//! `optimis predict`: the noise table and re-fitted weights of a moments document at another ray
+//! budget (`solve::predict`).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::documents::{read_document, solver_options};
+use super::{CliError, table};
+use crate::sim::model::params::check;
+use crate::sim::solve::predict::{Budget, predict as predict_budget};
+use crate::sim::spec::SpecError;
+
+#[derive(Debug, Args)]
+pub struct PredictArgs {
+    /// A moments document of a job run with `"noise_components": true`.
+    pub document: PathBuf,
+    /// N_F to predict for (default: the run's).
+    #[arg(long, value_name = "N")]
+    pub light_paths: Option<u64>,
+    /// N_B to predict for (default: the run's).
+    #[arg(long, value_name = "M")]
+    pub camera_paths: Option<u64>,
+    /// Print the prediction as JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+    /// Solver options to change, as JSON (as for `optimis report`).
+    #[arg(long, value_name = "JSON")]
+    pub solver: Option<String>,
+}
+
+pub fn predict(args: PredictArgs) -> Result<(), CliError> {
+    let doc = read_document(&args.document)?;
+    let job = doc.spec.validate()?;
+    let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
+    let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
+    let to = Budget {
+        light_paths: args.light_paths.unwrap_or(measured.light_paths),
+        camera_paths: args.camera_paths.unwrap_or(measured.camera_paths),
+    };
+    check((1..=1_000_000_000_000).contains(&to.light_paths), "--light-paths", || {
+        format!("must be in [1, 10^12], got {}", to.light_paths)
+    })?;
+    check((1..=1_000_000).contains(&to.camera_paths), "--camera-paths", || {
+        format!("must be in [1, 10^6], got {}", to.camera_paths)
+    })?;
+    let prediction = predict_budget(&doc.moments, &job.config.cells, &solver, measured, to)
+        .map_err(|e| SpecError::new("document", e.to_string()))?;
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        serde_json::to_writer_pretty(&mut out, &prediction).map_err(std::io::Error::from)?;
+        writeln!(out)?;
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "predicted for N_F = {} light paths × N_B = {} camera paths from {} iterations at N_F = {} × N_B = {} (noise components; L ± SE for as many iterations at the new budget)\n",
+        to.light_paths, to.camera_paths, prediction.iterations, measured.light_paths, measured.camera_paths
+    )?;
+    table::write_noise_rows(&mut out, &prediction.noise_table, prediction.folds, prediction.recommended.as_ref())?;
+    writeln!(out)?;
+    match (&prediction.recommended, &prediction.solve_error) {
+        (Some(r), _) => {
+            writeln!(
+                out,
+                "optimal weights re-fitted for this budget ({}, λ = {} chosen by cross-validation; ± jackknife SE over the folds):",
+                r.strategy, r.lambda
+            )?;
+            table::write_weights(&mut out, &prediction.weights)?;
+        }
+        (None, Some(e)) => writeln!(out, "optimal weights: not available: {e}")?,
+        (None, None) => {}
+    }
+    Ok(())
+}

@@ -1,0 +1,77 @@
+//! `POST /v1/jobs/{id}/predict`: the noise table and re-fitted weights of a job's latest
+//! checkpoint at another ray budget (`sim::solve::predict`), computed on the request pool.
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use utoipa::ToSchema;
+
+use super::error::JobError;
+use super::manager::JobManager;
+use super::resource::JobState;
+use crate::sim::model::params::check;
+use crate::sim::solve::predict::{Budget, Prediction, predict};
+use crate::sim::spec::SpecError;
+
+/// What to predict.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PredictRequest {
+    /// N_F to predict for, in [1, 10^12].
+    pub light_paths: u64,
+    /// N_B to predict for, in [1, 10^6].
+    pub camera_paths: u64,
+    /// Solver options to change (a merge patch, as for `POST /v1/jobs/{id}/solve`).
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub solver: Option<Value>,
+}
+
+/// A job's prediction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct JobPrediction {
+    pub job_id: i64,
+    /// True until the job has succeeded with all its iterations.
+    pub partial: bool,
+    pub state: JobState,
+    #[serde(flatten)]
+    pub prediction: Prediction,
+}
+
+impl JobManager {
+    /// Predicts the job's noise table at the budget of `body` (a [`PredictRequest`]) from its latest
+    /// checkpoint; nothing is run or stored.
+    pub async fn predict(&self, id: i64, body: &Value) -> Result<JobPrediction, JobError> {
+        let request: PredictRequest = serde_json::from_value(body.clone()).map_err(|e| {
+            let message = e.to_string();
+            let field = ["light_paths", "camera_paths", "solver"]
+                .into_iter()
+                .find(|f| message.contains(&format!("`{f}`")))
+                .unwrap_or("body");
+            SpecError::new(field, message)
+        })?;
+        check((1..=1_000_000_000_000).contains(&request.light_paths), "light_paths", || {
+            format!("must be in [1, 10^12], got {}", request.light_paths)
+        })?;
+        check((1..=1_000_000).contains(&request.camera_paths), "camera_paths", || {
+            format!("must be in [1, 10^6], got {}", request.camera_paths)
+        })?;
+        let (state, total, spec, merged) = self.state_and_total(id).await?;
+        let solver = match &request.solver {
+            Some(patch) => spec.solver.patched(patch)?,
+            None => spec.solver.clone(),
+        };
+        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
+        let done = checkpoint.iterations_done;
+        let measured = Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
+        let to = Budget { light_paths: request.light_paths, camera_paths: request.camera_paths };
+        let prediction = self
+            .compute(move || -> Result<Prediction, JobError> {
+                let job = spec.validate()?;
+                predict(&moments, &job.config.cells, &solver, measured, to)
+                    .map_err(|e| JobError::Conflict(e.to_string()))
+            })
+            .await??;
+        let partial = !(state == JobState::Succeeded && done >= total);
+        Ok(JobPrediction { job_id: id, partial, state, prediction })
+    }
+}

@@ -1,0 +1,270 @@
+//! The noise table and the optimal weights at another ray budget (N_F', N_B'), predicted from one
+//! run's noise components (`stats::components`, docs/model.md §12).
+//!
+//! For every entry of the moment vector's covariance and every per-path strategy's variance, the
+//! run gives unbiased estimates of the three components α (scaled by 1/(N_F N_B)), β (1/N_F) and
+//! δ (1/N_B); the prediction is V' = α/(N_F' N_B') + β/N_F' + δ/N_B'. The means do not depend on the
+//! budget (every strategy is unbiased for L). The predicted sums are handed to the same solver and
+//! cross-fitting as a measured noise table: the optimum is *re-fitted* for the new budget (its
+//! weights change with it — the paper's point), λ chosen by cross-validation, and its figure is
+//! cross-fitted (weights fitted on the other folds' predicted sums, scored on each fold's).
+//!
+//! Standard errors: a per-path strategy's predicted RMS gets the jackknife over the folds (each
+//! replicate predicts from all folds but one); `luminance_stderr` is the standard error of L that
+//! as many iterations as the run had would give at the new budget. Strategies whose weights
+//! depend on N_F and N_B (`correlation_aware`) cannot be predicted at another budget: their row
+//! says so.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::crossfit::{CrossFitting, jackknife_se, select_lambda};
+use super::noise::{NoiseRow, respects_fixed};
+use super::options::SolverOptions;
+use super::report::{RecommendedWeights, WeightRow, weight_rows};
+use super::solver::fit;
+use super::strategy::Strategy;
+use super::ystats::YStats;
+use crate::sim::engines::tally::PathStrategy;
+use crate::sim::math::exact_sum::ExactSum;
+use crate::sim::model::cells::CellGrid;
+use crate::sim::stats::components::{CAMERA, CROSS, LIGHT};
+use crate::sim::stats::moments::{FoldMoments, Moments, packed_index};
+
+/// Light and camera paths per iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct Budget {
+    pub light_paths: u64,
+    pub camera_paths: u64,
+}
+
+/// Why no prediction can be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PredictError {
+    #[error(
+        "these moments keep no noise components: run the job with \"noise_components\": true (even light_paths and camera_paths) to predict other budgets"
+    )]
+    NoComponents,
+    #[error("at least 2 iterations are needed, got {0}")]
+    TooFewIterations(u64),
+}
+
+/// The predicted noise table and re-fitted weights.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct Prediction {
+    /// The budget predicted for.
+    pub budget: Budget,
+    /// The budget the run measured.
+    pub measured: Budget,
+    /// Iterations of the run (the standard errors of L are for as many at the new budget).
+    pub iterations: u64,
+    pub folds: usize,
+    /// Rows as in a job's noise table: the per-path strategies, then `optimal_cv` re-fitted for the
+    /// new budget (cross-fitted).
+    pub noise_table: Vec<NoiseRow>,
+    /// The re-fitted weights (`optimal_cv`'s λ, fitted on all folds' predicted sums).
+    pub recommended: Option<RecommendedWeights>,
+    /// Their table, with jackknife standard errors over the folds.
+    pub weights: Vec<WeightRow>,
+    /// Why there are no re-fitted weights, if there are none.
+    pub solve_error: Option<String>,
+}
+
+/// Second-order and component sums of a set of iterations, as doubles.
+#[derive(Debug, Clone)]
+struct ComponentStats {
+    y: YStats,
+    /// ΣU_L, ΣU_C, ΣU_0 (full symmetric).
+    parts: [DMatrix<f64>; 3],
+    /// Per path strategy: Σ C, Σ C², and ΣU_L, ΣU_C, ΣU_0 of its C_s.
+    strategies: Vec<[f64; 5]>,
+}
+
+fn unpack(sums: &[ExactSum], n: usize) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(n, n);
+    for i in 0..n {
+        for j in i..n {
+            let v = sums[packed_index(n, i, j)].value();
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+    m
+}
+
+/// One covariance entry at `to` from its estimate `v` at `from` and the means of the block
+/// products `u` = (Ū_L, Ū_C, Ū_0) (module documentation of `stats::components`).
+fn rescale(v: f64, [ul, uc, u0]: [f64; 3], from: Budget, to: Budget) -> f64 {
+    let (f, b) = (from.light_paths as f64, from.camera_paths as f64);
+    let (f2, b2) = (to.light_paths as f64, to.camera_paths as f64);
+    let beta = 0.5 * f * (ul - u0);
+    let delta = 0.5 * b * (uc - u0);
+    let alpha = f * b * (v - beta / f - delta / b);
+    alpha / (f2 * b2) + beta / f2 + delta / b2
+}
+
+impl ComponentStats {
+    fn from_fold(fold: &FoldMoments, cells: usize) -> Option<Self> {
+        let c = fold.components.as_ref()?;
+        let n = 2 * cells + 1;
+        let parts = [LIGHT, CAMERA, CROSS].map(|k| unpack(c.matrix(k), n));
+        let strategies = fold
+            .strategies
+            .iter()
+            .zip(&c.strategies)
+            .map(|(p, u)| [p[0].value(), p[1].value(), u[0].value(), u[1].value(), u[2].value()])
+            .collect();
+        Some(Self { y: YStats::from_fold(fold, cells), parts, strategies })
+    }
+
+    fn without(&self, part: &Self) -> Self {
+        Self {
+            y: self.y.without(&part.y),
+            parts: std::array::from_fn(|k| &self.parts[k] - &part.parts[k]),
+            strategies: self
+                .strategies
+                .iter()
+                .zip(&part.strategies)
+                .map(|(a, b)| std::array::from_fn(|i| a[i] - b[i]))
+                .collect(),
+        }
+    }
+
+    /// The sums a measured run at `to` would be expected to have (same M and ΣY; ΣYYᵀ from the
+    /// predicted covariance), for the solver. None with fewer than 2 iterations.
+    fn predict(&self, from: Budget, to: Budget) -> Option<YStats> {
+        let m = self.y.m;
+        if m < 2.0 {
+            return None;
+        }
+        let outer = &self.y.sum_y * self.y.sum_y.transpose() / m;
+        let n = outer.nrows();
+        let mut sum_yy = DMatrix::zeros(n, n);
+        for i in 0..n {
+            for j in 0..n {
+                let v = (self.y.sum_yy[(i, j)] - outer[(i, j)]) / (m - 1.0);
+                let u = [0, 1, 2].map(|k| self.parts[k][(i, j)] / m);
+                sum_yy[(i, j)] = (m - 1.0) * rescale(v, u, from, to) + outer[(i, j)];
+            }
+        }
+        Some(YStats { sum_yy, ..self.y.clone() })
+    }
+
+    /// (M, Σ C, predicted Σ C²) of per-path strategy `k` at `to`.
+    fn strategy_sums(&self, k: usize, from: Budget, to: Budget) -> Option<[f64; 3]> {
+        let m = self.y.m;
+        let [s1, s2, ul, uc, u0] = self.strategies[k];
+        (m >= 2.0).then(|| {
+            let v = (s2 - s1 * s1 / m) / (m - 1.0);
+            let predicted = rescale(v, [ul / m, uc / m, u0 / m], from, to);
+            [m, s1, (m - 1.0) * predicted + s1 * s1 / m]
+        })
+    }
+}
+
+/// RMS% of (M, Σ C, Σ C²), if the mean is not zero.
+fn rms([m, s1, s2]: [f64; 3]) -> Option<f64> {
+    let mean = s1 / m;
+    (mean != 0.0).then(|| 100.0 * ((s2 / m - mean * mean).max(0.0) * m / (m - 1.0)).sqrt() / mean.abs())
+}
+
+/// Predicts the noise table and re-fits the optimum at `to` from `moments` drawn at `from`.
+pub fn predict(
+    moments: &Moments,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    from: Budget,
+    to: Budget,
+) -> Result<Prediction, PredictError> {
+    let cells = moments.cells;
+    let pooled = moments.pooled();
+    let all = ComponentStats::from_fold(&pooled, cells).ok_or(PredictError::NoComponents)?;
+    if all.y.m < 2.0 {
+        return Err(PredictError::TooFewIterations(moments.iterations()));
+    }
+    let folds: Vec<ComponentStats> = moments
+        .folds
+        .iter()
+        .filter(|f| f.iterations > 0)
+        .map(|f| ComponentStats::from_fold(f, cells).expect("every fold keeps components"))
+        .collect();
+    let complements: Vec<ComponentStats> = folds.iter().map(|f| all.without(f)).collect();
+
+    let mut rows: Vec<NoiseRow> = PathStrategy::ALL
+        .iter()
+        .enumerate()
+        .map(|(k, &s)| path_row(s, k, &all, &complements, solver, from, to))
+        .collect();
+
+    let predicted = |c: &ComponentStats| c.predict(from, to);
+    let cf = (|| {
+        Some(CrossFitting {
+            all: predicted(&all)?,
+            test: folds.iter().map(predicted).collect::<Option<_>>()?,
+            train: complements.iter().map(predicted).collect::<Option<_>>()?,
+        })
+    })();
+    let mut recommended = None;
+    let mut weights = Vec::new();
+    let mut solve_error = None;
+    let optimum = cf.as_ref().ok_or_else(|| "every fold needs at least 2 iterations".to_string()).and_then(|cf| {
+        let chosen = select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas)
+            .map_err(|f| format!("no λ of the grid could be cross-fitted ({})", f.join("; ")))?;
+        let all_fit = fit(&cf.all, grid, &solver.fixed, chosen.lambda).map_err(|e| e.to_string())?;
+        Ok((chosen, all_fit))
+    });
+    rows.push(match optimum {
+        Ok((chosen, all_fit)) => {
+            let [m, s1, s2] = chosen.totals();
+            recommended = Some(RecommendedWeights { strategy: Strategy::OptimalCv, lambda: chosen.lambda });
+            weights = weight_rows(grid, &all_fit, chosen.weight_stderr().as_deref());
+            NoiseRow { lambda: Some(chosen.lambda), ..NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None) }
+        }
+        Err(e) => {
+            solve_error = Some(e.clone());
+            NoiseRow { error: Some(e), ..NoiseRow::from_sums(Strategy::OptimalCv, 0.0, 0.0, 0.0, None) }
+        }
+    });
+    Ok(Prediction {
+        budget: to,
+        measured: from,
+        iterations: moments.iterations(),
+        folds: moments.fold_count(),
+        noise_table: rows,
+        recommended,
+        weights,
+        solve_error,
+    })
+}
+
+/// The predicted row of per-path strategy `s` (index `k`), with the jackknife SE of its RMS.
+fn path_row(
+    s: PathStrategy,
+    k: usize,
+    all: &ComponentStats,
+    complements: &[ComponentStats],
+    solver: &SolverOptions,
+    from: Budget,
+    to: Budget,
+) -> NoiseRow {
+    let name = Strategy::of_path(s);
+    if s.depends_on_budget() && from != to {
+        let mut row = NoiseRow::from_sums(name, 0.0, 0.0, 0.0, None);
+        row.error = Some(format!(
+            "{} weighs each merge by N_F and N_B: its weights, and so its noise, at another budget cannot be predicted from this run",
+            s.name()
+        ));
+        return row;
+    }
+    let Some([m, s1, s2]) = all.strategy_sums(k, from, to) else {
+        return NoiseRow::from_sums(name, all.y.m, 0.0, 0.0, None);
+    };
+    let replicates: Option<Vec<f64>> = complements.iter().map(|c| c.strategy_sums(k, from, to).and_then(rms)).collect();
+    NoiseRow {
+        rms_percent_stderr: replicates.filter(|r| r.len() >= 2).map(|r| jackknife_se(r.iter().copied())),
+        respects_fixed: respects_fixed(s, &solver.fixed),
+        ..NoiseRow::from_sums(name, m, s1, s2, None)
+    }
+}

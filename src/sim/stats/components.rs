@@ -1,0 +1,179 @@
+//! Noise components: the sums that let one run predict the noise at any other N_F and N_B.
+//!
+//! # The decomposition (docs/model.md §12)
+//!
+//! An iteration's value is Y = (1/(N_F N_B)) Σ_i Σ_j c(η_i, ξ_j) over its light paths η_i and camera
+//! paths ξ_j (each entry of the moment vector is such a sum, with its own c). For two entries a, b
+//! let Q_same = E[c^a c^b] of one pair, Q_L = E[c^a(η, ξ) c^b(η, ξ')] of two pairs sharing their
+//! light path, Q_C = E[c^a(η, ξ) c^b(η', ξ)] sharing their camera path, Q_0 = E c^a · E c^b. Counting
+//! the pairs of pairs,
+//!
+//! * brute force (N_F paths): Cov(Y_a, Y_b) = α/(N_F N_B) + β/N_F + δ/N_B with α = Q_same − Q_L −
+//!   Q_C + Q_0, β = Q_L − Q_0, δ = Q_C − Q_0;
+//! * restricted engine (a Poisson process of intensity N_F, whose factorial moment measure makes
+//!   E Σ_{i≠i'} f(η_i, η_i') = N_F² ∫∫ f): the same form with α = Q_same − Q_L, β = Q_L, δ = Q_C − Q_0
+//!   (E c² and the second moment Q_L take the place of the covariances on the light side).
+//!
+//! # The estimators
+//!
+//! Split the light paths in halves L ∈ {0, 1} of N_F/2 paths (the brute force alternates; the
+//! restricted engine tosses a fair coin per path, which leaves two independent Poisson processes
+//! of intensity N_F/2) and the camera paths in halves K of N_B/2, and let y_LK be block LK's own
+//! estimate of the pixel, (1/((N_F/2)(N_B/2))) Σ_{i∈L, j∈K} c. Blocks that share no half are
+//! independent, so E[y_00 y_11ᵀ] = E[y_01 y_10ᵀ] = Q_0. Two blocks sharing light half L pair each of
+//! its paths with two disjoint camera halves; counting as above, in both engines,
+//! E[y_L0 y_L1ᵀ] = Q_0 + β/(N_F/2), and likewise E[y_0K y_1Kᵀ] = Q_0 + δ/(N_B/2). Hence, with
+//! U_L, U_C, U_0 the per-iteration products below (averaged over their two instances and made
+//! symmetric, which keeps the expectations),
+//!
+//!   β̂ = (N_F/2)·(Ū_L − Ū_0),   δ̂ = (N_B/2)·(Ū_C − Ū_0),
+//!
+//! unbiased as linear combinations of unbiased means. With V̂ the sample covariance of Y (unbiased),
+//! α̂ = N_F N_B (V̂ − β̂/N_F − δ̂/N_B), and the prediction V̂' = α̂/(N_F' N_B') + β̂/N_F' + δ̂/N_B' is
+//! unbiased for Cov(Y) at (N_F', N_B') — for every entry of ΣYYᵀ (so for the optimal weights'
+//! objective) and for every per-path strategy whose weights do not depend on N_F or N_B.
+//!
+//! The sums are exact and kept per fold like the rest of the moments, so shards and merges stay
+//! bit-identical and the prediction can be cross-fitted and jackknifed over folds.
+
+use serde::{Deserialize, Serialize};
+
+use super::bounded::bounded;
+use crate::sim::engines::tally::{BLOCKS, IterationTally, PathStrategy};
+use crate::sim::math::exact_sum::ExactSum;
+use crate::sim::model::cells::MAX_CELLS;
+use crate::sim::model::config::{packed_index, packed_len};
+
+/// Longest packed matrix (as in `moments`).
+const MAX_PACKED: usize = (2 * MAX_CELLS + 1) * (2 * MAX_CELLS + 2) / 2;
+
+/// The three kinds of block pairs.
+pub const LIGHT: usize = 0;
+pub const CAMERA: usize = 1;
+pub const CROSS: usize = 2;
+
+/// Σ over a fold's iterations of the symmetrised block products.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct ComponentSums {
+    /// Σ_s U_L = ½ Σ_L sym(y_L0 y_L1ᵀ) (blocks sharing a light half), packed like ΣYYᵀ.
+    #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
+    pub light: Vec<ExactSum>,
+    /// Σ_s U_C = ½ Σ_K sym(y_0K y_1Kᵀ) (sharing a camera half).
+    #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
+    pub camera: Vec<ExactSum>,
+    /// Σ_s U_0 = ½ (sym(y_00 y_11ᵀ) + sym(y_01 y_10ᵀ)) (sharing nothing).
+    #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
+    pub cross: Vec<ExactSum>,
+    /// Per path strategy (in [`PathStrategy::ALL`] order): Σ U_L, Σ U_C, Σ U_0 of its C_s.
+    #[serde(deserialize_with = "bounded::<_, _, { PathStrategy::COUNT }>")]
+    pub strategies: Vec<[ExactSum; 3]>,
+}
+
+/// The pairs of blocks (block = 2·L + K) behind each kind, each weighted ½.
+const PAIRS: [[(usize, usize); 2]; 3] = [[(0, 1), (2, 3)], [(0, 2), (1, 3)], [(0, 3), (1, 2)]];
+
+impl ComponentSums {
+    /// Zero sums for moment vectors of dimension n.
+    pub fn empty(n: usize) -> Self {
+        let zeros = || vec![ExactSum::new(); packed_len(n)];
+        Self {
+            light: zeros(),
+            camera: zeros(),
+            cross: zeros(),
+            strategies: vec![Default::default(); PathStrategy::COUNT],
+        }
+    }
+
+    /// Whether the lists have the lengths of dimension n.
+    pub fn has_shape(&self, n: usize) -> bool {
+        [&self.light, &self.camera, &self.cross].iter().all(|m| m.len() == packed_len(n))
+            && self.strategies.len() == PathStrategy::COUNT
+    }
+
+    /// The packed sums of one kind.
+    pub fn matrix(&self, kind: usize) -> &[ExactSum] {
+        [&self.light, &self.camera, &self.cross][kind]
+    }
+
+    /// Adds one iteration's block products (its block vectors are empty when nothing merged).
+    pub fn add_iteration(&mut self, cells: usize, tally: &IterationTally) {
+        let n = 2 * cells + 1;
+        let mut y: [Vec<(usize, f64)>; BLOCKS] = Default::default();
+        for (b, v) in y.iter_mut().enumerate() {
+            tally.block_moment_vector(b, cells, v);
+        }
+        for (kind, pairs) in PAIRS.iter().enumerate() {
+            let sums = [&mut self.light, &mut self.camera, &mut self.cross][kind].as_mut_slice();
+            for &(p, q) in pairs {
+                add_symmetric_product(sums, n, &y[p], &y[q]);
+            }
+            for (s, acc) in self.strategies.iter_mut().enumerate() {
+                let value: f64 =
+                    pairs.iter().map(|&(p, q)| tally.block_strategies[p][s] * tally.block_strategies[q][s]).sum();
+                acc[kind].add(0.5 * value);
+            }
+        }
+    }
+
+    /// Every sum, for checks that treat them alike.
+    pub fn sums(&self) -> impl Iterator<Item = &ExactSum> {
+        self.light.iter().chain(&self.camera).chain(&self.cross).chain(self.strategies.iter().flatten())
+    }
+
+    /// Every sum, mutably, in the order of [`ComponentSums::sums`].
+    fn sums_mut(&mut self) -> impl Iterator<Item = &mut ExactSum> {
+        self.light
+            .iter_mut()
+            .chain(self.camera.iter_mut())
+            .chain(self.cross.iter_mut())
+            .chain(self.strategies.iter_mut().flatten())
+    }
+
+    /// Adds `other` (of the same shape; checked by the caller).
+    pub fn add(&mut self, other: &ComponentSums) {
+        for (a, b) in self.sums_mut().zip(other.sums()) {
+            a.add_sum(b);
+        }
+    }
+}
+
+/// Adds ½·sym(u vᵀ) = ¼(u vᵀ + v uᵀ) to the packed upper triangle `sums` of side n.
+fn add_symmetric_product(sums: &mut [ExactSum], n: usize, u: &[(usize, f64)], v: &[(usize, f64)]) {
+    for &(i, ui) in u {
+        for &(j, vj) in v {
+            // (i, j) and (j, i) both occur when both vectors hold both indices: ¼ each; a diagonal
+            // entry occurs once and gets ½ u_i v_i.
+            let weight = if i == j { 0.5 } else { 0.25 };
+            sums[packed_index(n, i.min(j), i.max(j))].add(weight * ui * vj);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_symmetric_product_is_half_the_symmetrised_outer_product() {
+        let n = 3;
+        let mut sums = vec![ExactSum::new(); packed_len(n)];
+        let (u, v) = ([(0, 2.0), (2, 3.0)], [(0, 5.0), (1, 7.0)]);
+        add_symmetric_product(&mut sums, n, &u, &v);
+        let dense = |x: &[(usize, f64)]| {
+            let mut d = [0.0; 3];
+            for &(i, a) in x {
+                d[i] = a;
+            }
+            d
+        };
+        let (du, dv) = (dense(&u), dense(&v));
+        for i in 0..n {
+            for j in i..n {
+                let want = 0.25 * (du[i] * dv[j] + du[j] * dv[i]);
+                assert_eq!(sums[packed_index(n, i, j)].value(), want, "({i}, {j})");
+            }
+        }
+    }
+}
