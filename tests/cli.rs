@@ -171,3 +171,42 @@ fn serve_refuses_bad_secrets_and_announces_itself_only_when_ready() {
     assert!(!stderr.contains("optimis listening"), "announced before the database opened: {stderr}");
     assert!(stderr.contains("database"), "{stderr}");
 }
+
+/// Issue 14: `optimis predict` and `optimis budget` on a run with noise components. The budget
+/// plan with given costs: every strategy's best point is at least as fast as any other point of
+/// the same strategy, and the paper's configuration is reported beside them.
+#[test]
+fn predict_and_budget_read_a_run_with_noise_components() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = r#"{"preset": "paper-table1", "light_paths": 1000000, "camera_paths": 20, "noise_components": true, "iterations": 3000, "seed": 2}"#;
+    std::fs::write(dir.path().join("job.json"), spec).unwrap();
+    ok(optimis(dir.path(), &["run", "--spec", "job.json", "--out", "comp.json", "--json"], &[]));
+    let text = String::from_utf8(ok(optimis(
+        dir.path(),
+        &["predict", "comp.json", "--light-paths", "2000000", "--camera-paths", "10"],
+        &[],
+    )))
+    .unwrap();
+    assert!(text.contains("predicted for N_F = 2000000") && text.contains("re-fitted"), "{text}");
+    let plan: Value = serde_json::from_slice(&ok(optimis(
+        dir.path(),
+        &["budget", "comp.json", "--light-cost", "1e-8", "--camera-cost", "1e-6", "--iteration-cost", "0.01", "--json"],
+        &[],
+    )))
+    .unwrap();
+    assert_eq!(plan["paper"]["strategy"], "switch");
+    assert_eq!(plan["paper"]["budget"]["light_paths"], 10_000_000);
+    let points = plan["points"].as_array().unwrap();
+    assert_eq!(points.iter().filter(|p| p["strategy"] == "plane1").count(), 25, "5 × 5 budgets");
+    for best in plan["best"].as_array().unwrap() {
+        let t = best["seconds_to_target"].as_f64().unwrap();
+        for p in points.iter().filter(|p| p["strategy"] == best["strategy"]) {
+            assert!(p["seconds_to_target"].as_f64().unwrap() >= t);
+        }
+        let expected = best["seconds_per_iteration"].as_f64().unwrap()
+            * (best["rms_percent"].as_f64().unwrap() / 1.0).powi(2).max(1.0);
+        assert!((t - expected).abs() <= 1e-9 * t, "time = iterations × seconds per iteration");
+    }
+    let missing = optimis(dir.path(), &["predict", "job.json"], &[]);
+    assert!(!missing.status.success());
+}

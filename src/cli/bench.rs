@@ -42,7 +42,7 @@ pub struct BenchArgs {
 }
 
 /// Seconds to run `iterations` iterations (after one warm-up iteration).
-fn time_iterations(config: &SimConfig, iterations: u64) -> f64 {
+pub(super) fn time_iterations(config: &SimConfig, iterations: u64) -> f64 {
     let never = AtomicBool::new(false);
     let mut moments = Moments::new(config);
     let go_on = |_: &Moments, _| std::ops::ControlFlow::Continue(());

@@ -1,7 +1,8 @@
-//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `serve` and `openapi`, thin shells
+//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `budget`, `serve` and `openapi`, thin shells
 //! around the library.
 
 mod bench;
+mod budget;
 mod documents;
 mod predict;
 mod run;
@@ -38,6 +39,9 @@ pub enum Command {
     /// Predict the noise table and re-fit the optimal weights at another N_F and N_B, from a moments
     /// document with noise components.
     Predict(predict::PredictArgs),
+    /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, from a moments
+    /// document with noise components.
+    Budget(budget::BudgetArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
     Serve(serve::ServeArgs),
@@ -94,6 +98,7 @@ pub fn main() -> ExitCode {
         Command::Merge(args) => documents::merge(args),
         Command::Report(args) => documents::report(args),
         Command::Predict(args) => predict::predict(args),
+        Command::Budget(args) => budget::budget(args),
         #[cfg(feature = "server")]
         Command::Serve(args) => serve::serve_command(args),
         #[cfg(feature = "server")]

@@ -11,8 +11,10 @@
 //! * [`strategy`] — the rows of the noise table, by name;
 //! * [`report`] — the result document of a run;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
-//!   noise components.
+//!   noise components;
+//! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy.
 
+pub mod budget;
 pub mod crossfit;
 pub mod noise;
 pub mod options;
