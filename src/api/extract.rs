@@ -122,6 +122,15 @@ impl<S: Send + Sync> FromRequestParts<S> for JobId {
 pub fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, ApiError> {
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
-        ApiError::Invalid { field: if path == "." { String::new() } else { path }, message: e.into_inner().to_string() }
+        let message = e.into_inner().to_string();
+        // serde reports a missing field at its parent's path: name the field itself.
+        let missing = message.strip_prefix("missing field `").and_then(|m| m.split('`').next());
+        let field = match (path.as_str(), missing) {
+            (".", Some(name)) => name.to_string(),
+            (".", None) => String::new(),
+            (parent, Some(name)) => format!("{parent}.{name}"),
+            (parent, None) => parent.to_string(),
+        };
+        ApiError::Invalid { field, message }
     })
 }

@@ -354,7 +354,8 @@ pub async fn predict(
     JobId(id): JobId,
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobPrediction>, ApiError> {
-    Ok(Json(state.jobs.predict(id, &body).await?))
+    let request: PredictRequest = typed(&body)?;
+    Ok(Json(state.jobs.predict(id, &request).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.

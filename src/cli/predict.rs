@@ -8,7 +8,7 @@ use clap::Args;
 
 use super::documents::{read_document, solver_options};
 use super::{CliError, table};
-use crate::sim::model::params::check;
+use crate::sim::model::params::check_path_counts;
 use crate::sim::solve::predict::{Budget, predict as predict_budget};
 use crate::sim::spec::SpecError;
 
@@ -39,12 +39,7 @@ pub fn predict(args: PredictArgs) -> Result<(), CliError> {
         light_paths: args.light_paths.unwrap_or(measured.light_paths),
         camera_paths: args.camera_paths.unwrap_or(measured.camera_paths),
     };
-    check((1..=1_000_000_000_000).contains(&to.light_paths), "--light-paths", || {
-        format!("must be in [1, 10^12], got {}", to.light_paths)
-    })?;
-    check((1..=1_000_000).contains(&to.camera_paths), "--camera-paths", || {
-        format!("must be in [1, 10^6], got {}", to.camera_paths)
-    })?;
+    check_path_counts(to.light_paths, to.camera_paths, ["--light-paths", "--camera-paths"])?;
     let prediction = predict_budget(&doc.moments, &job.config.cells, &solver, measured, to)
         .map_err(|e| SpecError::new("document", e.to_string()))?;
     let mut out = std::io::stdout().lock();

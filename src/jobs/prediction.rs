@@ -8,9 +8,8 @@ use utoipa::ToSchema;
 use super::error::JobError;
 use super::manager::JobManager;
 use super::resource::JobState;
-use crate::sim::model::params::check;
+use crate::sim::model::params::check_path_counts;
 use crate::sim::solve::predict::{Budget, Prediction, predict};
-use crate::sim::spec::SpecError;
 
 /// What to predict.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -38,23 +37,10 @@ pub struct JobPrediction {
 }
 
 impl JobManager {
-    /// Predicts the job's noise table at the budget of `body` (a [`PredictRequest`]) from its latest
-    /// checkpoint; nothing is run or stored.
-    pub async fn predict(&self, id: i64, body: &Value) -> Result<JobPrediction, JobError> {
-        let request: PredictRequest = serde_json::from_value(body.clone()).map_err(|e| {
-            let message = e.to_string();
-            let field = ["light_paths", "camera_paths", "solver"]
-                .into_iter()
-                .find(|f| message.contains(&format!("`{f}`")))
-                .unwrap_or("body");
-            SpecError::new(field, message)
-        })?;
-        check((1..=1_000_000_000_000).contains(&request.light_paths), "light_paths", || {
-            format!("must be in [1, 10^12], got {}", request.light_paths)
-        })?;
-        check((1..=1_000_000).contains(&request.camera_paths), "camera_paths", || {
-            format!("must be in [1, 10^6], got {}", request.camera_paths)
-        })?;
+    /// Predicts the job's noise table at the budget of `request` from its latest checkpoint;
+    /// nothing is run or stored.
+    pub async fn predict(&self, id: i64, request: &PredictRequest) -> Result<JobPrediction, JobError> {
+        check_path_counts(request.light_paths, request.camera_paths, ["light_paths", "camera_paths"])?;
         let (state, total, spec, merged) = self.state_and_total(id).await?;
         let solver = match &request.solver {
             Some(patch) => spec.solver.patched(patch)?,

@@ -20,7 +20,8 @@ use crate::sim::model::config::{
 };
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
-    CellSpec, MIN_LENGTH, SceneSpec, check, count, merge_patch, optional_count, validate_cells, validate_scene,
+    CellSpec, MIN_LENGTH, SceneSpec, check, check_path_counts, count, merge_patch, optional_count, validate_cells,
+    validate_scene,
 };
 use crate::sim::model::scene::Scene;
 use crate::sim::solve::options::{SolverOptions, validate_solver};
@@ -212,12 +213,7 @@ impl JobSpec {
             "merge_radius",
             || format!("must be in [{MIN_LENGTH:e}, min(l2, l3) = {max_r}), got {}", self.merge_radius),
         )?;
-        check((1..=1_000_000_000_000).contains(&self.light_paths), "light_paths", || {
-            format!("must be in [1, 10^12], got {}", self.light_paths)
-        })?;
-        check((1..=1_000_000).contains(&self.camera_paths), "camera_paths", || {
-            format!("must be in [1, 10^6], got {}", self.camera_paths)
-        })?;
+        check_path_counts(self.light_paths, self.camera_paths, ["light_paths", "camera_paths"])?;
         check((1..=1_000_000_000).contains(&self.iterations), "iterations", || {
             format!("must be in [1, 10^9], got {}", self.iterations)
         })?;

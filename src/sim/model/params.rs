@@ -101,6 +101,22 @@ pub fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
     u32::try_from(n).map_err(|_| D::Error::custom(format!("expected at most {}, got {n}", u32::MAX)))
 }
 
+/// Most light paths N_F per iteration.
+pub const MAX_LIGHT_PATHS: u64 = 1_000_000_000_000;
+/// Most camera paths N_B per iteration.
+pub const MAX_CAMERA_PATHS: u64 = 1_000_000;
+
+/// Checks N_F and N_B against their ranges, naming them `fields` (a spec's `light_paths`, a
+/// command line's `--light-paths`, …).
+pub(crate) fn check_path_counts(light_paths: u64, camera_paths: u64, fields: [&str; 2]) -> Result<(), SpecError> {
+    check((1..=MAX_LIGHT_PATHS).contains(&light_paths), fields[0], || {
+        format!("must be in [1, 10^12], got {light_paths}")
+    })?;
+    check((1..=MAX_CAMERA_PATHS).contains(&camera_paths), fields[1], || {
+        format!("must be in [1, 10^6], got {camera_paths}")
+    })
+}
+
 pub(crate) fn check(ok: bool, field: &str, message: impl FnOnce() -> String) -> Result<(), SpecError> {
     if ok { Ok(()) } else { Err(SpecError::new(field, message())) }
 }

@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::SolverOptions;
-use super::predict::{Budget, PredictError, predict};
+use super::predict::{Budget, PredictError, Predictor};
 use super::strategy::Strategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::Moments;
@@ -82,9 +82,10 @@ pub fn plan(
     light: &[u64],
     camera: &[u64],
 ) -> Result<BudgetPlan, PredictError> {
+    let predictor = Predictor::new(moments, measured)?;
     let mut points = Vec::new();
-    let evaluate = |b: Budget, points: &mut Vec<BudgetPoint>| -> Result<(), PredictError> {
-        let p = predict(moments, grid, solver, measured, b)?;
+    let evaluate = |b: Budget, points: &mut Vec<BudgetPoint>| {
+        let p = predictor.at(grid, solver, b);
         let seconds = costs.iteration_seconds(b);
         for row in &p.noise_table {
             if let Some(r) = row.rms_percent.filter(|r| r.is_finite() && *r > 0.0) {
@@ -100,15 +101,14 @@ pub fn plan(
                 });
             }
         }
-        Ok(())
     };
     for &l in light {
         for &c in camera {
-            evaluate(Budget { light_paths: l, camera_paths: c }, &mut points)?;
+            evaluate(Budget { light_paths: l, camera_paths: c }, &mut points);
         }
     }
     let mut at_paper = Vec::new();
-    evaluate(PAPER_BUDGET, &mut at_paper)?;
+    evaluate(PAPER_BUDGET, &mut at_paper);
     let paper = at_paper.iter().find(|p| p.strategy == Strategy::Switch).copied();
     let mut best: Vec<BudgetPoint> = Vec::new();
     for p in &points {

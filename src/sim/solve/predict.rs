@@ -24,12 +24,11 @@ use super::options::SolverOptions;
 use super::report::{RecommendedWeights, WeightRow, weight_rows};
 use super::solver::fit;
 use super::strategy::Strategy;
-use super::ystats::YStats;
+use super::ystats::{YStats, unpack};
 use crate::sim::engines::tally::PathStrategy;
-use crate::sim::math::exact_sum::ExactSum;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::components::{CAMERA, CROSS, LIGHT};
-use crate::sim::stats::moments::{FoldMoments, Moments, packed_index};
+use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// Light and camera paths per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -80,18 +79,6 @@ struct ComponentStats {
     parts: [DMatrix<f64>; 3],
     /// Per path strategy: Σ C, Σ C², and ΣU_L, ΣU_C, ΣU_0 of its C_s.
     strategies: Vec<[f64; 5]>,
-}
-
-fn unpack(sums: &[ExactSum], n: usize) -> DMatrix<f64> {
-    let mut m = DMatrix::zeros(n, n);
-    for i in 0..n {
-        for j in i..n {
-            let v = sums[packed_index(n, i, j)].value();
-            m[(i, j)] = v;
-            m[(j, i)] = v;
-        }
-    }
-    m
 }
 
 /// One covariance entry at `to` from its estimate `v` at `from` and the means of the block
@@ -170,6 +157,87 @@ fn rms([m, s1, s2]: [f64; 3]) -> Option<f64> {
     (mean != 0.0).then(|| 100.0 * ((s2 / m - mean * mean).max(0.0) * m / (m - 1.0)).sqrt() / mean.abs())
 }
 
+/// One run's component sums, read once: predictions at any number of budgets
+/// ([`Predictor::at`]) share them.
+#[derive(Debug, Clone)]
+pub struct Predictor {
+    measured: Budget,
+    iterations: u64,
+    folds: usize,
+    all: ComponentStats,
+    /// The folds that hold iterations, and their complements.
+    test: Vec<ComponentStats>,
+    train: Vec<ComponentStats>,
+}
+
+impl Predictor {
+    /// Reads `moments`, drawn at `measured`.
+    pub fn new(moments: &Moments, measured: Budget) -> Result<Self, PredictError> {
+        let cells = moments.cells;
+        let all = ComponentStats::from_fold(&moments.pooled(), cells).ok_or(PredictError::NoComponents)?;
+        if all.y.m < 2.0 {
+            return Err(PredictError::TooFewIterations(moments.iterations()));
+        }
+        let test: Vec<ComponentStats> = moments
+            .folds
+            .iter()
+            .filter(|f| f.iterations > 0)
+            .map(|f| ComponentStats::from_fold(f, cells).expect("every fold keeps components"))
+            .collect();
+        let train = test.iter().map(|f| all.without(f)).collect();
+        Ok(Self { measured, iterations: moments.iterations(), folds: moments.fold_count(), all, test, train })
+    }
+
+    /// The noise table and the re-fitted optimum at `to`.
+    pub fn at(&self, grid: &CellGrid, solver: &SolverOptions, to: Budget) -> Prediction {
+        let (from, all) = (self.measured, &self.all);
+        let mut rows: Vec<NoiseRow> = PathStrategy::ALL
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| path_row(s, k, all, &self.train, solver, from, to))
+            .collect();
+        let predicted = |c: &ComponentStats| c.predict(from, to);
+        let cf = (|| {
+            Some(CrossFitting {
+                all: predicted(all)?,
+                test: self.test.iter().map(predicted).collect::<Option<_>>()?,
+                train: self.train.iter().map(predicted).collect::<Option<_>>()?,
+            })
+        })();
+        let mut recommended = None;
+        let mut weights = Vec::new();
+        let mut solve_error = None;
+        let optimum = cf.as_ref().ok_or_else(|| "every fold needs at least 2 iterations".to_string()).and_then(|cf| {
+            let chosen = select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas)
+                .map_err(|f| format!("no λ of the grid could be cross-fitted ({})", f.join("; ")))?;
+            let all_fit = fit(&cf.all, grid, &solver.fixed, chosen.lambda).map_err(|e| e.to_string())?;
+            Ok((chosen, all_fit))
+        });
+        rows.push(match optimum {
+            Ok((chosen, all_fit)) => {
+                let [m, s1, s2] = chosen.totals();
+                recommended = Some(RecommendedWeights { strategy: Strategy::OptimalCv, lambda: chosen.lambda });
+                weights = weight_rows(grid, &all_fit, chosen.weight_stderr().as_deref());
+                NoiseRow { lambda: Some(chosen.lambda), ..NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None) }
+            }
+            Err(e) => {
+                solve_error = Some(e.clone());
+                NoiseRow { error: Some(e), ..NoiseRow::from_sums(Strategy::OptimalCv, 0.0, 0.0, 0.0, None) }
+            }
+        });
+        Prediction {
+            budget: to,
+            measured: from,
+            iterations: self.iterations,
+            folds: self.folds,
+            noise_table: rows,
+            recommended,
+            weights,
+            solve_error,
+        }
+    }
+}
+
 /// Predicts the noise table and re-fits the optimum at `to` from `moments` drawn at `from`.
 pub fn predict(
     moments: &Moments,
@@ -178,65 +246,7 @@ pub fn predict(
     from: Budget,
     to: Budget,
 ) -> Result<Prediction, PredictError> {
-    let cells = moments.cells;
-    let pooled = moments.pooled();
-    let all = ComponentStats::from_fold(&pooled, cells).ok_or(PredictError::NoComponents)?;
-    if all.y.m < 2.0 {
-        return Err(PredictError::TooFewIterations(moments.iterations()));
-    }
-    let folds: Vec<ComponentStats> = moments
-        .folds
-        .iter()
-        .filter(|f| f.iterations > 0)
-        .map(|f| ComponentStats::from_fold(f, cells).expect("every fold keeps components"))
-        .collect();
-    let complements: Vec<ComponentStats> = folds.iter().map(|f| all.without(f)).collect();
-
-    let mut rows: Vec<NoiseRow> = PathStrategy::ALL
-        .iter()
-        .enumerate()
-        .map(|(k, &s)| path_row(s, k, &all, &complements, solver, from, to))
-        .collect();
-
-    let predicted = |c: &ComponentStats| c.predict(from, to);
-    let cf = (|| {
-        Some(CrossFitting {
-            all: predicted(&all)?,
-            test: folds.iter().map(predicted).collect::<Option<_>>()?,
-            train: complements.iter().map(predicted).collect::<Option<_>>()?,
-        })
-    })();
-    let mut recommended = None;
-    let mut weights = Vec::new();
-    let mut solve_error = None;
-    let optimum = cf.as_ref().ok_or_else(|| "every fold needs at least 2 iterations".to_string()).and_then(|cf| {
-        let chosen = select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas)
-            .map_err(|f| format!("no λ of the grid could be cross-fitted ({})", f.join("; ")))?;
-        let all_fit = fit(&cf.all, grid, &solver.fixed, chosen.lambda).map_err(|e| e.to_string())?;
-        Ok((chosen, all_fit))
-    });
-    rows.push(match optimum {
-        Ok((chosen, all_fit)) => {
-            let [m, s1, s2] = chosen.totals();
-            recommended = Some(RecommendedWeights { strategy: Strategy::OptimalCv, lambda: chosen.lambda });
-            weights = weight_rows(grid, &all_fit, chosen.weight_stderr().as_deref());
-            NoiseRow { lambda: Some(chosen.lambda), ..NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None) }
-        }
-        Err(e) => {
-            solve_error = Some(e.clone());
-            NoiseRow { error: Some(e), ..NoiseRow::from_sums(Strategy::OptimalCv, 0.0, 0.0, 0.0, None) }
-        }
-    });
-    Ok(Prediction {
-        budget: to,
-        measured: from,
-        iterations: moments.iterations(),
-        folds: moments.fold_count(),
-        noise_table: rows,
-        recommended,
-        weights,
-        solve_error,
-    })
+    Ok(Predictor::new(moments, from)?.at(grid, solver, to))
 }
 
 /// The predicted row of per-path strategy `s` (index `k`), with the jackknife SE of its RMS.

@@ -3,7 +3,21 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::sim::math::exact_sum::ExactSum;
 use crate::sim::stats::moments::{FoldMoments, packed_index};
+
+/// A packed upper triangle of exact sums (side n) as a full symmetric matrix of doubles.
+pub(crate) fn unpack(sums: &[ExactSum], n: usize) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(n, n);
+    for i in 0..n {
+        for j in i..n {
+            let v = sums[packed_index(n, i, j)].value();
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+    m
+}
 
 /// Second-order sums of Y over a set of iterations, as plain doubles.
 #[derive(Debug, Clone)]
@@ -23,14 +37,7 @@ impl YStats {
     pub fn from_fold(fold: &FoldMoments, cells: usize) -> Self {
         let n = 2 * cells + 1;
         let sum_y = DVector::from_iterator(n, fold.sum_y.iter().map(|s| s.value()));
-        let mut sum_yy = DMatrix::zeros(n, n);
-        for i in 0..n {
-            for j in i..n {
-                let v = fold.sum_yy[packed_index(n, i, j)].value();
-                sum_yy[(i, j)] = v;
-                sum_yy[(j, i)] = v;
-            }
-        }
+        let sum_yy = unpack(&fold.sum_yy, n);
         let cell_samples = (0..cells).map(|a| (0..3).map(|m| fold.cell_counts[m * cells + a]).sum()).collect();
         Self { m: fold.iterations as f64, sum_y, sum_yy, cell_samples }
     }
