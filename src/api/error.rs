@@ -96,6 +96,7 @@ impl From<JobError> for ApiError {
             JobError::Invalid(s) => s.into(),
             JobError::Malformed(m) => ApiError::MalformedJson(m),
             JobError::NotFound(id) => ApiError::NotFound(format!("no job with id {id}")),
+            JobError::SweepNotFound(id) => ApiError::NotFound(format!("no sweep with id {id}")),
             JobError::Conflict(m) => ApiError::Conflict(m),
             JobError::Document(e @ DocumentError::Merge(MergeError::Overlap(_) | MergeError::Fingerprint { .. })) => {
                 ApiError::Conflict(format!("the statistics cannot be merged: {e}"))

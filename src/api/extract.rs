@@ -118,6 +118,24 @@ impl<S: Send + Sync> FromRequestParts<S> for JobId {
     }
 }
 
+/// The `{id}` of a sweep route. Anything that is not a sweep id names no sweep: 404.
+pub struct SweepId(pub i64);
+
+impl<S: Send + Sync> FromRequestParts<S> for SweepId {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        let Path(raw): Path<String> = Path::from_request_parts(parts, state)
+            .await
+            .map_err(|e| ApiError::NotFound(format!("no such sweep: {e}")))?;
+        raw.parse::<i64>()
+            .ok()
+            .filter(|id| *id > 0)
+            .map(SweepId)
+            .ok_or_else(|| ApiError::NotFound(format!("no sweep with id {raw:?}")))
+    }
+}
+
 /// Deserialises a typed request from a JSON value, naming the offending field on failure.
 pub fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, ApiError> {
     serde_path_to_error::deserialize(value).map_err(|e| {

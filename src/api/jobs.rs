@@ -236,11 +236,11 @@ pub async fn submit(
 }
 
 /// A query-string rejection as a 422 naming the parameter (axum reports `name: reason`).
-fn query_problem(rejection: QueryRejection) -> ApiError {
+pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
     let text = rejection.body_text();
     let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
     match reason.split_once(": ") {
-        Some((name, message)) if ["state", "limit", "cursor", "lambda"].contains(&name) => {
+        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format"].contains(&name) => {
             ApiError::Invalid { field: name.into(), message: message.into() }
         }
         _ => ApiError::Invalid { field: "query".into(), message: reason.into() },

@@ -16,6 +16,7 @@ mod jobs;
 pub mod limits;
 mod openapi;
 mod studies;
+mod sweeps;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -66,6 +67,7 @@ pub struct AppState {
     tags(
         (name = "jobs", description = "Simulation jobs"),
         (name = "statistics", description = "Merging statistics of shards, peers and documents"),
+        (name = "sweeps", description = "A job varied along axes: runs queued as jobs, one table"),
         (name = "operations", description = "Health, metrics and API description"),
         (name = "dashboard", description = "The built-in web dashboard")
     )
@@ -88,6 +90,10 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::history))
         .routes(with_limit(routes!(studies::merge)))
         .routes(with_limit(routes!(studies::create)))
+        .routes(routes!(sweeps::create, sweeps::list))
+        .routes(routes!(sweeps::get, sweeps::delete))
+        .routes(routes!(sweeps::table))
+        .routes(routes!(sweeps::cancel))
         .routes(routes!(events::events))
         .routes(routes!(health::healthz))
         .routes(routes!(health::readyz))

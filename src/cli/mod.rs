@@ -1,5 +1,5 @@
-//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `budget`, `serve` and `openapi`, thin shells
-//! around the library.
+//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `budget`, `sweep`, `serve` and
+//! `openapi`, thin shells around the library.
 
 mod bench;
 mod budget;
@@ -9,6 +9,7 @@ mod run;
 #[cfg(feature = "server")]
 mod serve;
 mod shard;
+mod sweep;
 mod table;
 
 use std::path::PathBuf;
@@ -42,6 +43,9 @@ pub enum Command {
     /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, from a moments
     /// document with noise components.
     Budget(budget::BudgetArgs),
+    /// Run a sweep (a job varied along axes) locally or one run per cluster task, and collect its
+    /// table (`optimis sweep collect DIR`).
+    Sweep(sweep::SweepArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
     Serve(serve::ServeArgs),
@@ -99,6 +103,7 @@ pub fn main() -> ExitCode {
         Command::Report(args) => documents::report(args),
         Command::Predict(args) => predict::predict(args),
         Command::Budget(args) => budget::budget(args),
+        Command::Sweep(args) => sweep::sweep(args),
         #[cfg(feature = "server")]
         Command::Serve(args) => serve::serve_command(args),
         #[cfg(feature = "server")]

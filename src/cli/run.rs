@@ -109,9 +109,8 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
     std::fs::rename(&tmp, path).map_err(fail)
 }
 
-pub fn run(args: RunArgs) -> Result<(), CliError> {
-    let job = job_from_args(&args)?;
-    let pool = thread_pool(args.threads)?;
+/// Runs every iteration of `job` on `pool`, with a progress bar on stderr, into fresh moments.
+pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool) -> Moments {
     let config = &job.config;
     let range = job.spec.iteration_range();
     let total = range.end - range.start;
@@ -134,6 +133,15 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     })
     .expect("a fresh run is neither cancelled nor overlapping");
     progress.finish_and_clear();
+    moments
+}
+
+pub fn run(args: RunArgs) -> Result<(), CliError> {
+    let job = job_from_args(&args)?;
+    let pool = thread_pool(args.threads)?;
+    let config = &job.config;
+    let started = Instant::now();
+    let moments = run_moments(&job, &pool);
     let seconds = started.elapsed().as_secs_f64();
     if let Some(path) = &args.out {
         write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;

@@ -56,6 +56,9 @@ pub struct ServeArgs {
     /// Most jobs waiting in the queue (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub max_queued_jobs: u64,
+    /// Most points of one sweep (`POST /v1/sweeps`; each run is a queued job).
+    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_SWEEP_POINTS as u64, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub max_sweep_points: u64,
     /// Most event streams open at once (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_event_streams: u64,
@@ -179,6 +182,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
             max_iteration_work: args.max_iteration_work,
             max_cells: args.max_cells as usize,
             max_queued_jobs: args.max_queued_jobs as usize,
+            max_sweep_points: args.max_sweep_points as usize,
         },
         http: HttpLimits {
             body_bytes: args.body_limit as usize,

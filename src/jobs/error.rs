@@ -16,6 +16,9 @@ pub enum JobError {
     /// No such job (HTTP 404).
     #[error("no job with id {0}")]
     NotFound(String),
+    /// No such sweep (HTTP 404).
+    #[error("no sweep with id {0}")]
+    SweepNotFound(i64),
     /// The job's state does not allow the operation (HTTP 409).
     #[error("{0}")]
     Conflict(String),

@@ -82,6 +82,7 @@ impl JobManager {
             lifecycle: tokio::sync::Mutex::new(()),
             merging: Mutex::new(HashSet::new()),
             verified: Mutex::new(HashMap::new()),
+            predictions: Default::default(),
             wake: Notify::new(),
             running: AtomicUsize::new(0),
             driver_ended: Notify::new(),
@@ -124,7 +125,7 @@ impl JobManager {
         Ok(())
     }
 
-    fn enqueue(&self, id: i64, job: ValidJob, resource: JobResource) {
+    pub(super) fn enqueue(&self, id: i64, job: ValidJob, resource: JobResource) {
         let total = resource.progress.iterations_total;
         let active = Arc::new(ActiveJob {
             id,

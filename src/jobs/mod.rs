@@ -3,6 +3,8 @@
 //!
 //! Layout (each module imports only those below it):
 //! * [`statistics`] — results, re-solves, the moments export, merges and studies (on the manager);
+//! * [`sweeps`] — sweeps: their runs queued as jobs, their figures and table (on the manager);
+//! * [`prediction`] — a job's noise table predicted at another ray budget (on the manager);
 //! * [`manager`] — the public handle: submit, get, list, cancel, extend, delete, shutdown;
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
@@ -24,6 +26,7 @@ pub mod resource;
 pub mod scheduler;
 pub mod state;
 pub mod statistics;
+pub mod sweeps;
 
 pub use error::JobError;
 pub use manager::JobManager;

@@ -24,11 +24,16 @@ pub struct RunPolicy {
     pub max_cells: usize,
     /// Most jobs waiting in the queue; beyond it submissions get 429 with Retry-After.
     pub max_queued_jobs: usize,
+    /// Most points of one sweep.
+    pub max_sweep_points: usize,
 }
 
 /// Default per-iteration work limit: 10¹⁰ light-path equivalents, about 45 s of the brute force
 /// on 2 cores (the paper's brute-force iteration is 10⁷, its restricted one ~3·10³).
 pub const DEFAULT_MAX_ITERATION_WORK: f64 = 1e10;
+
+/// Default limit on the points of a sweep.
+pub const DEFAULT_MAX_SWEEP_POINTS: usize = 256;
 
 impl Default for RunPolicy {
     /// `optimis serve`'s defaults: one job at a time, a checkpoint every 50 iterations or 15 s.
@@ -41,6 +46,7 @@ impl Default for RunPolicy {
             max_iteration_work: DEFAULT_MAX_ITERATION_WORK,
             max_cells: crate::sim::model::cells::MAX_CELLS,
             max_queued_jobs: 1000,
+            max_sweep_points: DEFAULT_MAX_SWEEP_POINTS,
         }
     }
 }

@@ -58,6 +58,8 @@ pub struct JobResource {
     /// True when the job holds statistics merged from other runs (shards, peers, documents);
     /// such a job is complete and cannot be extended.
     pub merged: bool,
+    /// The sweep this job is a run of (`GET /v1/sweeps/{id}`), if any.
+    pub sweep_id: Option<i64>,
     /// What the data of the latest checkpoint cannot support (see the result's `warnings`).
     pub warnings: Vec<Warning>,
 }
@@ -102,6 +104,7 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
         fingerprint: row.fingerprint.clone(),
         reference_luminance: row.reference_luminance,
         merged: row.merged,
+        sweep_id: row.sweep_id,
         warnings: row.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default(),
     })
 }

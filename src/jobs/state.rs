@@ -99,6 +99,8 @@ pub(crate) struct Inner {
     /// (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
     /// checkpoint changed since. std Mutex, map operations only.
     pub(super) verified: Mutex<HashMap<i64, String>>,
+    /// Predicted figures of sweep runs, per (job, checkpoint checksum) (`sweeps`).
+    pub(super) predictions: super::sweeps::PredictionCache,
     /// Wakes the scheduler: a job was queued or a worker became free.
     pub(super) wake: Notify,
     pub(super) running: AtomicUsize,

@@ -14,8 +14,9 @@
 //!   the restricted engine, and the expected work of an iteration;
 //! * [`stats`] — exact, mergeable moments and the iterations they cover;
 //! * [`solve`] — solver options, the optimal weights, the noise table, the result document;
-//! * [`spec`], [`document`], [`runner`] — the job document users submit (presets, validation), the
-//!   portable moments document, and the runner that puts iterations into moments;
+//! * [`spec`], [`document`], [`runner`], [`sweep`] — the job document users submit (presets,
+//!   validation), the portable moments document, the runner that puts iterations into moments, and
+//!   sweeps (a job document varied along axes, and their table);
 //! * [`checks`] — independent references: the quadrature, exact merge expectations, engine
 //!   equivalence.
 //!
@@ -31,3 +32,4 @@ pub mod runner;
 pub mod solve;
 pub mod spec;
 pub mod stats;
+pub mod sweep;

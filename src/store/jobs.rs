@@ -38,6 +38,8 @@ pub struct JobRow {
     pub merged: bool,
     /// A cancel was acknowledged; the job must not run again.
     pub cancel_requested: bool,
+    /// The sweep the job is a run of, if any.
+    pub sweep_id: Option<i64>,
     pub created_at: i64,
     pub updated_at: i64,
 }
@@ -87,9 +89,10 @@ pub struct Checkpoint {
 macro_rules! job_columns {
     () => {
         "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, warnings, \
-         error, merged, cancel_requested, created_at, updated_at"
+         error, merged, cancel_requested, sweep_id, created_at, updated_at"
     };
 }
+pub(super) use job_columns;
 
 /// The `state` column as a [`JobState`]; any other text is a decoding error (a corrupted row).
 fn decode_state(row: &SqliteRow) -> Result<JobState, sqlx::Error> {
@@ -100,7 +103,7 @@ fn decode_state(row: &SqliteRow) -> Result<JobState, sqlx::Error> {
     })
 }
 
-fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
+pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
     Ok(JobRow {
         id: row.try_get("id")?,
         state: decode_state(row)?,
@@ -114,6 +117,7 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         error: row.try_get("error")?,
         merged: row.try_get::<i64, _>("merged")? != 0,
         cancel_requested: row.try_get::<i64, _>("cancel_requested")? != 0,
+        sweep_id: row.try_get("sweep_id")?,
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
     })

@@ -14,6 +14,7 @@
 
 mod jobs;
 mod state;
+mod sweeps;
 
 use std::str::FromStr;
 use std::sync::Arc;
@@ -26,6 +27,7 @@ use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, S
 
 pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
 pub use state::JobState;
+pub use sweeps::SweepRow;
 
 /// The schema migrations, embedded in the binary.
 pub static MIGRATOR: Migrator = sqlx::migrate!("./migrations");

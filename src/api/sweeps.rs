@@ -1,0 +1,196 @@
+//! Handlers of `/v1/sweeps`: create a sweep (its runs queued as jobs), list, inspect with every
+//! point's figures, its table as JSON or CSV, cancel and delete (both cascade to the runs).
+
+use axum::Json;
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Query, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use utoipa::IntoParams;
+
+use super::AppState;
+use super::error::{ApiError, Problem};
+use super::extract::{JsonBody, SweepId};
+use super::jobs::query_problem;
+use crate::jobs::sweeps::{SweepList, SweepResource};
+use crate::sim::sweep::{SweepSpec, SweepTable};
+
+/// Query of the sweep list.
+#[derive(Debug, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct SweepListQuery {
+    /// Page size, 1 to 100 (default 20).
+    #[param(minimum = 1, maximum = 100)]
+    limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    #[param(pattern = "^[1-9][0-9]{0,18}$")]
+    cursor: Option<String>,
+}
+
+/// Query of a sweep's table.
+#[derive(Debug, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct TableQuery {
+    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
+    #[param(pattern = "^(csv|json)$")]
+    format: Option<String>,
+}
+
+/// Create a sweep: the base job varied along the axes; every run is queued as a job.
+#[utoipa::path(
+    post, path = "/v1/sweeps", tag = "sweeps",
+    request_body(content = SweepSpec, description = "The base job document, the axes and the mode"),
+    responses(
+        (status = 201, description = "Created; its runs are queued", body = SweepResource,
+            headers(("Location" = String, description = "URL of the sweep"))),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid: `field` names the axis and value (`axes[1].values[2]`) and the detail the point; or a run exceeds a limit of this server (points per sweep: --max-sweep-points, job budget, the work of an iteration)", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "The runs do not fit in the queue; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Shutting down, or the database cannot store the sweep (nothing was created)", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> Result<Response, ApiError> {
+    let resource = state.jobs.create_sweep(doc).await?;
+    let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
+    let location = HeaderValue::from_str(&format!("/v1/sweeps/{}", resource.id)).expect("an ASCII path");
+    response.headers_mut().insert(header::LOCATION, location);
+    Ok(response)
+}
+
+/// List sweeps, newest first (without figures).
+#[utoipa::path(
+    get, path = "/v1/sweeps", tag = "sweeps", params(SweepListQuery),
+    responses(
+        (status = 200, description = "A page of sweeps", body = SweepList),
+        (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn list(
+    State(state): State<AppState>,
+    query: Result<Query<SweepListQuery>, QueryRejection>,
+) -> Result<Json<SweepList>, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    let limit = q.limit.unwrap_or(20);
+    if !(1..=100).contains(&limit) {
+        return Err(ApiError::Invalid { field: "limit".into(), message: format!("must be in [1, 100], got {limit}") });
+    }
+    let cursor = match q.cursor {
+        None => None,
+        Some(c) => Some(c.parse::<i64>().ok().filter(|&c| c > 0).ok_or_else(|| ApiError::Invalid {
+            field: "cursor".into(),
+            message: format!("not a cursor returned by this list: {c:?}"),
+        })?),
+    };
+    Ok(Json(state.jobs.list_sweeps(cursor, limit).await?))
+}
+
+/// A sweep: progress, and per point the swept values, its job, its honest noise table and
+/// recommended weights (measured, or predicted from its run).
+#[utoipa::path(
+    get, path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    responses(
+        (status = 200, description = "The sweep", body = SweepResource),
+        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn get(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
+    Ok(Json(state.jobs.get_sweep(id).await?))
+}
+
+/// The sweep's table: one row per point (with figures) and strategy, as JSON or CSV (columns:
+/// `point`, one per swept field, then `source`, `light_paths`, `camera_paths`, `iterations_done`,
+/// `partial`, `strategy`, `luminance` (model units), `luminance_stderr`, `rms_percent` (percent of
+/// L, one iteration), `rms_percent_stderr`, `respects_fixed`, `recommended`).
+#[utoipa::path(
+    get, path = "/v1/sweeps/{id}/table", tag = "sweeps",
+    params(("id" = i64, Path, description = "Sweep id"), TableQuery),
+    responses(
+        (status = 200, description = "The table", content(
+            (SweepTable = "application/json"),
+            (String = "text/csv"))),
+        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn table(
+    State(state): State<AppState>,
+    SweepId(id): SweepId,
+    headers: HeaderMap,
+    query: Result<Query<TableQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    let csv = match q.format.as_deref() {
+        Some("csv") => true,
+        Some("json") => false,
+        Some(other) => {
+            return Err(ApiError::Invalid {
+                field: "format".into(),
+                message: format!("must be csv or json, got {other:?}"),
+            });
+        }
+        None => wants_csv(&headers),
+    };
+    let table = state.jobs.sweep_table(id).await?;
+    if !csv {
+        return Ok(Json(table).into_response());
+    }
+    let disposition = format!("attachment; filename=\"sweep-{id}.csv\"");
+    Ok((
+        [
+            (header::CONTENT_TYPE, HeaderValue::from_static("text/csv; charset=utf-8; header=present")),
+            (header::CONTENT_DISPOSITION, HeaderValue::from_str(&disposition).expect("an ASCII header")),
+        ],
+        table.to_csv(),
+    )
+        .into_response())
+}
+
+/// Whether `Accept` prefers CSV: it names text/csv before any JSON type.
+fn wants_csv(headers: &HeaderMap) -> bool {
+    let Some(accept) = headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()) else { return false };
+    for part in accept.split(',') {
+        let media = part.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
+        match media.as_str() {
+            "text/csv" => return true,
+            "application/json" | "*/*" => return false,
+            _ => {}
+        }
+    }
+    false
+}
+
+/// Cancel every queued or running run of the sweep (each keeps the iterations it completed).
+#[utoipa::path(
+    post, path = "/v1/sweeps/{id}/cancel", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    responses(
+        (status = 200, description = "Cancel requested for every active run", body = SweepResource),
+        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
+    Ok(Json(state.jobs.cancel_sweep(id).await?))
+}
+
+/// Delete a sweep and its jobs (refused while one runs: cancel the sweep first).
+#[utoipa::path(
+    delete, path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    responses(
+        (status = 204, description = "Deleted with its jobs"),
+        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "A run is running or taking a merge", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn delete(State(state): State<AppState>, SweepId(id): SweepId) -> Result<StatusCode, ApiError> {
+    state.jobs.delete_sweep(id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}

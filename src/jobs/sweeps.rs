@@ -1,0 +1,352 @@
+//! Sweeps on the server: a sweep document planned (`sim::sweep`), its runs inserted as ordinary
+//! queued jobs in one transaction, and its figures and table read back from their checkpoints.
+//!
+//! Bounds: a sweep has at most `--max-sweep-points` points and is refused whole (429) when its
+//! runs would not fit in the queue; every run passes the same budget and work checks as a
+//! submitted job. Planning, validation and the reference quadratures run on the request pool;
+//! predicted points are computed there too, once per checkpoint of their run (a small cache keyed
+//! by the checkpoint's checksum), so a dashboard polling a finished sweep does not re-fit them.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use utoipa::ToSchema;
+
+use super::checkpoint::spec_json;
+use super::error::JobError;
+use super::manager::JobManager;
+use super::policy::{check_budget, check_iteration_work, range_len};
+use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
+use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::spec::SpecError;
+use crate::sim::sweep::{PointFigures, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures};
+use crate::store::{JobRow, NewJob, SweepRow};
+
+/// Most sweeps' predicted figures kept in memory (beyond it the cache starts over).
+const MAX_CACHED_RUNS: usize = 1024;
+
+/// One point of a sweep as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SweepPointView {
+    pub index: usize,
+    /// The swept fields' values.
+    #[schema(value_type = Object)]
+    pub values: Map<String, Value>,
+    /// The run (job) that answers the point: measured by it, or predicted from it.
+    pub run: usize,
+    /// The run's job; null if it was deleted.
+    pub job_id: Option<i64>,
+    pub state: Option<JobState>,
+    /// Its honest noise table and recommended weights, once the run has a checkpoint.
+    pub figures: Option<PointFigures>,
+}
+
+/// How far a sweep has come.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SweepProgress {
+    pub runs: usize,
+    /// Runs per job state (a run whose job was deleted counts as `deleted`).
+    pub runs_by_state: BTreeMap<String, usize>,
+    pub iterations_done: u64,
+    pub iterations_total: u64,
+}
+
+/// A sweep.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SweepResource {
+    pub id: i64,
+    /// RFC 3339, UTC.
+    pub created_at: String,
+    /// `running` while any run runs, else `queued` while any waits, else `succeeded` if all did,
+    /// else `failed` if any failed, else `cancelled`.
+    pub state: JobState,
+    pub spec: SweepSpec,
+    /// The swept fields, in the axes' order.
+    pub fields: Vec<String>,
+    pub progress: SweepProgress,
+    /// Every point; `figures` only in `GET /v1/sweeps/{id}` (not in lists or acknowledgements).
+    pub points: Vec<SweepPointView>,
+}
+
+/// One page of sweeps, newest first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SweepList {
+    pub sweeps: Vec<SweepResource>,
+    pub next_cursor: Option<String>,
+}
+
+/// Predicted figures of a run's points at one checkpoint (its checksum).
+pub(super) type PredictionCache = std::sync::Mutex<BTreeMap<(i64, String), Arc<Vec<(usize, PointFigures)>>>>;
+
+impl JobManager {
+    /// Plans a sweep, checks every run as a job, and queues the runs; acknowledged once stored.
+    pub async fn create_sweep(&self, document: Value) -> Result<SweepResource, JobError> {
+        if self.is_shutting_down() {
+            return Err(JobError::ShuttingDown);
+        }
+        let policy = self.inner.policy.clone();
+        let (plan, new_jobs, valid) = self
+            .compute(move || -> Result<_, JobError> {
+                let plan = plan(&document, policy.max_sweep_points)?;
+                let mut new_jobs = Vec::with_capacity(plan.runs.len());
+                let mut valid = Vec::with_capacity(plan.runs.len());
+                for run in &plan.runs {
+                    let job = run.spec.validate()?;
+                    let at_run = |e: JobError| match e {
+                        JobError::Invalid(e) => JobError::Invalid(SpecError::new(
+                            "axes",
+                            format!("run {} ({}): {}: {}", run.index, plan.describe_run(run.index), e.field, e.message),
+                        )),
+                        other => other,
+                    };
+                    check_budget(&policy, &job.spec, range_len(&job.spec)).map_err(at_run)?;
+                    check_iteration_work(&policy, &job).map_err(at_run)?;
+                    new_jobs.push(NewJob {
+                        spec: spec_json(&job.spec)?,
+                        fingerprint: job.config.fingerprint().to_string(),
+                        iterations_total: range_len(&job.spec),
+                        reference_luminance: reference_luminance(&job.config.scene).ok(),
+                        idempotency_key: None,
+                        request_hash: None,
+                        now: 0,
+                    });
+                    valid.push(job);
+                }
+                Ok((plan, new_jobs, valid))
+            })
+            .await??;
+        let queued = self.inner.queue.lock().expect("queue").len();
+        if queued + new_jobs.len() > self.inner.policy.max_queued_jobs {
+            return Err(JobError::Busy {
+                detail: format!(
+                    "the sweep's {} runs do not fit in the queue ({queued} jobs waiting, at most {} queued: --max-queued-jobs)",
+                    new_jobs.len(),
+                    self.inner.policy.max_queued_jobs
+                ),
+                retry_after_seconds: 30,
+            });
+        }
+        let spec_text = serde_json::to_string(&plan.spec).map_err(|e| JobError::Internal(e.to_string()))?;
+        let _guard = self.inner.lifecycle.lock().await;
+        let now = now_ms();
+        let (id, rows) = self.inner.store.insert_sweep(&spec_text, &new_jobs, now).await?;
+        for (row, job) in rows.iter().zip(valid) {
+            self.enqueue(row.id, job, resource_from_row(row)?);
+        }
+        drop(_guard);
+        let row = SweepRow { id, spec: spec_text, created_at: now };
+        self.sweep_resource(&row, &plan, false).await
+    }
+
+    /// A sweep with every point's figures.
+    pub async fn get_sweep(&self, id: i64) -> Result<SweepResource, JobError> {
+        let (row, plan) = self.sweep_plan(id).await?;
+        self.sweep_resource(&row, &plan, true).await
+    }
+
+    /// A page of sweeps, newest first (without figures).
+    pub async fn list_sweeps(&self, cursor: Option<i64>, limit: u32) -> Result<SweepList, JobError> {
+        let mut rows = self.inner.store.list_sweeps(cursor, limit + 1).await?;
+        let more = rows.len() > limit as usize;
+        rows.truncate(limit as usize);
+        let next_cursor = if more { rows.last().map(|r| r.id.to_string()) } else { None };
+        let mut sweeps = Vec::with_capacity(rows.len());
+        for row in rows {
+            let plan = self.replan(&row).await?;
+            sweeps.push(self.sweep_resource(&row, &plan, false).await?);
+        }
+        Ok(SweepList { sweeps, next_cursor })
+    }
+
+    /// The table of a sweep: one row per point with figures and strategy.
+    pub async fn sweep_table(&self, id: i64) -> Result<SweepTable, JobError> {
+        let (row, plan) = self.sweep_plan(id).await?;
+        let resource = self.sweep_resource(&row, &plan, true).await?;
+        let figures: Vec<Option<PointFigures>> = resource.points.into_iter().map(|p| p.figures).collect();
+        self.compute(move || SweepTable::build(&plan, &figures)).await
+    }
+
+    /// Cancels every queued or running run of a sweep (each keeps the iterations it completed).
+    pub async fn cancel_sweep(&self, id: i64) -> Result<SweepResource, JobError> {
+        let (row, plan) = self.sweep_plan(id).await?;
+        for (_, job) in self.inner.store.sweep_jobs(id).await? {
+            if matches!(job.state, JobState::Queued | JobState::Running) {
+                match self.cancel(job.id).await {
+                    // It ended meanwhile: nothing to cancel.
+                    Ok(_) | Err(JobError::Conflict(_)) => {}
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        self.sweep_resource(&row, &plan, false).await
+    }
+
+    /// Deletes a sweep and its jobs; refused while one of them runs (cancel the sweep first).
+    pub async fn delete_sweep(&self, id: i64) -> Result<(), JobError> {
+        let jobs = self.inner.store.sweep_jobs(id).await?;
+        let _guard = self.inner.lifecycle.lock().await;
+        if self.inner.store.get_sweep(id).await?.is_none() {
+            return Err(no_sweep(id));
+        }
+        for (_, job) in &jobs {
+            let queued = self.inner.queue.lock().expect("queue").contains(&job.id);
+            if self.active(job.id).is_some() && !queued {
+                return Err(JobError::Conflict(format!(
+                    "job {} of sweep {id} is running; cancel the sweep (POST /v1/sweeps/{id}/cancel) before deleting it",
+                    job.id
+                )));
+            }
+            if self.inner.merging.lock().expect("merging set").contains(&job.id) {
+                return Err(JobError::Conflict(format!("job {} of sweep {id} is taking a merge; retry", job.id)));
+            }
+        }
+        if !self.inner.store.delete_sweep(id).await? {
+            return Err(no_sweep(id));
+        }
+        for (_, job) in &jobs {
+            self.inner.queue.lock().expect("queue").retain(|&q| q != job.id);
+            if let Some(active) = self.inner.active.lock().expect("active map").remove(&job.id) {
+                active.view.send_modify(|r| r.state = JobState::Cancelled);
+            }
+        }
+        Ok(())
+    }
+
+    async fn sweep_plan(&self, id: i64) -> Result<(SweepRow, SweepPlan), JobError> {
+        let row = self.inner.store.get_sweep(id).await?.ok_or_else(|| no_sweep(id))?;
+        let plan = self.replan(&row).await?;
+        Ok((row, plan))
+    }
+
+    /// The stored sweep planned again (on the request pool; it was validated when created, and
+    /// may have more points than a restarted server's limit).
+    async fn replan(&self, row: &SweepRow) -> Result<SweepPlan, JobError> {
+        let text = row.spec.clone();
+        let id = row.id;
+        self.compute(move || {
+            let document: Value = serde_json::from_str(&text)
+                .map_err(|e| JobError::Internal(format!("stored sweep {id} is unreadable: {e}")))?;
+            plan(&document, usize::MAX)
+                .map_err(|e| JobError::Internal(format!("stored sweep {id} is no longer valid: {e}")))
+        })
+        .await?
+    }
+
+    async fn sweep_resource(&self, row: &SweepRow, plan: &SweepPlan, figures: bool) -> Result<SweepResource, JobError> {
+        let jobs: BTreeMap<usize, JobRow> = self.inner.store.sweep_jobs(row.id).await?.into_iter().collect();
+        let mut by_state: BTreeMap<String, usize> = BTreeMap::new();
+        let (mut done, mut total) = (0, 0);
+        let mut states = Vec::new();
+        let mut run_views = Vec::with_capacity(plan.runs.len());
+        for r in 0..plan.runs.len() {
+            let view = match jobs.get(&r) {
+                Some(job) => Some(match self.active(job.id) {
+                    Some(active) => active.view.borrow().clone(),
+                    None => resource_from_row(job)?,
+                }),
+                None => None,
+            };
+            let state = view.as_ref().map(|v| v.state);
+            *by_state.entry(state.map_or("deleted".to_string(), |s| s.as_str().to_string())).or_default() += 1;
+            if let Some(v) = &view {
+                done += v.progress.iterations_done;
+                total += v.progress.iterations_total;
+                states.push(v.state);
+            }
+            run_views.push(view);
+        }
+        let mut point_figures_of: BTreeMap<usize, PointFigures> = BTreeMap::new();
+        if figures {
+            for (r, view) in run_views.iter().enumerate() {
+                if let Some(v) = view {
+                    for (p, f) in self.run_figures(plan, r, v.id).await? {
+                        point_figures_of.insert(p, f);
+                    }
+                }
+            }
+        }
+        let fields = plan.fields();
+        let points = plan
+            .points
+            .iter()
+            .map(|p| SweepPointView {
+                index: p.index,
+                values: fields.iter().cloned().zip(p.values.iter().cloned()).collect(),
+                run: p.run,
+                job_id: run_views[p.run].as_ref().map(|v| v.id),
+                state: run_views[p.run].as_ref().map(|v| v.state),
+                figures: point_figures_of.remove(&p.index),
+            })
+            .collect();
+        Ok(SweepResource {
+            id: row.id,
+            created_at: rfc3339(row.created_at),
+            state: overall_state(&states),
+            spec: plan.spec.clone(),
+            fields,
+            progress: SweepProgress {
+                runs: plan.runs.len(),
+                runs_by_state: by_state,
+                iterations_done: done,
+                iterations_total: total,
+            },
+            points,
+        })
+    }
+
+    /// The figures of run `r`'s points from its job's latest checkpoint (none before the first).
+    async fn run_figures(&self, plan: &SweepPlan, r: usize, job: i64) -> Result<Vec<(usize, PointFigures)>, JobError> {
+        let Some((_, _, checksum)) = self.inner.store.load_result(job).await? else { return Ok(Vec::new()) };
+        let predicted = plan.points.iter().any(|p| p.run == r && p.predicted.is_some());
+        let result = self.result(job).await?;
+        if !predicted {
+            let spec = &plan.runs[r].spec;
+            let budget =
+                crate::sim::solve::predict::Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
+            let f = figures_of_report(&result.report, budget, result.partial);
+            return Ok(plan.points.iter().filter(|p| p.run == r).map(|p| (p.index, f.clone())).collect());
+        }
+        let key = (job, checksum);
+        if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&key) {
+            return Ok(hit.as_ref().clone());
+        }
+        let (state, _, spec, merged) = self.state_and_total(job).await?;
+        let (moments, _) = self.checkpoint_moments(job, &spec, merged).await?;
+        let plan = plan.clone();
+        let partial = result.partial || state != JobState::Succeeded;
+        let figures = self
+            .compute(move || -> Result<_, JobError> {
+                let valid = plan.runs[r].spec.validate()?;
+                Ok(point_figures(&plan, r, &moments, &valid.config.cells, &result.report, partial))
+            })
+            .await??;
+        let mut cache = self.inner.predictions.lock().expect("prediction cache");
+        if cache.len() >= MAX_CACHED_RUNS {
+            cache.clear();
+        }
+        cache.insert(key, Arc::new(figures.clone()));
+        Ok(figures)
+    }
+}
+
+fn no_sweep(id: i64) -> JobError {
+    JobError::SweepNotFound(id)
+}
+
+/// The state a sweep's runs add up to.
+fn overall_state(states: &[JobState]) -> JobState {
+    let any = |s: JobState| states.contains(&s);
+    if any(JobState::Running) {
+        JobState::Running
+    } else if any(JobState::Queued) {
+        JobState::Queued
+    } else if !states.is_empty() && states.iter().all(|&s| s == JobState::Succeeded) {
+        JobState::Succeeded
+    } else if any(JobState::Failed) {
+        JobState::Failed
+    } else {
+        JobState::Cancelled
+    }
+}

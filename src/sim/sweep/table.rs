@@ -1,0 +1,266 @@
+//! A sweep's figures: per point, the honest noise table and the recommended weights (measured by
+//! its run, or predicted from it), and the table of all points, as JSON rows or CSV.
+//!
+//! "Honest" rows only: the in-sample `optimal` row (the paper's procedure, optimistic) is left
+//! out; `optimal_cv` is the cross-fitted figure of the recommended weights. Units are the model's:
+//! `luminance` in the units of docs/model.md (the light's radiance scale), `rms_percent` in percent
+//! of L for one iteration.
+
+use std::fmt::Write;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use super::plan::SweepPlan;
+use crate::sim::model::cells::CellGrid;
+use crate::sim::solve::noise::NoiseRow;
+use crate::sim::solve::predict::{Budget, Prediction, Predictor};
+use crate::sim::solve::report::{RecommendedWeights, RunReport, WeightRow};
+use crate::sim::solve::strategy::Strategy;
+use crate::sim::stats::moments::Moments;
+
+/// Whether a point's figures were run or predicted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum FigureSource {
+    Measured,
+    Predicted,
+}
+
+/// One point's figures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct PointFigures {
+    pub source: FigureSource,
+    /// The point's ray budget.
+    pub budget: Budget,
+    /// Iterations of the run behind the figures.
+    pub iterations: u64,
+    /// True until the point's run has succeeded with all its iterations.
+    pub partial: bool,
+    /// The honest rows of the noise table (the in-sample `optimal` row left out).
+    pub noise_table: Vec<NoiseRow>,
+    pub recommended: Option<RecommendedWeights>,
+    /// The recommended weights with their standard errors.
+    pub weights: Vec<WeightRow>,
+    /// Why there are no figures or no weights, if so.
+    pub error: Option<String>,
+}
+
+/// The figures of a measured point from its run's report.
+pub fn figures_of_report(report: &RunReport, budget: Budget, partial: bool) -> PointFigures {
+    PointFigures {
+        source: FigureSource::Measured,
+        budget,
+        iterations: report.iterations,
+        partial,
+        noise_table: report.noise_table.iter().filter(|r| !r.in_sample).cloned().collect(),
+        recommended: report.recommended,
+        weights: report.weights.clone(),
+        error: report.solve_error.clone(),
+    }
+}
+
+/// The figures of a predicted point.
+pub fn figures_of_prediction(p: &Prediction, partial: bool) -> PointFigures {
+    PointFigures {
+        source: FigureSource::Predicted,
+        budget: p.budget,
+        iterations: p.iterations,
+        partial,
+        noise_table: p.noise_table.iter().filter(|r| !r.in_sample).cloned().collect(),
+        recommended: p.recommended,
+        weights: p.weights.clone(),
+        error: p.solve_error.clone(),
+    }
+}
+
+/// The figures of every point run `run` answers: its report for a measured point, a prediction
+/// from its moments (one [`Predictor`] for all of them) for a predicted one.
+pub fn point_figures(
+    plan: &SweepPlan,
+    run: usize,
+    moments: &Moments,
+    grid: &CellGrid,
+    report: &RunReport,
+    partial: bool,
+) -> Vec<(usize, PointFigures)> {
+    let spec = &plan.runs[run].spec;
+    let measured = Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
+    let points = plan.points.iter().filter(|p| p.run == run);
+    let needs_predictor = plan.points.iter().any(|p| p.run == run && p.predicted.is_some());
+    let predictor = needs_predictor.then(|| Predictor::new(moments, measured));
+    points
+        .map(|p| {
+            let figures = match (p.predicted, &predictor) {
+                (Some(to), Some(Ok(predictor))) => {
+                    figures_of_prediction(&predictor.at(grid, &spec.solver, to), partial)
+                }
+                (Some(to), Some(Err(e))) => PointFigures {
+                    source: FigureSource::Predicted,
+                    budget: to,
+                    iterations: moments.iterations(),
+                    partial,
+                    noise_table: Vec::new(),
+                    recommended: None,
+                    weights: Vec::new(),
+                    error: Some(e.to_string()),
+                },
+                _ => figures_of_report(report, measured, partial),
+            };
+            (p.index, figures)
+        })
+        .collect()
+}
+
+/// One point and strategy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct SweepRow {
+    pub point: usize,
+    /// The swept fields' values at this point.
+    #[cfg_attr(feature = "server", schema(value_type = Object))]
+    pub values: Map<String, Value>,
+    pub source: FigureSource,
+    pub light_paths: u64,
+    pub camera_paths: u64,
+    /// Iterations behind the figures (fewer than the point's `iterations` while its run is partial).
+    pub iterations_done: u64,
+    pub partial: bool,
+    pub strategy: Strategy,
+    /// L in the model's units (docs/model.md).
+    pub luminance: Option<f64>,
+    pub luminance_stderr: Option<f64>,
+    /// RMS of one iteration, percent of L.
+    pub rms_percent: Option<f64>,
+    pub rms_percent_stderr: Option<f64>,
+    /// Whether the strategy keeps the solver's fixed weights (else it is shown for comparison).
+    pub respects_fixed: bool,
+    /// Whether this is the strategy whose weights the point recommends.
+    pub recommended: bool,
+}
+
+/// The table of a sweep: one row per point (with figures) and strategy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct SweepTable {
+    /// The swept fields, in the axes' order.
+    pub fields: Vec<String>,
+    pub rows: Vec<SweepRow>,
+}
+
+/// Columns every table has after the swept fields (a swept `light_paths` or `camera_paths` is
+/// this column, not a second one).
+const COLUMNS: [&str; 12] = [
+    "source",
+    "light_paths",
+    "camera_paths",
+    "iterations_done",
+    "partial",
+    "strategy",
+    "luminance",
+    "luminance_stderr",
+    "rms_percent",
+    "rms_percent_stderr",
+    "respects_fixed",
+    "recommended",
+];
+
+impl SweepTable {
+    /// The table of `plan` from its points' figures (`None`: the point has none yet).
+    pub fn build(plan: &SweepPlan, figures: &[Option<PointFigures>]) -> Self {
+        let fields = plan.fields();
+        let mut rows = Vec::new();
+        for (point, f) in plan.points.iter().zip(figures) {
+            let Some(f) = f else { continue };
+            let values: Map<String, Value> = fields.iter().cloned().zip(point.values.iter().cloned()).collect();
+            let chosen = f.recommended.map(|r| r.strategy);
+            for r in &f.noise_table {
+                rows.push(SweepRow {
+                    point: point.index,
+                    values: values.clone(),
+                    source: f.source,
+                    light_paths: f.budget.light_paths,
+                    camera_paths: f.budget.camera_paths,
+                    iterations_done: f.iterations,
+                    partial: f.partial,
+                    strategy: r.strategy,
+                    luminance: r.luminance,
+                    luminance_stderr: r.luminance_stderr,
+                    rms_percent: r.rms_percent,
+                    rms_percent_stderr: r.rms_percent_stderr,
+                    respects_fixed: r.respects_fixed,
+                    recommended: Some(r.strategy) == chosen,
+                });
+            }
+        }
+        Self { fields, rows }
+    }
+
+    /// RFC 4180 CSV: `point`, one column per swept field (named by its path), then [`COLUMNS`].
+    /// Numbers in shortest round-trip form, empty for null; a swept value that is an object or an
+    /// array is its JSON text.
+    pub fn to_csv(&self) -> String {
+        let swept: Vec<&String> = self.fields.iter().filter(|f| !COLUMNS.contains(&f.as_str())).collect();
+        let mut out = String::from("point");
+        for name in swept.iter().map(|s| s.as_str()).chain(COLUMNS) {
+            out.push(',');
+            out.push_str(&quoted(name));
+        }
+        out.push_str("\r\n");
+        let number = |x: Option<f64>| x.map(|v| v.to_string()).unwrap_or_default();
+        for r in &self.rows {
+            let mut cells = vec![r.point.to_string()];
+            cells.extend(swept.iter().map(|f| cell(r.values.get(f.as_str()).unwrap_or(&Value::Null))));
+            cells.extend([
+                cell(&serde_json::to_value(r.source).expect("an enum")),
+                r.light_paths.to_string(),
+                r.camera_paths.to_string(),
+                r.iterations_done.to_string(),
+                r.partial.to_string(),
+                cell(&serde_json::to_value(r.strategy).expect("an enum")),
+                number(r.luminance),
+                number(r.luminance_stderr),
+                number(r.rms_percent),
+                number(r.rms_percent_stderr),
+                r.respects_fixed.to_string(),
+                r.recommended.to_string(),
+            ]);
+            let _ = write!(out, "{}\r\n", cells.join(","));
+        }
+        out
+    }
+}
+
+fn cell(v: &Value) -> String {
+    match v {
+        Value::Null => String::new(),
+        Value::String(s) => quoted(s),
+        Value::Number(n) => n.to_string(),
+        Value::Bool(b) => b.to_string(),
+        other => quoted(&other.to_string()),
+    }
+}
+
+/// A CSV field, quoted when it holds a comma, a quote or a line break.
+fn quoted(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_quotes_what_needs_it_and_leaves_nulls_empty() {
+        assert_eq!(cell(&Value::Null), "");
+        assert_eq!(cell(&serde_json::json!("a,b")), "\"a,b\"");
+        assert_eq!(
+            cell(&serde_json::json!({ "kind": "spot", "a": 0.02 })),
+            "\"{\"\"a\"\":0.02,\"\"kind\"\":\"\"spot\"\"}\""
+        );
+        assert_eq!(cell(&serde_json::json!(0.003)), "0.003");
+        assert_eq!(quoted("plain"), "plain");
+    }
+}

@@ -1,0 +1,111 @@
+//! Queries on the `sweeps` table and the jobs that are its runs.
+//!
+//! A sweep and all its jobs are inserted in one transaction (a sweep is acknowledged whole or not
+//! at all), and deleted in one.
+
+use sqlx::Row;
+
+use super::jobs::{JobRow, NewJob, job_columns, job_from_row};
+use super::{JobState, Store, StoreError};
+
+/// A sweep as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepRow {
+    pub id: i64,
+    /// The sweep document, JSON.
+    pub spec: String,
+    pub created_at: i64,
+}
+
+impl Store {
+    /// Inserts a sweep and its runs (queued jobs, in run order); committed before it returns.
+    pub async fn insert_sweep(&self, spec: &str, runs: &[NewJob], now: i64) -> Result<(i64, Vec<JobRow>), StoreError> {
+        let result = self
+            .transaction(async |tx| {
+                let id: i64 = sqlx::query_scalar("INSERT INTO sweeps (spec, created_at) VALUES (?, ?) RETURNING id")
+                    .bind(spec)
+                    .bind(now)
+                    .fetch_one(&mut *tx)
+                    .await?;
+                let mut rows = Vec::with_capacity(runs.len());
+                for (run, job) in runs.iter().enumerate() {
+                    let row = sqlx::query(concat!(
+                        "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, \
+                         sweep_id, sweep_run, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
+                        job_columns!()
+                    ))
+                    .bind(JobState::Queued.as_str())
+                    .bind(&job.spec)
+                    .bind(&job.fingerprint)
+                    .bind(job.iterations_total as i64)
+                    .bind(job.reference_luminance)
+                    .bind(id)
+                    .bind(run as i64)
+                    .bind(now)
+                    .bind(now)
+                    .fetch_one(&mut *tx)
+                    .await?;
+                    rows.push(job_from_row(&row)?);
+                }
+                Ok((id, rows))
+            })
+            .await;
+        self.track(result)
+    }
+
+    /// One sweep.
+    pub async fn get_sweep(&self, id: i64) -> Result<Option<SweepRow>, StoreError> {
+        let row = sqlx::query("SELECT id, spec, created_at FROM sweeps WHERE id = ?")
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        row.map(|r| {
+            Ok(SweepRow { id: r.try_get("id")?, spec: r.try_get("spec")?, created_at: r.try_get("created_at")? })
+        })
+        .transpose()
+        .map_err(|e: sqlx::Error| e.into())
+    }
+
+    /// Sweeps newest first, with ids below `before`.
+    pub async fn list_sweeps(&self, before: Option<i64>, limit: u32) -> Result<Vec<SweepRow>, StoreError> {
+        let rows = sqlx::query("SELECT id, spec, created_at FROM sweeps WHERE id < ? ORDER BY id DESC LIMIT ?")
+            .bind(before.unwrap_or(i64::MAX))
+            .bind(i64::from(limit))
+            .fetch_all(self.pool())
+            .await?;
+        rows.iter()
+            .map(|r| {
+                Ok(SweepRow { id: r.try_get("id")?, spec: r.try_get("spec")?, created_at: r.try_get("created_at")? })
+            })
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(Into::into)
+    }
+
+    /// The jobs of a sweep with their run index, in run order (a job deleted alone is missing).
+    pub async fn sweep_jobs(&self, id: i64) -> Result<Vec<(usize, JobRow)>, StoreError> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            ", sweep_run FROM jobs WHERE sweep_id = ? ORDER BY sweep_run"
+        ))
+        .bind(id)
+        .fetch_all(self.pool())
+        .await?;
+        rows.iter()
+            .map(|r| Ok((r.try_get::<i64, _>("sweep_run")? as usize, job_from_row(r)?)))
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(Into::into)
+    }
+
+    /// Deletes a sweep and its jobs (with their checkpoints), returning whether it existed.
+    pub async fn delete_sweep(&self, id: i64) -> Result<bool, StoreError> {
+        let result = self
+            .transaction(async |tx| {
+                sqlx::query("DELETE FROM jobs WHERE sweep_id = ?").bind(id).execute(&mut *tx).await?;
+                let done = sqlx::query("DELETE FROM sweeps WHERE id = ?").bind(id).execute(&mut *tx).await?;
+                Ok(done.rows_affected() == 1)
+            })
+            .await;
+        self.track(result)
+    }
+}
