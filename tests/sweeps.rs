@@ -1,0 +1,186 @@
+//! Sweeps (issue 14): created through the API, their runs ordinary jobs linked back to them, their
+//! table identical byte for byte to `optimis sweep` (locally, and run per task then collected),
+//! bad axes named in 422s, the points limit, predicted axes, cancel and delete cascading.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use common::{TestServer, assert_problem};
+use serde_json::{Value, json};
+
+/// A 2 × 2 grid at a small paper-preset budget (restricted engine: milliseconds per run).
+fn grid_sweep() -> Value {
+    json!({
+        "base": { "iterations": 60, "light_paths": 1_000_000, "seed": 3 },
+        "axes": [
+            { "field": "merge_radius", "values": [0.003, 0.01] },
+            { "field": "scene.l3", "values": [1, 3] }
+        ],
+        "mode": "grid"
+    })
+}
+
+async fn wait_for_sweep(server: &TestServer, id: i64, state: &str) -> Value {
+    for _ in 0..600 {
+        let sweep = server.get_json(&format!("/v1/sweeps/{id}")).await;
+        if sweep["state"] == state {
+            return sweep;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("sweep {id} did not reach {state}");
+}
+
+fn optimis(args: &[&str], dir: &Path, env: &[(&str, &str)]) -> std::process::Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_optimis"));
+    command.args(args).current_dir(dir).env_remove("SLURM_ARRAY_TASK_ID").env_remove("JOB_COMPLETION_INDEX");
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    let output = command.output().expect("optimis runs");
+    assert!(output.status.success(), "optimis {args:?}: {}", String::from_utf8_lossy(&output.stderr));
+    output
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sweep_runs_as_jobs_and_its_table_equals_the_clis() {
+    let server = TestServer::start().await;
+    let reply = server.post("/v1/sweeps", &grid_sweep()).await;
+    assert_eq!(reply.status, 201, "{}", reply.text());
+    let created = reply.json();
+    let id = created["id"].as_i64().unwrap();
+    assert_eq!(reply.header("location"), Some(format!("/v1/sweeps/{id}").as_str()));
+    assert_eq!(created["progress"]["runs"], 4);
+    assert_eq!(created["fields"], json!(["merge_radius", "scene.l3"]));
+
+    let sweep = wait_for_sweep(&server, id, "succeeded").await;
+    let points = sweep["points"].as_array().unwrap();
+    assert_eq!(points.len(), 4);
+    assert_eq!(points[1]["values"], json!({ "merge_radius": 0.003, "scene.l3": 1 + 2 }));
+    for p in points {
+        let job = server.job(p["job_id"].as_i64().unwrap()).await;
+        assert_eq!(job["sweep_id"], id, "each run links back to its sweep");
+        assert_eq!(job["spec"]["merge_radius"], p["values"]["merge_radius"]);
+        assert_eq!(job["spec"]["scene"]["l3"].as_f64(), p["values"]["scene.l3"].as_f64());
+        let f = &p["figures"];
+        assert_eq!(f["source"], "measured");
+        assert_eq!(f["iterations"], 60);
+        let rows = f["noise_table"].as_array().unwrap();
+        assert!(rows.iter().all(|r| r["in_sample"] == false), "only honest rows");
+        assert_eq!(f["recommended"]["strategy"], "optimal_cv");
+        assert_eq!(f["weights"].as_array().unwrap().len(), 52);
+        // The point's figures are its job's.
+        let result = server.result(p["job_id"].as_i64().unwrap()).await;
+        let switch = |rows: &[Value]| rows.iter().find(|r| r["strategy"] == "switch").cloned().unwrap();
+        assert_eq!(switch(rows), switch(result["noise_table"].as_array().unwrap()));
+    }
+
+    let table = server.get_json(&format!("/v1/sweeps/{id}/table")).await;
+    let p = assert_problem(server.get(&format!("/v1/sweeps/{id}/table?format=xml")).await, 422);
+    assert_eq!(p["field"], "format");
+    let strategies = points[0]["figures"]["noise_table"].as_array().unwrap().len();
+    assert_eq!(table["rows"].as_array().unwrap().len(), 4 * strategies);
+    let csv = server.get(&format!("/v1/sweeps/{id}/table?format=csv")).await;
+    assert_eq!(csv.status, 200);
+    assert!(csv.header("content-type").unwrap().starts_with("text/csv"));
+    let by_accept = server
+        .send(server.builder(reqwest::Method::GET, &format!("/v1/sweeps/{id}/table")).header("accept", "text/csv"))
+        .await;
+    assert_eq!(by_accept.text(), csv.text());
+    let csv_text = csv.text();
+    let lines: Vec<&str> = csv_text.lines().collect();
+    assert_eq!(lines.len(), 1 + 4 * strategies);
+    assert!(lines[0].starts_with("point,merge_radius,scene.l3,source,light_paths,camera_paths,iterations_done,"));
+
+    // The CLI, locally and as four tasks collected: the same bytes.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("sweep.json"), grid_sweep().to_string()).unwrap();
+    optimis(&["sweep", "--spec", "sweep.json", "--csv", "local.csv", "--threads", "1"], dir.path(), &[]);
+    assert_eq!(std::fs::read_to_string(dir.path().join("local.csv")).unwrap(), csv.text());
+    let runs = optimis(&["sweep", "--spec", "sweep.json", "--runs"], dir.path(), &[]);
+    assert_eq!(String::from_utf8_lossy(&runs.stdout).trim(), "4");
+    for task in ["1", "2", "3", "4"] {
+        let env = [("SLURM_ARRAY_TASK_ID", task), ("SLURM_ARRAY_TASK_MIN", "1")];
+        optimis(&["sweep", "--spec", "sweep.json", "--out", "out"], dir.path(), &env);
+    }
+    let collected = optimis(&["sweep", "collect", "out", "--json"], dir.path(), &[]);
+    let collected: Value = serde_json::from_slice(&collected.stdout).unwrap();
+    assert_eq!(collected, table, "collect gives the API's table");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_axes_name_the_axis_and_point_and_sweeps_are_bounded() {
+    let server = TestServer::start_with(|c| c.policy.max_sweep_points = 8).await;
+    let mut doc = grid_sweep();
+    doc["axes"][1]["values"] = json!([1, -3]);
+    let p = assert_problem(server.post("/v1/sweeps", &doc).await, 422);
+    assert_eq!(p["field"], "axes[1].values[1]", "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("point 1 (merge_radius=0.003, scene.l3=-3)"), "{p}");
+    doc["axes"][1] = json!({ "field": "scene.l9", "values": [1] });
+    assert_eq!(assert_problem(server.post("/v1/sweeps", &doc).await, 422)["field"], "axes[1].values[0]");
+    doc["axes"][1] = json!({ "field": "seed", "values": (1..=5).collect::<Vec<_>>() });
+    let p = assert_problem(server.post("/v1/sweeps", &doc).await, 422);
+    assert_eq!(p["field"], "axes");
+    assert!(p["detail"].as_str().unwrap().contains("10 points") && p["detail"].as_str().unwrap().contains("at most 8"));
+    assert!(server.list("").await.is_empty(), "nothing was queued by a refused sweep");
+    assert_problem(server.get("/v1/sweeps/99").await, 404);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn predicted_axes_share_one_run_and_match_the_cli() {
+    let server = TestServer::start().await;
+    let doc = json!({
+        "base": { "iterations": 80, "light_paths": 1_000_000, "seed": 5 },
+        "axes": [{ "field": "light_paths", "values": [300_000, 1_000_000, 3_000_000], "by": "prediction" }]
+    });
+    let id = server.post("/v1/sweeps", &doc).await.json()["id"].as_i64().unwrap();
+    let sweep = wait_for_sweep(&server, id, "succeeded").await;
+    assert_eq!(sweep["progress"]["runs"], 1);
+    let job = server.job(sweep["points"][0]["job_id"].as_i64().unwrap()).await;
+    assert_eq!(job["spec"]["noise_components"], true);
+    for (p, n) in sweep["points"].as_array().unwrap().iter().zip([300_000, 1_000_000, 3_000_000]) {
+        assert_eq!(p["figures"]["source"], "predicted");
+        assert_eq!(p["figures"]["budget"]["light_paths"], n);
+    }
+    // More light paths per iteration: less noise for plane 3 (its variance has a 1/N_F part).
+    let plane3 = |i: usize| {
+        sweep["points"][i]["figures"]["noise_table"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["strategy"] == "plane3")
+            .unwrap()["rms_percent"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(plane3(0) > plane3(1) && plane3(1) > plane3(2), "{} {} {}", plane3(0), plane3(1), plane3(2));
+    let csv = server.get(&format!("/v1/sweeps/{id}/table?format=csv")).await.text();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("p.json"), doc.to_string()).unwrap();
+    optimis(&["sweep", "--spec", "p.json", "--csv", "p.csv"], dir.path(), &[]);
+    assert_eq!(std::fs::read_to_string(dir.path().join("p.csv")).unwrap(), csv);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancel_and_delete_cascade_to_the_runs() {
+    let server = TestServer::start().await;
+    let doc = json!({ "base": { "iterations": 1_000_000 }, "axes": [{ "field": "seed", "values": [1, 2, 3] }] });
+    let sweep = server.post("/v1/sweeps", &doc).await.json();
+    let id = sweep["id"].as_i64().unwrap();
+    let jobs: Vec<i64> = sweep["points"].as_array().unwrap().iter().map(|p| p["job_id"].as_i64().unwrap()).collect();
+    server.wait_for_state(jobs[0], "running").await;
+    let p = assert_problem(server.request(reqwest::Method::DELETE, &format!("/v1/sweeps/{id}"), None).await, 409);
+    assert!(p["detail"].as_str().unwrap().contains("cancel the sweep"), "{p}");
+    assert_eq!(server.post(&format!("/v1/sweeps/{id}/cancel"), &json!({})).await.status, 200);
+    let cancelled = wait_for_sweep(&server, id, "cancelled").await;
+    assert_eq!(cancelled["progress"]["runs_by_state"], json!({ "cancelled": 3 }));
+    let deleted = server.request(reqwest::Method::DELETE, &format!("/v1/sweeps/{id}"), None).await;
+    assert_eq!(deleted.status, 204);
+    assert_problem(server.get(&format!("/v1/sweeps/{id}")).await, 404);
+    for job in jobs {
+        assert_problem(server.get(&format!("/v1/jobs/{job}")).await, 404);
+    }
+}
