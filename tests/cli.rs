@@ -207,6 +207,27 @@ fn predict_and_budget_read_a_run_with_noise_components() {
             * (best["rms_percent"].as_f64().unwrap() / 1.0).powi(2).max(1.0);
         assert!((t - expected).abs() <= 1e-9 * t, "time = iterations × seconds per iteration");
     }
+    // The fixed-time curve: T is the paper's time; each ratio's point is a grid point's R·√(t/T),
+    // the lowest of its strategy at that ratio. The 5 × 5 grid has 9 ratios, half a decade apart.
+    let fixed = &plan["fixed_time"];
+    let big_t = fixed["seconds"].as_f64().unwrap();
+    assert_eq!(big_t, plan["paper"]["seconds_to_target"].as_f64().unwrap());
+    let curve = fixed["curve"].as_array().unwrap();
+    assert_eq!(curve.iter().filter(|c| c["strategy"] == "plane1").count(), 9, "{curve:?}");
+    let at_t =
+        |p: &Value| p["rms_percent"].as_f64().unwrap() * (p["seconds_per_iteration"].as_f64().unwrap() / big_t).sqrt();
+    let ratio = |p: &Value| {
+        (p["budget"]["light_paths"].as_f64().unwrap() / p["budget"]["camera_paths"].as_f64().unwrap()).log10()
+    };
+    for c in curve {
+        let same = |p: &&Value| {
+            p["strategy"] == c["strategy"] && (ratio(p) - c["ratio"].as_f64().unwrap().log10()).abs() < 0.05
+        };
+        let kept = points.iter().filter(same).find(|p| p["budget"] == c["budget"]).expect("a grid point");
+        let rms = c["rms_percent"].as_f64().unwrap();
+        assert!((rms - at_t(kept)).abs() <= 1e-9 * rms);
+        assert!(points.iter().filter(same).all(|p| at_t(p) >= rms * (1.0 - 1e-12)));
+    }
     let missing = optimis(dir.path(), &["predict", "job.json"], &[]);
     assert!(!missing.status.success());
 }

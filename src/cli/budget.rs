@@ -144,5 +144,18 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             paper.seconds_to_target / first.seconds_to_target
         )?;
     }
+    if let Some(f) = &p.fixed_time {
+        writeln!(
+            out,
+            "\nRMS % after T = {:.3e} s (the paper's switch at (10⁷, 100) to {}%), per ratio N_F/N_B at its best budget on the grid (‡ = not one iteration fits in T: extrapolated)\n",
+            f.seconds, args.target_rms
+        )?;
+        writeln!(out, "{:<18} {:>9} {:>20} {:>12}", "strategy", "N_F/N_B", "best (N_F, N_B)", "RMS % at T")?;
+        for c in &f.curve {
+            let at = format!("({}, {})", c.budget.light_paths, c.budget.camera_paths);
+            let flag = if c.iterations < 1.0 { "‡" } else { "" };
+            writeln!(out, "{:<18} {:>9.1e} {at:>20} {:>12.2}{flag}", c.strategy, c.ratio, c.rms_percent)?;
+        }
+    }
     Ok(())
 }
