@@ -101,10 +101,12 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
 }
 
 /// Writes `bytes` to `path`, through a temporary file and a rename so that a reader (or a
-/// crashed run) never sees a partial file.
+/// crashed run) never sees a partial file. The temporary name holds the process id: the tasks of a
+/// job array write the same `sweep.json` at once, and a shared temporary file would be renamed
+/// away under another task.
 pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     let fail = |source| CliError::Write { path: path.to_path_buf(), source };
-    let tmp = path.with_extension("partial");
+    let tmp = path.with_extension(format!("partial-{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(fail)?;
     std::fs::rename(&tmp, path).map_err(fail)
 }
