@@ -133,12 +133,13 @@ async fn bad_axes_name_the_axis_and_point_and_sweeps_are_bounded() {
 async fn predicted_axes_share_one_run_and_match_the_cli() {
     let server = TestServer::start().await;
     let doc = json!({
-        "base": { "iterations": 80, "light_paths": 1_000_000, "seed": 5 },
-        "axes": [{ "field": "light_paths", "values": [300_000, 1_000_000, 3_000_000], "by": "prediction" }]
+        "base": { "iterations": 400, "light_paths": 1_000_000, "seed": 5 },
+        "axes": [{ "field": "light_paths", "values": [300_000, 1_000_000, 3_000_000], "by": "prediction" }],
+        "measure_predictions": true
     });
     let id = server.post("/v1/sweeps", &doc).await.json()["id"].as_i64().unwrap();
     let sweep = wait_for_sweep(&server, id, "succeeded").await;
-    assert_eq!(sweep["progress"]["runs"], 1);
+    assert_eq!(sweep["progress"]["runs"], 1 + 3, "the source run and one direct run per point");
     let job = server.job(sweep["points"][0]["job_id"].as_i64().unwrap()).await;
     assert_eq!(job["spec"]["noise_components"], true);
     for (p, n) in sweep["points"].as_array().unwrap().iter().zip([300_000, 1_000_000, 3_000_000]) {
@@ -157,6 +158,22 @@ async fn predicted_axes_share_one_run_and_match_the_cli() {
             .unwrap()
     };
     assert!(plane3(0) > plane3(1) && plane3(1) > plane3(2), "{} {} {}", plane3(0), plane3(1), plane3(2));
+    // Predicted and measured side by side: every fixed per-path strategy within 4 combined SE.
+    for p in sweep["points"].as_array().unwrap() {
+        let measured = &p["measured"];
+        assert_eq!(measured["source"], "measured");
+        let job = server.job(p["measured_job_id"].as_i64().unwrap()).await;
+        assert_eq!(job["spec"]["light_paths"], p["figures"]["budget"]["light_paths"]);
+        for strategy in ["plane2", "plane3", "switch"] {
+            let row = |f: &Value| {
+                f["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == strategy).cloned().unwrap()
+            };
+            let (a, b) = (row(&p["figures"]), row(measured));
+            let se = |r: &Value| r["rms_percent_stderr"].as_f64().unwrap();
+            let z = (a["rms_percent"].as_f64().unwrap() - b["rms_percent"].as_f64().unwrap()) / se(&a).hypot(se(&b));
+            assert!(z.abs() < 4.0, "{strategy} at {}: predicted {a}, measured {b}, z = {z:.2}", p["values"]);
+        }
+    }
     let csv = server.get(&format!("/v1/sweeps/{id}/table?format=csv")).await.text();
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("p.json"), doc.to_string()).unwrap();

@@ -21,7 +21,7 @@ use crate::sim::document::MomentsDocument;
 use crate::sim::solve::report::build_report;
 use crate::sim::spec::SpecError;
 use crate::sim::stats::moments::Moments;
-use crate::sim::sweep::{PointFigures, SweepPlan, SweepTable, plan, point_figures};
+use crate::sim::sweep::{PointFigures, PointResults, SweepPlan, SweepTable, plan, point_figures};
 
 /// Most points of a sweep run from the command line.
 const DEFAULT_MAX_POINTS: usize = 4096;
@@ -127,7 +127,7 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
         Some(k) => vec![k],
         None => (0..plan.runs.len()).collect(),
     };
-    let mut figures: Vec<Option<PointFigures>> = vec![None; plan.points.len()];
+    let mut figures = Vec::new();
     for &r in &selected {
         let job = plan.runs[r].spec.validate()?;
         eprintln!("run {r} of {}: {} ({} iterations)", plan.runs.len(), plan.describe_run(r), job.spec.iterations);
@@ -135,15 +135,13 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
         if let Some(dir) = &args.out {
             write_atomically(&run_file(dir, r), &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
         }
-        for (p, f) in run_figures(&plan, r, &moments)? {
-            figures[p] = Some(f);
-        }
+        figures.extend(run_figures(&plan, r, &moments)?);
     }
     if task.is_some() {
         eprintln!("run {} written; `optimis sweep collect DIR` builds the table once every run has", selected[0]);
         return Ok(());
     }
-    write_table(&plan, &figures, args.json, args.csv.as_deref())
+    write_table(&plan, &PointResults::collect(&plan, figures), args.json, args.csv.as_deref())
 }
 
 /// The figures of every point run `r` answers, from its moments.
@@ -156,7 +154,7 @@ fn run_figures(plan: &SweepPlan, r: usize, moments: &Moments) -> Result<Vec<(usi
 
 fn collect(args: CollectArgs) -> Result<(), CliError> {
     let plan = plan_of(&args.dir.join("sweep.json"), usize::MAX)?;
-    let mut figures: Vec<Option<PointFigures>> = vec![None; plan.points.len()];
+    let mut figures = Vec::new();
     for r in 0..plan.runs.len() {
         let path = run_file(&args.dir, r);
         if !path.exists() {
@@ -175,20 +173,13 @@ fn collect(args: CollectArgs) -> Result<(), CliError> {
                 args.dir.join("sweep.json").display()
             )));
         }
-        for (p, f) in run_figures(&plan, r, &doc.moments)? {
-            figures[p] = Some(f);
-        }
+        figures.extend(run_figures(&plan, r, &doc.moments)?);
     }
-    write_table(&plan, &figures, args.json, args.csv.as_deref())
+    write_table(&plan, &PointResults::collect(&plan, figures), args.json, args.csv.as_deref())
 }
 
-fn write_table(
-    plan: &SweepPlan,
-    figures: &[Option<PointFigures>],
-    json: bool,
-    csv: Option<&Path>,
-) -> Result<(), CliError> {
-    let table = SweepTable::build(plan, figures);
+fn write_table(plan: &SweepPlan, results: &[PointResults], json: bool, csv: Option<&Path>) -> Result<(), CliError> {
+    let table = SweepTable::build(plan, results);
     if let Some(path) = csv {
         write_atomically(path, table.to_csv().as_bytes())?;
     }
@@ -198,7 +189,8 @@ fn write_table(
         writeln!(out)?;
         return Ok(());
     }
-    for (point, f) in plan.points.iter().zip(figures) {
+    let each = plan.points.iter().zip(results).flat_map(|(p, r)| [(p, &r.figures), (p, &r.measured)]);
+    for (point, f) in each {
         let Some(f) = f else { continue };
         let values: Vec<String> =
             plan.spec.axes.iter().zip(&point.values).map(|(a, v)| format!("{} = {v}", a.field)).collect();

@@ -21,7 +21,9 @@ use super::policy::{check_budget, check_iteration_work, range_len};
 use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::spec::SpecError;
-use crate::sim::sweep::{PointFigures, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures};
+use crate::sim::sweep::{
+    PointFigures, PointResults, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures,
+};
 use crate::store::{JobRow, NewJob, SweepRow};
 
 /// Most sweeps' predicted figures kept in memory (beyond it the cache starts over).
@@ -39,8 +41,14 @@ pub struct SweepPointView {
     /// The run's job; null if it was deleted.
     pub job_id: Option<i64>,
     pub state: Option<JobState>,
-    /// Its honest noise table and recommended weights, once the run has a checkpoint.
+    /// Its honest noise table and recommended weights, once the run has a checkpoint (predicted,
+    /// for a point on an axis by prediction).
     pub figures: Option<PointFigures>,
+    /// With `measure_predictions`: the direct run's job, and its figures beside the prediction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_job_id: Option<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured: Option<PointFigures>,
 }
 
 /// How far a sweep has come.
@@ -164,8 +172,9 @@ impl JobManager {
     pub async fn sweep_table(&self, id: i64) -> Result<SweepTable, JobError> {
         let (row, plan) = self.sweep_plan(id).await?;
         let resource = self.sweep_resource(&row, &plan, true).await?;
-        let figures: Vec<Option<PointFigures>> = resource.points.into_iter().map(|p| p.figures).collect();
-        self.compute(move || SweepTable::build(&plan, &figures)).await
+        let results: Vec<PointResults> =
+            resource.points.into_iter().map(|p| PointResults { figures: p.figures, measured: p.measured }).collect();
+        self.compute(move || SweepTable::build(&plan, &results)).await
     }
 
     /// Cancels every queued or running run of a sweep (each keeps the iterations it completed).
@@ -257,16 +266,15 @@ impl JobManager {
             }
             run_views.push(view);
         }
-        let mut point_figures_of: BTreeMap<usize, PointFigures> = BTreeMap::new();
+        let mut all = Vec::new();
         if figures {
             for (r, view) in run_views.iter().enumerate() {
                 if let Some(v) = view {
-                    for (p, f) in self.run_figures(plan, r, v.id).await? {
-                        point_figures_of.insert(p, f);
-                    }
+                    all.extend(self.run_figures(plan, r, v.id).await?);
                 }
             }
         }
+        let mut results = PointResults::collect(plan, all);
         let fields = plan.fields();
         let points = plan
             .points
@@ -277,7 +285,9 @@ impl JobManager {
                 run: p.run,
                 job_id: run_views[p.run].as_ref().map(|v| v.id),
                 state: run_views[p.run].as_ref().map(|v| v.state),
-                figures: point_figures_of.remove(&p.index),
+                figures: results[p.index].figures.take(),
+                measured_job_id: p.measured_run.and_then(|r| run_views[r].as_ref().map(|v| v.id)),
+                measured: results[p.index].measured.take(),
             })
             .collect();
         Ok(SweepResource {
@@ -306,7 +316,8 @@ impl JobManager {
             let budget =
                 crate::sim::solve::predict::Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
             let f = figures_of_report(&result.report, budget, result.partial);
-            return Ok(plan.points.iter().filter(|p| p.run == r).map(|p| (p.index, f.clone())).collect());
+            let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
+            return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
         let key = (job, checksum);
         if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&key) {

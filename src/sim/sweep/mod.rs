@@ -22,5 +22,6 @@ pub mod table;
 
 pub use plan::{Axis, AxisSource, PlannedPoint, PlannedRun, SweepMode, SweepPlan, SweepSpec, plan};
 pub use table::{
-    FigureSource, PointFigures, SweepRow, SweepTable, figures_of_prediction, figures_of_report, point_figures,
+    FigureSource, PointFigures, PointResults, SweepRow, SweepTable, figures_of_prediction, figures_of_report,
+    point_figures,
 };

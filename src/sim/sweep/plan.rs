@@ -35,6 +35,10 @@ pub struct SweepSpec {
     /// `zip`: the i-th values of all axes together (the axes must have equal lengths).
     #[serde(default)]
     pub mode: SweepMode,
+    /// With axes by prediction: also run every predicted point directly, so that its predicted and
+    /// measured figures stand side by side (one more job per point).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub measure_predictions: bool,
 }
 
 /// One swept field.
@@ -96,6 +100,9 @@ pub struct PlannedPoint {
     pub run: usize,
     /// Set when the point is predicted: the budget to predict (the run measured another).
     pub predicted: Option<Budget>,
+    /// With `measure_predictions`: the run that measures a predicted point directly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_run: Option<usize>,
 }
 
 /// A validated sweep.
@@ -134,6 +141,9 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
         SpecError::new(if path == "." { String::new() } else { path }, e.into_inner().to_string())
     })?;
     check_axes(&spec)?;
+    if spec.measure_predictions && !spec.axes.iter().any(|a| a.by == AxisSource::Prediction) {
+        return Err(SpecError::new("measure_predictions", "needs an axis with \"by\": \"prediction\""));
+    }
     let count = point_count(&spec, max_points)?;
     let predicted_axes = spec.axes.iter().any(|a| a.by == AxisSource::Prediction);
     if !spec.base.is_object() {
@@ -180,6 +190,7 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
                 runs.len() - 1
             }
         };
+        let mut measured_run = None;
         let predicted = if predicted_axes {
             // The point's own document, checked like a job at that budget (without components:
             // a predicted budget need not be even).
@@ -193,11 +204,18 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
             let job = parse_job_spec(&point_doc)
                 .and_then(|s| s.validate())
                 .map_err(|e| blame(&spec, &picks, &e, &describe()))?;
-            Some(Budget { light_paths: job.spec.light_paths, camera_paths: job.spec.camera_paths })
+            let budget = Budget { light_paths: job.spec.light_paths, camera_paths: job.spec.camera_paths };
+            if spec.measure_predictions {
+                measured_run = Some(runs.len());
+                runs.push(PlannedRun { index: runs.len(), spec: job.spec });
+                // Never shared: no other point's run key can name it.
+                run_keys.push(vec![Value::String(format!("measure point {index}"))]);
+            }
+            Some(budget)
         } else {
             None
         };
-        points.push(PlannedPoint { index, values, run, predicted });
+        points.push(PlannedPoint { index, values, run, predicted, measured_run });
     }
     Ok(SweepPlan { spec, runs, points })
 }
@@ -401,7 +419,7 @@ mod tests {
 
     #[test]
     fn predicted_axes_share_one_run_with_components() {
-        let doc = json!({
+        let mut doc = json!({
             "base": { "iterations": 10, "light_paths": 1000 },
             "axes": [
                 { "field": "scene.l3", "values": [1, 3] },
@@ -416,5 +434,15 @@ mod tests {
         let mut bad = doc.clone();
         bad["axes"][1]["values"][1] = json!(0);
         assert_eq!(plan(&bad, 64).unwrap_err().field, "axes[1].values[1]");
+        let mut measured = doc.clone();
+        measured["measure_predictions"] = json!(true);
+        let p = plan(&measured, 64).unwrap();
+        assert_eq!(p.runs.len(), 2 + 6, "one direct run per predicted point");
+        assert_eq!(p.points[4].measured_run, Some(6));
+        assert!(!p.runs[6].spec.noise_components);
+        assert_eq!((p.runs[6].spec.light_paths, p.runs[6].spec.scene.l3), (3001, 3.0));
+        doc["measure_predictions"] = json!(false);
+        measured["axes"][1]["by"] = json!("run");
+        assert_eq!(plan(&measured, 64).unwrap_err().field, "measure_predictions");
     }
 }

@@ -76,8 +76,9 @@ pub fn figures_of_prediction(p: &Prediction, partial: bool) -> PointFigures {
     }
 }
 
-/// The figures of every point run `run` answers: its report for a measured point, a prediction
-/// from its moments (one [`Predictor`] for all of them) for a predicted one.
+/// The figures of every point run `run` answers: its report for a measured point (or the direct
+/// measurement of a predicted one, with `measure_predictions`), a prediction from its moments (one
+/// [`Predictor`] for all of them) for a predicted one.
 pub fn point_figures(
     plan: &SweepPlan,
     run: usize,
@@ -88,30 +89,57 @@ pub fn point_figures(
 ) -> Vec<(usize, PointFigures)> {
     let spec = &plan.runs[run].spec;
     let measured = Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
-    let points = plan.points.iter().filter(|p| p.run == run);
     let needs_predictor = plan.points.iter().any(|p| p.run == run && p.predicted.is_some());
     let predictor = needs_predictor.then(|| Predictor::new(moments, measured));
-    points
-        .map(|p| {
-            let figures = match (p.predicted, &predictor) {
-                (Some(to), Some(Ok(predictor))) => {
-                    figures_of_prediction(&predictor.at(grid, &spec.solver, to), partial)
-                }
-                (Some(to), Some(Err(e))) => PointFigures {
-                    source: FigureSource::Predicted,
-                    budget: to,
-                    iterations: moments.iterations(),
-                    partial,
-                    noise_table: Vec::new(),
-                    recommended: None,
-                    weights: Vec::new(),
-                    error: Some(e.to_string()),
-                },
-                _ => figures_of_report(report, measured, partial),
-            };
-            (p.index, figures)
-        })
-        .collect()
+    let mut out = Vec::new();
+    for p in &plan.points {
+        if p.measured_run == Some(run) {
+            out.push((p.index, figures_of_report(report, measured, partial)));
+        }
+        if p.run != run {
+            continue;
+        }
+        let figures = match (p.predicted, &predictor) {
+            (Some(to), Some(Ok(predictor))) => figures_of_prediction(&predictor.at(grid, &spec.solver, to), partial),
+            (Some(to), Some(Err(e))) => PointFigures {
+                source: FigureSource::Predicted,
+                budget: to,
+                iterations: moments.iterations(),
+                partial,
+                noise_table: Vec::new(),
+                recommended: None,
+                weights: Vec::new(),
+                error: Some(e.to_string()),
+            },
+            _ => figures_of_report(report, measured, partial),
+        };
+        out.push((p.index, figures));
+    }
+    out
+}
+
+/// A point's figures: measured or predicted, and with `measure_predictions` the direct measurement
+/// of a predicted point beside its prediction.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointResults {
+    pub figures: Option<PointFigures>,
+    pub measured: Option<PointFigures>,
+}
+
+impl PointResults {
+    /// Per point, the figures of [`point_figures`] calls (in any order).
+    pub fn collect(plan: &SweepPlan, figures: impl IntoIterator<Item = (usize, PointFigures)>) -> Vec<Self> {
+        let mut out = vec![Self::default(); plan.points.len()];
+        for (p, f) in figures {
+            let slot = &mut out[p];
+            if plan.points[p].predicted.is_some() && f.source == FigureSource::Measured {
+                slot.measured = Some(f);
+            } else {
+                slot.figures = Some(f);
+            }
+        }
+        out
+    }
 }
 
 /// One point and strategy.
@@ -168,11 +196,13 @@ const COLUMNS: [&str; 12] = [
 ];
 
 impl SweepTable {
-    /// The table of `plan` from its points' figures (`None`: the point has none yet).
-    pub fn build(plan: &SweepPlan, figures: &[Option<PointFigures>]) -> Self {
+    /// The table of `plan` from its points' figures (a point without any has no rows yet; a
+    /// predicted point measured directly has its predicted rows, then its measured ones).
+    pub fn build(plan: &SweepPlan, results: &[PointResults]) -> Self {
         let fields = plan.fields();
         let mut rows = Vec::new();
-        for (point, f) in plan.points.iter().zip(figures) {
+        let each = plan.points.iter().zip(results).flat_map(|(p, r)| [(p, &r.figures), (p, &r.measured)]);
+        for (point, f) in each {
             let Some(f) = f else { continue };
             let values: Map<String, Value> = fields.iter().cloned().zip(point.values.iter().cloned()).collect();
             let chosen = f.recommended.map(|r| r.strategy);
