@@ -15,7 +15,7 @@ use common::{TestServer, assert_problem};
 use tokio::process::Command;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
-const SCREENSHOTS: [&str; 3] = ["list.png", "job-running.png", "job-finished.png"];
+const SCREENSHOTS: [&str; 4] = ["list.png", "job-running.png", "job-finished.png", "sweep.png"];
 /// A hang guard: the script has its own limit of 240 s.
 const SCRIPT_TIMEOUT: Duration = Duration::from_secs(300);
 
@@ -151,6 +151,10 @@ async fn every_dashboard_file_is_served() {
         "list.js",
         "plots.js",
         "results.js",
+        "sweep.js",
+        "sweepdata.js",
+        "sweepplots.js",
+        "sweeps.js",
         "uPlot.iife.min.js",
         "uPlot.min.css",
     ];

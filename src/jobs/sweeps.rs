@@ -9,6 +9,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -86,7 +87,18 @@ pub struct SweepList {
 }
 
 /// Predicted figures of a run's points at one checkpoint (its checksum).
-pub(super) type PredictionCache = std::sync::Mutex<BTreeMap<(i64, String), Arc<Vec<(usize, PointFigures)>>>>;
+pub(super) type PredictionCache = std::sync::Mutex<BTreeMap<i64, CachedPredictions>>;
+
+/// A run's predicted figures, the checksum of the checkpoint they come from and when they were made.
+pub(super) struct CachedPredictions {
+    checksum: String,
+    made: Instant,
+    figures: Arc<Vec<(usize, PointFigures)>>,
+}
+
+/// While a run is still running, its predictions are re-fitted at most this often (each of its
+/// checkpoints changes the moments, and a re-fit of every predicted point is real work).
+const REFIT_INTERVAL: Duration = Duration::from_secs(10);
 
 impl JobManager {
     /// Plans a sweep, checks every run as a job, and queues the runs; acknowledged once stored.
@@ -319,9 +331,11 @@ impl JobManager {
             let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
             return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
-        let key = (job, checksum);
-        if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&key) {
-            return Ok(hit.as_ref().clone());
+        let running = self.active(job).is_some();
+        if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&job)
+            && (hit.checksum == checksum || (running && hit.made.elapsed() < REFIT_INTERVAL))
+        {
+            return Ok(hit.figures.as_ref().clone());
         }
         let (state, _, spec, merged) = self.state_and_total(job).await?;
         let (moments, _) = self.checkpoint_moments(job, &spec, merged).await?;
@@ -337,7 +351,7 @@ impl JobManager {
         if cache.len() >= MAX_CACHED_RUNS {
             cache.clear();
         }
-        cache.insert(key, Arc::new(figures.clone()));
+        cache.insert(job, CachedPredictions { checksum, made: Instant::now(), figures: Arc::new(figures.clone()) });
         Ok(figures)
     }
 }

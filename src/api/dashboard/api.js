@@ -1,4 +1,5 @@
-// API: every call to the server (/v1/jobs…, the job event stream) and the bearer token they carry.
+// API: every call to the server (/v1/jobs…, /v1/sweeps…, the job event stream, downloads) and the
+// bearer token they carry.
 // Imports nothing of ours: the sign-in banner a 401 asks for is app.js's, hooked in with
 // `whenUnauthorized`.
 
@@ -33,6 +34,24 @@ export function whenUnauthorized(handler) {
 /** Keeps the token for this tab: every later call carries it. */
 export function saveToken(token) {
   sessionStorage.setItem(TOKEN_KEY, token);
+}
+
+/** Whether this tab carries a token (then a plain link to the API would be refused). */
+export function hasToken() {
+  return Boolean(sessionStorage.getItem(TOKEN_KEY));
+}
+
+/** Fetches `path` with the token and saves it as `filename` (for downloads a plain link cannot carry the token to). */
+export async function download(path, filename) {
+  const response = await fetch(path, { headers: authHeaders() });
+  if (response.status === 401) onUnauthorized();
+  if (!response.ok) throw new ApiError(`${response.status} ${response.statusText}`, response.status);
+  const url = URL.createObjectURL(await response.blob());
+  const link = Object.assign(document.createElement('a'), { href: url, download: filename });
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10_000);
 }
 
 /** Calls the API; throws an ApiError in plain words (the problem's `detail`) on any failure. */

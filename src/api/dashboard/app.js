@@ -1,30 +1,47 @@
-// The optimis dashboard: a hash-routed client of the public API (/v1/jobs…).
+// The optimis dashboard: a hash-routed client of the public API (/v1/jobs…, /v1/sweeps…).
 //
 // No framework and no build step: pages are <template>s from index.html filled in by plain ES
 // modules, served as they are. The page is served under a Content-Security-Policy that forbids
 // inline script, so every event handler is attached from these modules.
 //
 // This entry module owns the routing and the sign-in banner, and wires the others together:
-//   api.js      calls to the server, the bearer token             (imports nothing of ours)
-//   format.js   DOM and formatting helpers                        (imports nothing of ours)
-//   plots.js    the uPlot charts                                  (format)
-//   results.js  a job's noise table and plots                     (api, format, plots)
-//   form.js     the submit form                                   (api, format)
-//   list.js     the job list page                                 (api, format, form)
-//   job.js      the job page                                      (api, format, plots, results)
+//   api.js        calls to the server, downloads, the bearer token    (imports nothing of ours)
+//   format.js     DOM and formatting helpers                          (imports nothing of ours)
+//   plots.js      the uPlot charts of a job, what every chart shares  (format)
+//   results.js    a job's noise table and plots                       (api, format, plots)
+//   form.js       the submit form                                     (api, format)
+//   list.js       the job list page                                   (api, format, form)
+//   job.js        the job page                                        (api, format, plots, results)
+//   sweepdata.js  a sweep's chart data (no DOM)                       (plots)
+//   sweepplots.js a sweep's charts, with error bars                   (format, plots, sweepdata)
+//   sweeps.js     the sweep list page                                 (api, format)
+//   sweep.js      the sweep page                                      (api, format, plots, sweepdata, sweepplots)
 
 import { saveToken, whenUnauthorized } from './api.js';
 import { h } from './format.js';
 import { showJob } from './job.js';
 import { showList } from './list.js';
+import { showSweep } from './sweep.js';
+import { showSweeps } from './sweeps.js';
 
 const app = document.getElementById('app');
 let leavePage = () => {};
 
+// Hash routes: #/jobs/ID, #/sweeps, #/sweeps/ID; anything else is the job list.
 function route() {
   leavePage();
-  const match = /^#\/jobs\/(\d+)$/.exec(location.hash);
-  leavePage = match ? showJob(app, Number(match[1])) : showList(app);
+  const hash = location.hash;
+  const job = /^#\/jobs\/(\d+)$/.exec(hash);
+  const sweep = /^#\/sweeps\/(\d+)$/.exec(hash);
+  if (job) leavePage = showJob(app, Number(job[1]));
+  else if (sweep) leavePage = showSweep(app, Number(sweep[1]));
+  else if (hash === '#/sweeps') leavePage = showSweeps(app);
+  else leavePage = showList(app);
+  const section = job || /^#\/$|^$/.test(hash) ? 'jobs' : sweep || hash === '#/sweeps' ? 'sweeps' : '';
+  for (const link of document.querySelectorAll('.topnav a[data-nav]')) {
+    if (link.dataset.nav === section) link.setAttribute('aria-current', 'page');
+    else link.removeAttribute('aria-current');
+  }
   window.scrollTo(0, 0);
 }
 

@@ -30,6 +30,7 @@ export function showJob(app, id) {
     refs.body.hidden = false;
     refs.id.textContent = job.id;
     refs.state.replaceChildren(badge(job.state));
+    renderSweepLink(refs.sweep, job);
     updateProgress(refs.progress, job);
     renderStats(refs, job);
     renderSpec(refs.spec, job);
@@ -119,6 +120,15 @@ export function showJob(app, id) {
     weightsPlot.destroy();
     historyPlot.destroy();
   };
+}
+
+/** "sweep N", linked to the sweep's page, when the job is a run of a sweep. */
+function renderSweepLink(link, job) {
+  link.hidden = job.sweep_id === null || job.sweep_id === undefined;
+  if (link.hidden) return;
+  link.href = `#/sweeps/${job.sweep_id}`;
+  link.textContent = `sweep ${job.sweep_id}`;
+  link.title = 'This job is a run of a sweep';
 }
 
 function renderStats(refs, job) {

@@ -84,7 +84,8 @@ export function showList(app) {
 
   function jobRow(job) {
     return h('tr', { 'data-job': job.id },
-      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, job.spec.preset)),
+      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, job.spec.preset,
+        job.sweep_id ? [' · ', h('a', { class: 'sweep-link', href: `#/sweeps/${job.sweep_id}` }, `sweep ${job.sweep_id}`)] : null)),
       h('td'),
       h('td', { class: 'col-progress' }, progressBar()),
       h('td', { class: 'num' }),

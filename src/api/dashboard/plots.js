@@ -1,20 +1,21 @@
 // Plots: the uPlot charts of a job's result (the fitted weights per cell, the RMS history per
-// strategy). uPlot is the vendored library, loaded before this module as a classic script (a global).
+// strategy), and what every chart shares (the chart slot, the strategies' colours, the weights'
+// range). uPlot is the vendored library, loaded before this module as a classic script (a global).
 
 /* global uPlot */
 
 import { fixed, formatCount, formatParameter, formatRms, h, showMessage } from './format.js';
 
-const STRATEGIES = [
+export const STRATEGIES = [
   'plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware',
 ];
-const STRATEGY_COLORS = {
+export const STRATEGY_COLORS = {
   plane1: '#8c564b', plane2: '#1f77b4', plane3: '#2ca02c', switch: '#9467bd', optimal: '#d62728',
   optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', balance: '#17becf', power: '#7f7f7f', correlation_aware: '#bcbd22',
 };
 // The weights plot clips the y axis to this range: with few samples a cell's fitted weights can be
 // in the hundreds, which would flatten every other cell to a line.
-const WEIGHT_RANGE = [-1, 2];
+export const WEIGHT_RANGE = [-1, 2];
 
 /** One uPlot chart in a container, rebuilt only when its series change; follows the page width. */
 export class PlotSlot {
@@ -66,7 +67,7 @@ function intervals(cells, key) {
 }
 
 // Cells whose weights the server copied from a neighbour because the data say nothing about them.
-const UNFITTED = new Set(['empty', 'uninformative']);
+export const UNFITTED = new Set(['empty', 'uninformative']);
 
 /**
  * The optimal w₁ and w₂ per (r₂ band, r₃ cell), the mean over the φ bins that were fitted (cells
@@ -156,7 +157,7 @@ function weightLine(label, stroke, dash) {
 }
 
 /** Fits the data, but never beyond WEIGHT_RANGE, and always shows 0 and 1. */
-function weightRange(u, min, max) {
+export function weightRange(u, min, max) {
   const lo = Math.max(WEIGHT_RANGE[0], Math.min(min ?? 0, 0));
   const hi = Math.min(WEIGHT_RANGE[1], Math.max(max ?? 1, 1));
   const pad = 0.05 * (hi - lo);
