@@ -29,6 +29,8 @@ pub mod jobs;
 #[cfg(feature = "server")]
 pub mod metrics;
 #[cfg(feature = "server")]
+mod process_metrics;
+#[cfg(feature = "server")]
 pub mod server;
 pub mod sim;
 #[cfg(feature = "server")]

@@ -7,8 +7,15 @@
 //!   clients send — before this, 3,000 odd method names grew a scrape from 40 KB to 12 MB;
 //! * `optimis_checkpoint_duration_seconds`: writing a checkpoint (report, serialisation, database);
 //! * `optimis_jobs{state}`: jobs in the database by state;
-//! * `optimis_job_iterations_done{job}` and `optimis_job_light_paths_per_second{job}`: each running
-//!   job, read from memory at scrape time.
+//! * `optimis_iterations_total` and `optimis_light_paths_total`: iterations and light paths computed
+//!   by every job since the server started (counters: take their `rate()` for the throughput);
+//! * `optimis_job_iterations_done{job_id}` and `optimis_job_light_paths_per_second{job_id}`: each
+//!   running job, read from memory at scrape time (`job_id`, not `job`: Prometheus' target label is
+//!   `job`, and a scraped `job` label would be renamed `exported_job`);
+//! * `optimis_build_info{version}` (always 1) and the process's `process_cpu_seconds_total`,
+//!   `process_resident_memory_bytes`, `process_open_fds`, `process_start_time_seconds` (read from
+//!   `/proc/self` at scrape time on Linux; absent elsewhere), named as every Prometheus client names
+//!   them.
 //!
 //! Request and checkpoint metrics are recorded as they happen; the job gauges are refreshed on
 //! each scrape from the job manager, so finished jobs drop out.
@@ -66,7 +73,12 @@ struct StateLabels {
 
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct JobLabels {
-    job: String,
+    job_id: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct BuildLabels {
+    version: String,
 }
 
 /// The server's metrics.
@@ -78,6 +90,8 @@ pub struct Metrics {
     jobs: Family<StateLabels, Gauge>,
     job_iterations: Family<JobLabels, Gauge>,
     job_rate: Family<JobLabels, Gauge<f64, AtomicU64>>,
+    iterations: Counter,
+    light_paths: Counter<f64, AtomicU64>,
 }
 
 impl Default for Metrics {
@@ -95,7 +109,10 @@ pub struct JobSample {
 
 impl Metrics {
     pub fn new() -> Self {
-        let mut registry = Registry::with_prefix("optimis");
+        let mut root = Registry::default();
+        crate::process_metrics::ProcessCollector::started();
+        root.register_collector(Box::new(crate::process_metrics::ProcessCollector));
+        let registry = root.sub_registry_with_prefix("optimis");
         let requests = Family::<RequestLabels, Counter>::default();
         registry.register("http_requests", "HTTP requests by method, route template and status", requests.clone());
         // 100 µs to ~50 s.
@@ -111,7 +128,34 @@ impl Metrics {
         registry.register("job_iterations_done", "Iterations a running job has computed", job_iterations.clone());
         let job_rate = Family::<JobLabels, Gauge<f64, AtomicU64>>::default();
         registry.register("job_light_paths_per_second", "Recent throughput of a running job", job_rate.clone());
-        Self { registry, requests, request_seconds, checkpoint_seconds, jobs, job_iterations, job_rate }
+        let iterations = Counter::default();
+        registry.register("iterations", "Iterations computed by all jobs since the server started", iterations.clone());
+        let light_paths = Counter::<f64, AtomicU64>::default();
+        registry.register(
+            "light_paths",
+            "Light paths (N_F per iteration) of all jobs' iterations since the server started",
+            light_paths.clone(),
+        );
+        let build = Family::<BuildLabels, Gauge>::default();
+        build.get_or_create(&BuildLabels { version: env!("CARGO_PKG_VERSION").to_string() }).set(1);
+        registry.register("build_info", "The optimis version serving (always 1)", build);
+        Self {
+            registry: root,
+            requests,
+            request_seconds,
+            checkpoint_seconds,
+            jobs,
+            job_iterations,
+            job_rate,
+            iterations,
+            light_paths,
+        }
+    }
+
+    /// Counts iterations a job computed, with their light paths.
+    pub fn add_iterations(&self, iterations: u64, light_paths_each: u64) {
+        self.iterations.inc_by(iterations);
+        self.light_paths.inc_by(iterations as f64 * light_paths_each as f64);
     }
 
     /// Records one answered request.
@@ -137,7 +181,7 @@ impl Metrics {
         self.job_iterations.clear();
         self.job_rate.clear();
         for job in running {
-            let labels = JobLabels { job: job.id.to_string() };
+            let labels = JobLabels { job_id: job.id.to_string() };
             self.job_iterations.get_or_create(&labels).set(job.iterations_done as i64);
             self.job_rate.get_or_create(&labels).set(job.light_paths_per_second);
         }
@@ -156,6 +200,9 @@ mod tests {
         let m = Metrics::new();
         m.observe_request("GET", "/v1/jobs/{id}", 200, Duration::from_millis(3));
         m.observe_checkpoint(Duration::from_millis(20));
+        m.add_iterations(3, 1_000_000);
+        m.add_iterations(2, 1_000_000);
+        let build = format!(r#"optimis_build_info{{version="{}"}} 1"#, env!("CARGO_PKG_VERSION"));
         let text = m.render(
             &[(JobState::Running, 1), (JobState::Succeeded, 4)],
             &[JobSample { id: 7, iterations_done: 12, light_paths_per_second: 5e7 }],
@@ -165,14 +212,23 @@ mod tests {
             "optimis_http_request_duration_seconds_bucket",
             "optimis_checkpoint_duration_seconds_count 1",
             r#"optimis_jobs{state="succeeded"} 4"#,
-            r#"optimis_job_iterations_done{job="7"} 12"#,
-            r#"optimis_job_light_paths_per_second{job="7"} 50000000"#,
+            r#"optimis_job_iterations_done{job_id="7"} 12"#,
+            r#"optimis_job_light_paths_per_second{job_id="7"} 50000000"#,
+            "optimis_iterations_total 5",
+            "optimis_light_paths_total 5000000",
+            build.as_str(),
             "# EOF",
         ] {
             assert!(text.contains(needle), "missing {needle} in\n{text}");
         }
         let again = m.render(&[], &[]);
-        assert!(!again.contains(r#"job="7""#), "finished jobs drop out");
+        assert!(!again.contains(r#"job_id="7""#), "finished jobs drop out");
+        if cfg!(target_os = "linux") {
+            assert!(
+                text.contains("process_cpu_seconds_total ") && text.contains("process_resident_memory_bytes "),
+                "{text}"
+            );
+        }
     }
 
     #[test]

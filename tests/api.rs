@@ -335,9 +335,14 @@ async fn events_stream_progress_until_the_end() {
     assert_eq!(events.last().unwrap()["state"], "succeeded", "the stream ends at the terminal state");
     let done: Vec<u64> = events.iter().map(|e| e["progress"]["iterations_done"].as_u64().unwrap()).collect();
     assert!(done.windows(2).all(|w| w[0] <= w[1]), "progress never goes back: {done:?}");
-    // A finished job's stream is its one current event.
-    let text = server.get(&format!("/v1/jobs/{id}/events")).await.text();
-    assert_eq!(text.lines().filter(|l| l.starts_with("data: ")).count(), 1);
+    // Every event has an id (its iterations; the last one its state too), the first a retry.
+    let ids: Vec<&str> = body.lines().filter_map(|l| l.strip_prefix("id: ")).collect();
+    assert_eq!(ids.len(), events.len(), "{body}");
+    assert_eq!(*ids.last().unwrap(), "30-succeeded");
+    assert_eq!(body.lines().filter(|l| l.starts_with("retry: ")).collect::<Vec<_>>(), ["retry: 5000"]);
+    // A finished job has nothing to stream: 204, which ends a browser's EventSource.
+    let finished = server.get(&format!("/v1/jobs/{id}/events")).await;
+    assert_eq!((finished.status, finished.text().as_str()), (204, ""));
     assert_problem(server.get("/v1/jobs/999/events").await, 404);
     server.stop().await;
 }
@@ -368,7 +373,7 @@ async fn metrics_show_a_running_job_progressing() {
         .submit(&json!({ "engine": "brute", "light_paths": 2_000_000, "camera_paths": 300, "merge_radius": 0.01, "iterations": 400, "seed": 1 }))
         .await;
     server.wait_for_state(id, "running").await;
-    let series = format!("optimis_job_iterations_done{{job=\"{id}\"}}");
+    let series = format!("optimis_job_iterations_done{{job_id=\"{id}\"}}");
     let mut seen = Vec::new();
     let started = std::time::Instant::now();
     let text = loop {
@@ -390,7 +395,14 @@ async fn metrics_show_a_running_job_progressing() {
     };
     assert!(seen.windows(2).all(|w| w[0] < w[1]), "the iteration counter only grows: {seen:?}");
     assert_eq!(sample(&text, "optimis_jobs{state=\"running\"}"), Some(1.0));
-    assert!(sample(&text, &format!("optimis_job_light_paths_per_second{{job=\"{id}\"}}")).unwrap() > 0.0);
+    assert!(sample(&text, &format!("optimis_job_light_paths_per_second{{job_id=\"{id}\"}}")).unwrap() > 0.0);
+    // The server-wide counters: at least the iterations the job shows, N_F light paths each.
+    let iterations = sample(&text, "optimis_iterations_total").unwrap();
+    assert!(iterations >= *seen.last().unwrap(), "{iterations} < {seen:?}");
+    assert_eq!(sample(&text, "optimis_light_paths_total"), Some(iterations * 2e6));
+    let build = format!("optimis_build_info{{version=\"{}\"}}", env!("CARGO_PKG_VERSION"));
+    assert_eq!(sample(&text, &build), Some(1.0), "{text}");
+    assert!(sample(&text, "process_resident_memory_bytes").unwrap() > 1e6, "{text}");
     assert!(
         text.contains(r#"optimis_http_requests_total{method="GET",route="/v1/jobs/{id}",status="200"}"#),
         "requests are counted by route template:\n{text}"

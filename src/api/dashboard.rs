@@ -52,7 +52,7 @@ fn asset_response(media_type: &'static str, body: &'static [u8]) -> Response {
 
 /// The dashboard.
 #[utoipa::path(
-    get, path = "/", tag = "dashboard",
+    get, operation_id = "dashboard", path = "/", tag = "dashboard",
     responses((status = 200, description = "The dashboard page", content_type = "text/html", body = String))
 )]
 pub async fn index() -> Response {
@@ -61,7 +61,7 @@ pub async fn index() -> Response {
 
 /// A file of the dashboard.
 #[utoipa::path(
-    get, path = "/assets/{name}", tag = "dashboard", params(("name" = String, Path, description = "File name")),
+    get, operation_id = "dashboard_asset", path = "/assets/{name}", tag = "dashboard", params(("name" = String, Path, description = "File name")),
     responses(
         (status = 200, description = "The file", content_type = "text/plain", body = String),
         (status = 404, description = "No such file", body = Problem, content_type = "application/problem+json"),

@@ -18,14 +18,14 @@ pub struct Health {
 }
 
 /// The process is alive.
-#[utoipa::path(get, path = "/healthz", tag = "operations", responses((status = 200, description = "Alive", body = Health)))]
+#[utoipa::path(get, operation_id = "healthz", path = "/healthz", tag = "operations", responses((status = 200, description = "Alive", body = Health)))]
 pub async fn healthz() -> Json<Health> {
     Json(Health { status: "ok".into() })
 }
 
 /// The database answers and every migration is applied.
 #[utoipa::path(
-    get, path = "/readyz", tag = "operations",
+    get, operation_id = "readyz", path = "/readyz", tag = "operations",
     responses(
         (status = 200, description = "Ready", body = Health),
         (status = 503, description = "Not ready, and why", body = Problem, content_type = "application/problem+json"),
@@ -39,7 +39,7 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
 /// Prometheus metrics: requests by route template and status, request latency, checkpoint
 /// duration, jobs by state, and iterations and throughput of each running job.
 #[utoipa::path(
-    get, path = "/metrics", tag = "operations",
+    get, operation_id = "get_metrics", path = "/metrics", tag = "operations",
     responses(
         (status = 200, description = "OpenMetrics text exposition", content_type = "application/openmetrics-text", body = String),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
@@ -53,7 +53,7 @@ pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse,
 
 /// This API's OpenAPI description.
 #[utoipa::path(
-    get, path = "/openapi.yaml", tag = "operations",
+    get, operation_id = "get_openapi", path = "/openapi.yaml", tag = "operations",
     responses((status = 200, description = "OpenAPI 3.1 document", content_type = "application/yaml", body = String))
 )]
 pub async fn openapi_yaml(State(state): State<AppState>) -> impl IntoResponse {

@@ -192,7 +192,7 @@ fn accepted(resource: &JobResource) -> Response {
 
 /// Submit a job.
 #[utoipa::path(
-    post, path = "/v1/jobs", tag = "jobs",
+    post, operation_id = "submit_job", path = "/v1/jobs", tag = "jobs",
     request_body(content = JobSubmission, description = "Preset and overrides"),
     params(("Idempotency-Key" = Option<String>, Header,
         description = "Repeat a submission safely: the same key and body return the original job")),
@@ -249,7 +249,7 @@ pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
 
 /// List jobs, newest first.
 #[utoipa::path(
-    get, path = "/v1/jobs", tag = "jobs", params(ListQuery),
+    get, operation_id = "list_jobs", path = "/v1/jobs", tag = "jobs", params(ListQuery),
     responses(
         (status = 200, description = "A page of jobs", body = JobList),
         (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
@@ -277,7 +277,7 @@ pub async fn list(
 
 /// A job: state, spec and progress.
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, operation_id = "get_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 200, description = "The job", body = JobResource),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
@@ -290,7 +290,7 @@ pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json
 
 /// The job's noise and weights tables from its latest checkpoint (`partial` until it succeeded).
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
+    get, operation_id = "get_result", path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
         (status = 200, description = "Results", body = JobResult),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
@@ -313,7 +313,7 @@ pub async fn result(
 
 /// Re-solve the stored moments with other solver options; nothing is re-run or stored.
 #[utoipa::path(
-    post, path = "/v1/jobs/{id}/solve", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    post, operation_id = "solve_job", path = "/v1/jobs/{id}/solve", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     request_body(content = SolverPatch, description = "Solver options to change"),
     responses(
         (status = 200, description = "Results with these options", body = JobResult),
@@ -337,7 +337,7 @@ pub async fn solve(
 /// re-fit the optimal weights for it; needs a job run with `"noise_components": true`. Nothing is
 /// run or stored.
 #[utoipa::path(
-    post, path = "/v1/jobs/{id}/predict", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    post, operation_id = "predict_job", path = "/v1/jobs/{id}/predict", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     request_body(content = PredictRequest, description = "The budget to predict for, and solver options to change"),
     responses(
         (status = 200, description = "The predicted noise table and re-fitted weights", body = JobPrediction),
@@ -360,7 +360,7 @@ pub async fn predict(
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.
 #[utoipa::path(
-    post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    post, operation_id = "cancel_job", path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 202, description = "Cancelled, or stopping", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
@@ -375,7 +375,7 @@ pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<R
 
 /// Add iterations to a job; they continue the same deterministic sequence.
 #[utoipa::path(
-    post, path = "/v1/jobs/{id}/extend", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    post, operation_id = "extend_job", path = "/v1/jobs/{id}/extend", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     request_body(content = ExtendRequest),
     responses(
         (status = 202, description = "Extended (and queued again if it had finished)", body = JobResource,
@@ -399,7 +399,7 @@ pub async fn extend(
 
 /// Delete a job that is not running, with its checkpoint.
 #[utoipa::path(
-    delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    delete, operation_id = "delete_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 204, description = "Deleted"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
@@ -414,9 +414,10 @@ pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<S
 
 /// The job's moments (additive statistics) from its latest checkpoint, as a checksummed document.
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/moments", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, operation_id = "get_moments", path = "/v1/jobs/{id}/moments", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
-        (status = 200, description = "The moments document", body = MomentsDocument),
+        (status = 200, description = "The moments document (with a Content-Disposition naming the file)", body = MomentsDocument,
+            headers(("Content-Disposition" = String, description = "attachment; filename=\"optimis-job-ID-moments.json\""))),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
@@ -425,12 +426,21 @@ pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<S
 pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
     // Serialised on the job layer's request pool (a document can be megabytes), sent as is.
     let bytes = state.jobs.moments_json(id).await?;
-    Ok(([(header::CONTENT_TYPE, HeaderValue::from_static("application/json"))], bytes).into_response())
+    let disposition = HeaderValue::from_str(&format!("attachment; filename=\"optimis-job-{id}-moments.json\""))
+        .expect("an ASCII header");
+    Ok((
+        [
+            (header::CONTENT_TYPE, HeaderValue::from_static("application/json")),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        bytes,
+    )
+        .into_response())
 }
 
 /// Each strategy's luminance and RMS at every checkpoint (at most 1,000 points, evenly thinned).
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, operation_id = "get_history", path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 200, description = "The history, oldest checkpoint first", body = JobHistory),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),

@@ -25,6 +25,7 @@ use axum::Router;
 use axum::extract::{DefaultBodyLimit, State};
 use axum::response::Response;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::compression::CompressionLayer;
 use tower_http::trace::TraceLayer;
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -148,9 +149,10 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
 }
 
 /// The application: every route, with request tracing, metrics, the cross-site guard,
-/// authentication (when `token` is set), the body limits and timeout of `limits`, and panics
-/// answered as problem documents. Layers run outside in: trace → metrics → guard → auth → panics
-/// → the route (whose body limit applies as its body is read).
+/// authentication (when `token` is set), the body limits and timeout of `limits`, gzip for clients
+/// that accept it, and panics answered as problem documents. Layers run outside in: trace →
+/// metrics → guard → auth → panics → compression → the route (whose body limit applies as its body
+/// is read).
 pub fn router(jobs: JobManager, limits: &HttpLimits, token: Option<BearerToken>, guard: Guard) -> Router {
     let (router, api) = routes_and_document(limits.document_bytes);
     let state = AppState {
@@ -167,6 +169,9 @@ pub fn router(jobs: JobManager, limits: &HttpLimits, token: Option<BearerToken>,
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
+        // gzip for clients that ask (browsers do): result documents, moments and tables shrink
+        // several-fold; tower-http's default predicate leaves event streams and tiny bodies alone.
+        .layer(CompressionLayer::new())
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(axum::middleware::from_fn_with_state(state.clone(), auth::authenticate))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard::guard))

@@ -57,7 +57,7 @@ pub struct StudyRequest {
 
 /// Merge statistics into a finished job and recompute its results.
 #[utoipa::path(
-    post, path = "/v1/jobs/{id}/merge", tag = "statistics", params(("id" = i64, Path, description = "Job id")),
+    post, operation_id = "merge_into_job", path = "/v1/jobs/{id}/merge", tag = "statistics", params(("id" = i64, Path, description = "Job id")),
     request_body(content = MergeSource, description = "A moments document, or {\"from\": URL of a peer's job}"),
     responses(
         (status = 200, description = "Merged; the results recomputed", body = JobResult),
@@ -81,7 +81,7 @@ pub async fn merge(
 
 /// Create a finished job from merged statistics of several documents or peer jobs.
 #[utoipa::path(
-    post, path = "/v1/studies", tag = "statistics",
+    post, operation_id = "create_study", path = "/v1/studies", tag = "statistics",
     request_body(content = StudyRequest),
     responses(
         (status = 201, description = "The study's job, with its results computed", body = JobResource,

@@ -41,7 +41,7 @@ pub struct TableQuery {
 
 /// Create a sweep: the base job varied along the axes; every run is queued as a job.
 #[utoipa::path(
-    post, path = "/v1/sweeps", tag = "sweeps",
+    post, operation_id = "create_sweep", path = "/v1/sweeps", tag = "sweeps",
     request_body(content = SweepSpec, description = "The base job document, the axes and the mode"),
     responses(
         (status = 201, description = "Created; its runs are queued", body = SweepResource,
@@ -64,7 +64,7 @@ pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> R
 
 /// List sweeps, newest first (without figures).
 #[utoipa::path(
-    get, path = "/v1/sweeps", tag = "sweeps", params(SweepListQuery),
+    get, operation_id = "list_sweeps", path = "/v1/sweeps", tag = "sweeps", params(SweepListQuery),
     responses(
         (status = 200, description = "A page of sweeps", body = SweepList),
         (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
@@ -93,7 +93,7 @@ pub async fn list(
 /// A sweep: progress, and per point the swept values, its job, its honest noise table and
 /// recommended weights (measured, or predicted from its run).
 #[utoipa::path(
-    get, path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    get, operation_id = "get_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 200, description = "The sweep", body = SweepResource),
         (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
@@ -109,7 +109,7 @@ pub async fn get(State(state): State<AppState>, SweepId(id): SweepId) -> Result<
 /// `partial`, `strategy`, `luminance` (model units), `luminance_stderr`, `rms_percent` (percent of
 /// L, one iteration), `rms_percent_stderr`, `respects_fixed`, `recommended`).
 #[utoipa::path(
-    get, path = "/v1/sweeps/{id}/table", tag = "sweeps",
+    get, operation_id = "get_sweep_table", path = "/v1/sweeps/{id}/table", tag = "sweeps",
     params(("id" = i64, Path, description = "Sweep id"), TableQuery),
     responses(
         (status = 200, description = "The table", content(
@@ -169,7 +169,7 @@ fn wants_csv(headers: &HeaderMap) -> bool {
 
 /// Cancel every queued or running run of the sweep (each keeps the iterations it completed).
 #[utoipa::path(
-    post, path = "/v1/sweeps/{id}/cancel", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    post, operation_id = "cancel_sweep", path = "/v1/sweeps/{id}/cancel", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 200, description = "Cancel requested for every active run", body = SweepResource),
         (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
@@ -182,7 +182,7 @@ pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Resu
 
 /// Delete a sweep and its jobs (refused while one runs: cancel the sweep first).
 #[utoipa::path(
-    delete, path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    delete, operation_id = "delete_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 204, description = "Deleted with its jobs"),
         (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),

@@ -90,9 +90,12 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         // Publish after the first batch already, then at most every PROGRESS_INTERVAL.
         let mut last_publish = segment_start.checked_sub(PROGRESS_INTERVAL).unwrap_or(segment_start);
         let policy = &inner.policy;
+        let mut counted = done;
         let outcome = inner.pool.install(|| {
             run_iterations(config, seed, start + done..start + total, &mut moments, &job.stop, |m, next| {
                 let next = next - start;
+                inner.metrics.add_iterations(next - counted, config.light_paths);
+                counted = next;
                 if last_publish.elapsed() >= PROGRESS_INTERVAL {
                     last_publish = Instant::now();
                     publish_progress(job, m, next, done, segment_start, config.light_paths);
