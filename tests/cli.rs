@@ -231,3 +231,77 @@ fn predict_and_budget_read_a_run_with_noise_components() {
     let missing = optimis(dir.path(), &["predict", "job.json"], &[]);
     assert!(!missing.status.success());
 }
+
+/// Issue 15's conventions: `--set` overrides any field, progress lines on a non-terminal stderr
+/// (`--quiet` silences them), CSV tables beside the JSON, errors that name the input at fault and
+/// exit codes that tell bad input, conflicts and I/O apart.
+#[test]
+fn set_progress_csv_and_exit_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = [
+        "run",
+        "--preset",
+        "paper-table1",
+        "--iterations",
+        "400",
+        "--set",
+        "scene.l3=9",
+        "--set",
+        "solver.fixed.w0=null",
+        "--progress-seconds",
+        "0.1",
+        "--json",
+        "--csv",
+        "noise.csv",
+        "--weights-csv",
+        "weights.csv",
+        "--out",
+        "a.json",
+    ];
+    let output = optimis(dir.path(), &run, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+    let report: Value = serde_json::from_slice(&ok(output)).unwrap();
+    assert!(stderr.contains("optimis: 400 iterations done in"), "a final progress line: {stderr}");
+    let doc: Value = serde_json::from_slice(&std::fs::read(dir.path().join("a.json")).unwrap()).unwrap();
+    assert_eq!(doc["spec"]["scene"]["l3"], 9.0);
+    assert!(doc["spec"]["solver"]["fixed"].get("w0").is_none(), "null removes the fixed w0");
+    // The CSV tables hold the JSON's figures.
+    let noise = std::fs::read_to_string(dir.path().join("noise.csv")).unwrap();
+    let lines: Vec<&str> = noise.lines().collect();
+    assert!(lines[0].starts_with("strategy,luminance,luminance_stderr,rms_percent,rms_percent_stderr,"));
+    assert_eq!(lines.len(), 1 + report["noise_table"].as_array().unwrap().len());
+    let switch = report["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == "switch").unwrap();
+    let row = lines.iter().find(|l| l.starts_with("switch,")).unwrap();
+    assert_eq!(row.split(',').nth(3).unwrap().parse::<f64>().unwrap(), switch["rms_percent"].as_f64().unwrap());
+    let weights = std::fs::read_to_string(dir.path().join("weights.csv")).unwrap();
+    assert_eq!(weights.lines().count(), 1 + 52);
+    for (line, w) in weights.lines().skip(1).zip(report["weights"].as_array().unwrap()) {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells.len(), 15, "{line}");
+        assert_eq!(cells[14], w["status"].as_str().unwrap(), "statuses as the JSON writes them");
+        assert_eq!(cells[9].parse::<f64>().unwrap(), w["w1"].as_f64().unwrap());
+    }
+    let quiet =
+        optimis(dir.path(), &["run", "--preset", "paper-table1", "--iterations", "50", "--quiet", "--json"], &[]);
+    assert!(quiet.status.success() && quiet.stderr.is_empty(), "{}", String::from_utf8_lossy(&quiet.stderr));
+
+    // Exit codes: 3 bad input (naming the field), 4 a conflict (naming the input at fault), 5 I/O.
+    let bad = optimis(dir.path(), &["run", "--set", "scene.l4=1"], &[]);
+    assert_eq!(bad.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("scene.l4"));
+    ok(optimis(
+        dir.path(),
+        &["run", "--preset", "paper-table1", "--iterations", "20", "--quiet", "--out", "b.json"],
+        &[],
+    ));
+    let conflict = optimis(dir.path(), &["merge", "b.json", "a.json", "--out", "m.json"], &[]);
+    assert_eq!(conflict.status.code(), Some(4));
+    assert!(
+        String::from_utf8_lossy(&conflict.stderr).starts_with("optimis: a.json: configuration fingerprints differ")
+    );
+    let overlap = optimis(dir.path(), &["merge", "b.json", "b.json", "--out", "m.json"], &[]);
+    assert_eq!(overlap.status.code(), Some(4));
+    let missing = optimis(dir.path(), &["report", "missing.json"], &[]);
+    assert_eq!(missing.status.code(), Some(5));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("missing.json"));
+}

@@ -1,6 +1,7 @@
 //! Sweeps (issue 14): created through the API, their runs ordinary jobs linked back to them, their
 //! table identical byte for byte to `optimis sweep` (locally, and run per task then collected),
-//! bad axes named in 422s, the points limit, predicted axes, cancel and delete cascading.
+//! bad axes named in 422s, the points limit, predicted axes, cancel and delete cascading; and the
+//! CSV exports of a job's tables.
 
 mod common;
 
@@ -200,4 +201,48 @@ async fn cancel_and_delete_cascade_to_the_runs() {
     for job in jobs {
         assert_problem(server.get(&format!("/v1/jobs/{job}")).await, 404);
     }
+}
+
+/// Issue 15's exports: a job's noise table, weights and history as CSV (by `format` or `Accept`),
+/// holding the JSON's figures; a bad `format` or `table` is a 422 naming it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_jobs_tables_download_as_csv() {
+    let server = TestServer::start().await;
+    let id = server.submit_and_wait(&json!({ "iterations": 60, "light_paths": 1_000_000 })).await;
+    let result = server.result(id).await;
+    let noise = server.get(&format!("/v1/jobs/{id}/result?format=csv")).await;
+    assert_eq!(noise.status, 200);
+    assert!(noise.header("content-type").unwrap().starts_with("text/csv"));
+    assert_eq!(
+        noise.header("content-disposition"),
+        Some(format!("attachment; filename=\"optimis-job-{id}-noise.csv\"").as_str())
+    );
+    let text = noise.text();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows[0][..5], ["strategy", "luminance", "luminance_stderr", "rms_percent", "rms_percent_stderr"]);
+    let table = result["noise_table"].as_array().unwrap();
+    assert_eq!(rows.len(), 1 + table.len());
+    for (row, json) in rows[1..].iter().zip(table) {
+        assert_eq!(row[0], json["strategy"].as_str().unwrap());
+        assert_eq!(row[1].parse::<f64>().unwrap(), json["luminance"].as_f64().unwrap());
+    }
+    let by_accept = server
+        .send(server.builder(reqwest::Method::GET, &format!("/v1/jobs/{id}/result")).header("accept", "text/csv"))
+        .await;
+    assert_eq!(by_accept.text(), text);
+    let weights = server.get(&format!("/v1/jobs/{id}/result?format=csv&table=weights")).await.text();
+    assert_eq!(weights.lines().count(), 1 + result["weights"].as_array().unwrap().len());
+    assert!(weights.starts_with("cell,r2_lo,r2_hi,r3_lo,r3_hi,phi_lo_rad,phi_hi_rad,w0,w0_stderr,w1,"));
+    let history = server.get(&format!("/v1/jobs/{id}/history?format=csv")).await.text();
+    let json_history = server.history(id).await;
+    let samples: usize =
+        json_history["points"].as_array().unwrap().iter().map(|p| p["strategies"].as_array().unwrap().len()).sum();
+    assert!(samples > 0);
+    assert_eq!(history.lines().count(), 1 + samples, "one row per checkpoint and strategy");
+    assert!(history.starts_with("iterations,strategy,luminance,rms_percent\r\n"));
+    assert_eq!(assert_problem(server.get(&format!("/v1/jobs/{id}/result?format=xml")).await, 422)["field"], "format");
+    assert_eq!(
+        assert_problem(server.get(&format!("/v1/jobs/{id}/result?format=csv&table=cells")).await, 422)["field"],
+        "table"
+    );
 }

@@ -10,6 +10,7 @@ use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
 
 use super::AppState;
+use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, typed};
 use crate::jobs::documents::{JobHistory, JobList, JobResult};
@@ -17,6 +18,7 @@ use crate::jobs::prediction::{JobPrediction, PredictRequest};
 use crate::jobs::resource::{JobResource, JobState};
 use crate::sim::document::MomentsDocument;
 use crate::sim::model::params::RingSpec;
+use crate::sim::solve::export::{noise_table_csv, weights_csv};
 use crate::sim::solve::options::FixedWeights;
 /// Longest accepted `Idempotency-Key`.
 const MAX_KEY_LEN: usize = 255;
@@ -178,6 +180,22 @@ pub struct ResultQuery {
     /// procedure) instead of the recommended weights; the noise table is the same.
     #[param(minimum = 0.0, maximum = 1e12)]
     lambda: Option<f64>,
+    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
+    #[param(pattern = "^(csv|json)$")]
+    format: Option<String>,
+    /// With CSV: `noise` (default; one row per strategy) or `weights` (one row per cell).
+    #[param(pattern = "^(noise|weights)$")]
+    table: Option<String>,
+}
+
+/// Query of a job's history.
+#[derive(Debug, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct HistoryQuery {
+    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
+    #[param(pattern = "^(csv|json)$")]
+    format: Option<String>,
 }
 
 fn location(id: i64) -> HeaderValue {
@@ -240,7 +258,7 @@ pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
     let text = rejection.body_text();
     let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
     match reason.split_once(": ") {
-        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format"].contains(&name) => {
+        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format", "table"].contains(&name) => {
             ApiError::Invalid { field: name.into(), message: message.into() }
         }
         _ => ApiError::Invalid { field: "query".into(), message: reason.into() },
@@ -292,7 +310,9 @@ pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json
 #[utoipa::path(
     get, operation_id = "get_result", path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
-        (status = 200, description = "Results", body = JobResult),
+        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy, luminance in model units, rms_percent of one iteration; weights: one row per cell)", content(
+            (JobResult = "application/json"),
+            (String = "text/csv"))),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
@@ -302,13 +322,31 @@ pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json
 pub async fn result(
     State(state): State<AppState>,
     JobId(id): JobId,
+    headers: HeaderMap,
     query: Result<Query<ResultQuery>, QueryRejection>,
-) -> Result<Json<JobResult>, ApiError> {
+) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    Ok(Json(match q.lambda {
+    let csv = wants_csv(&headers, q.format.as_deref())?;
+    let result = match q.lambda {
         None => state.jobs.result(id).await?,
         Some(lambda) => state.jobs.solve(id, &serde_json::json!({}), Some(lambda)).await?,
-    }))
+    };
+    match (csv, q.table.as_deref()) {
+        (false, None) => Ok(Json(result).into_response()),
+        (false, Some(_)) => {
+            Err(ApiError::Invalid { field: "table".into(), message: "applies to CSV only (format=csv)".into() })
+        }
+        (true, None | Some("noise")) => {
+            Ok(csv_response(noise_table_csv(&result.report.noise_table), &format!("optimis-job-{id}-noise.csv")))
+        }
+        (true, Some("weights")) => {
+            Ok(csv_response(weights_csv(&result.report.weights), &format!("optimis-job-{id}-weights.csv")))
+        }
+        (true, Some(other)) => Err(ApiError::Invalid {
+            field: "table".into(),
+            message: format!("must be noise or weights, got {other:?}"),
+        }),
+    }
 }
 
 /// Re-solve the stored moments with other solver options; nothing is re-run or stored.
@@ -440,13 +478,27 @@ pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<
 
 /// Each strategy's luminance and RMS at every checkpoint (at most 1,000 points, evenly thinned).
 #[utoipa::path(
-    get, operation_id = "get_history", path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, operation_id = "get_history", path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id"), HistoryQuery),
     responses(
-        (status = 200, description = "The history, oldest checkpoint first", body = JobHistory),
+        (status = 200, description = "The history, oldest checkpoint first (CSV with format=csv: iterations, strategy, luminance, rms_percent)", content(
+            (JobHistory = "application/json"),
+            (String = "text/csv"))),
+        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn history(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobHistory>, ApiError> {
-    Ok(Json(state.jobs.history(id).await?))
+pub async fn history(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    headers: HeaderMap,
+    query: Result<Query<HistoryQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    let csv = wants_csv(&headers, q.format.as_deref())?;
+    let history = state.jobs.history(id).await?;
+    if csv {
+        return Ok(csv_response(history.to_csv(), &format!("optimis-job-{id}-history.csv")));
+    }
+    Ok(Json(history).into_response())
 }

@@ -10,6 +10,7 @@ use serde::Deserialize;
 use utoipa::IntoParams;
 
 use super::AppState;
+use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
 use super::extract::{JsonBody, SweepId};
 use super::jobs::query_problem;
@@ -127,44 +128,12 @@ pub async fn table(
     query: Result<Query<TableQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    let csv = match q.format.as_deref() {
-        Some("csv") => true,
-        Some("json") => false,
-        Some(other) => {
-            return Err(ApiError::Invalid {
-                field: "format".into(),
-                message: format!("must be csv or json, got {other:?}"),
-            });
-        }
-        None => wants_csv(&headers),
-    };
+    let csv = wants_csv(&headers, q.format.as_deref())?;
     let table = state.jobs.sweep_table(id).await?;
     if !csv {
         return Ok(Json(table).into_response());
     }
-    let disposition = format!("attachment; filename=\"sweep-{id}.csv\"");
-    Ok((
-        [
-            (header::CONTENT_TYPE, HeaderValue::from_static("text/csv; charset=utf-8; header=present")),
-            (header::CONTENT_DISPOSITION, HeaderValue::from_str(&disposition).expect("an ASCII header")),
-        ],
-        table.to_csv(),
-    )
-        .into_response())
-}
-
-/// Whether `Accept` prefers CSV: it names text/csv before any JSON type.
-fn wants_csv(headers: &HeaderMap) -> bool {
-    let Some(accept) = headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()) else { return false };
-    for part in accept.split(',') {
-        let media = part.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
-        match media.as_str() {
-            "text/csv" => return true,
-            "application/json" | "*/*" => return false,
-            _ => {}
-        }
-    }
-    false
+    Ok(csv_response(table.to_csv(), &format!("sweep-{id}.csv")))
 }
 
 /// Cancel every queued or running run of the sweep (each keeps the iterations it completed).

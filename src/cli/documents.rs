@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use clap::Args;
 use serde_json::Value;
 
-use super::run::write_atomically;
+use super::run::{write_atomically, write_csv};
 use super::{CliError, table};
 use crate::sim::checks::quadrature::reference_luminance;
-use crate::sim::document::{MomentsDocument, merge_documents};
+use crate::sim::document::{MomentsDocument, merge_documents_at};
 use crate::sim::model::params::check;
 use crate::sim::solve::crossfit::{CrossFitting, nested_selection};
 use crate::sim::solve::noise::NoiseRow;
@@ -46,6 +46,12 @@ pub struct ReportArgs {
     /// (K λ searches: slower than the report itself).
     #[arg(long)]
     pub nested_cv: bool,
+    /// Write the noise table as CSV (one row per strategy).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Write the weights table as CSV (one row per cell).
+    #[arg(long, value_name = "FILE")]
+    pub weights_csv: Option<PathBuf>,
 }
 
 /// Reads and verifies a moments document.
@@ -56,7 +62,9 @@ pub(super) fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError>
 
 pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     let documents = args.documents.iter().map(read_document).collect::<Result<Vec<_>, _>>()?;
-    let merged = merge_documents(&documents).map_err(|source| CliError::Document { path: args.out.clone(), source })?;
+    // The error names the input at fault (the first that conflicts with those before it).
+    let merged = merge_documents_at(&documents)
+        .map_err(|(i, source)| CliError::Document { path: args.documents[i].clone(), source })?;
     write_atomically(&args.out, &merged.to_json())?;
     eprintln!(
         "merged {} documents: {} iterations → {}",
@@ -85,6 +93,7 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
         })?;
     }
     let report = build_report(&doc.moments, &job.config.cells, &solver, reference, args.weights_lambda);
+    write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.nested_cv {
         let cf = CrossFitting::new(&doc.moments, &doc.moments.pooled());

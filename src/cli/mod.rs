@@ -5,6 +5,7 @@ mod bench;
 mod budget;
 mod documents;
 mod predict;
+mod progress;
 mod run;
 #[cfg(feature = "server")]
 mod serve;
@@ -21,7 +22,15 @@ use crate::sim::spec::SpecError;
 
 /// optimis — optimal MIS weights for bidirectional photon mapping by direct variance minimisation.
 #[derive(Debug, Parser)]
-#[command(name = "optimis", version, about)]
+#[command(
+    name = "optimis",
+    version,
+    about,
+    after_help = "Exit status: 0 success; 2 usage (a flag or argument); 3 invalid input (a job or sweep \
+                  specification, a JSON file, a moments document, the configuration); 4 conflict (documents \
+                  of other configurations or with iterations already counted); 5 I/O (a file that cannot \
+                  be read or written); 1 anything else."
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -93,7 +102,8 @@ pub(crate) fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
-/// Parses the command line and runs it; errors go to stderr with exit status 1 (2 for usage).
+/// Parses the command line and runs it; errors go to stderr with the exit status of
+/// [`CliError::exit_code`] (2 for usage, from clap).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -118,7 +128,25 @@ pub fn main() -> ExitCode {
         Err(CliError::Output(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("optimis: {e}");
-            ExitCode::FAILURE
+            ExitCode::from(e.exit_code())
+        }
+    }
+}
+
+impl CliError {
+    /// The exit status (documented in `optimis --help`): scripts and schedulers tell bad input,
+    /// conflicts and I/O apart without parsing the message.
+    pub fn exit_code(&self) -> u8 {
+        use crate::sim::document::DocumentError;
+        use crate::sim::stats::moments::MergeError;
+        match self {
+            CliError::Document {
+                source: DocumentError::Merge(MergeError::Fingerprint { .. } | MergeError::Overlap(_)),
+                ..
+            } => 4,
+            CliError::Spec(_) | CliError::Json { .. } | CliError::Document { .. } | CliError::Config(_) => 3,
+            CliError::Read { .. } | CliError::Write { .. } | CliError::Output(_) => 5,
+            _ => 1,
         }
     }
 }

@@ -7,17 +7,18 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
 
+use super::progress::{Progress, ProgressArgs};
 use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::MomentsDocument;
 use crate::sim::model::params::merge_patch;
 use crate::sim::runner::run_iterations;
-use crate::sim::solve::report::build_report;
-use crate::sim::spec::{Shard, ValidJob, parse_job_spec};
+use crate::sim::solve::export::{noise_table_csv, weights_csv};
+use crate::sim::solve::report::{RunReport, build_report};
+use crate::sim::spec::{Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
 
 #[derive(Debug, Args)]
@@ -60,6 +61,45 @@ pub struct RunArgs {
     /// or `POST /v1/jobs/{id}/merge`).
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Set any field of the job document, by its dotted path (repeatable; applied after the spec
+    /// file and the flags). VALUE is JSON if it parses (`0.01`, `true`, `null`, `{"w0": null}`),
+    /// else a string: `--set scene.l3=9 --set solver.fixed.w0=null --set engine=brute`.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub set: Vec<String>,
+    /// Write the noise table as CSV (one row per strategy).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Write the weights table as CSV (one row per cell).
+    #[arg(long, value_name = "FILE")]
+    pub weights_csv: Option<PathBuf>,
+    #[command(flatten)]
+    pub progress: ProgressArgs,
+}
+
+/// Writes the report's tables as CSV where asked.
+pub(super) fn write_csv(report: &RunReport, noise: Option<&Path>, weights: Option<&Path>) -> Result<(), CliError> {
+    if let Some(path) = noise {
+        write_atomically(path, noise_table_csv(&report.noise_table).as_bytes())?;
+    }
+    if let Some(path) = weights {
+        write_atomically(path, weights_csv(&report.weights).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `--set PATH=VALUE` as a merge patch: `{"a": {"b": VALUE}}`.
+fn set_patch(assignment: &str) -> Result<Value, SpecError> {
+    let (path, text) = assignment
+        .split_once('=')
+        .ok_or_else(|| SpecError::new("--set", format!("expected PATH=VALUE, got {assignment:?}")))?;
+    let segments: Vec<&str> = path.split('.').collect();
+    let identifier =
+        |s: &&str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
+    if !segments.iter().all(identifier) {
+        return Err(SpecError::new("--set", format!("{path:?} is not a dotted path of field names (e.g. scene.l3)")));
+    }
+    let value = serde_json::from_str(text).unwrap_or_else(|_| Value::String(text.to_string()));
+    Ok(segments.iter().rev().fold(value, |inner, key| json!({ *key: inner })))
 }
 
 /// Reads a JSON file.
@@ -91,6 +131,9 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
         doc["preset"] = Value::Null;
     }
     merge_patch(&mut doc, &Value::Object(overrides));
+    for assignment in &args.set {
+        merge_patch(&mut doc, &set_patch(assignment)?);
+    }
     let mut spec = parse_job_spec(&doc)?;
     let environment: HashMap<String, String> = std::env::vars().collect();
     spec.shard = resolve_shard(args.shard, args.shard_count, spec.shard, &environment)?;
@@ -111,30 +154,23 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
     std::fs::rename(&tmp, path).map_err(fail)
 }
 
-/// Runs every iteration of `job` on `pool`, with a progress bar on stderr, into fresh moments.
-pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool) -> Moments {
+/// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
+pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool, progress: &ProgressArgs, label: &str) -> Moments {
     let config = &job.config;
     let range = job.spec.iteration_range();
     let total = range.end - range.start;
-    let progress = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} iterations, ETA {eta} {msg}")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
+    let mut shown = Progress::new(progress, label, total, config.light_paths);
     let started = Instant::now();
     let mut moments = Moments::new(config);
     let never = AtomicBool::new(false);
     pool.install(|| {
         run_iterations(config, job.spec.seed, range.clone(), &mut moments, &never, |_, next| {
-            let done = next - range.start;
-            let rate = (done * config.light_paths) as f64 / started.elapsed().as_secs_f64();
-            progress.set_message(format!("{rate:.3e} light paths/s"));
-            progress.set_position(done);
+            shown.update(next - range.start, started, config.light_paths);
             std::ops::ControlFlow::Continue(())
         })
     })
     .expect("a fresh run is neither cancelled nor overlapping");
-    progress.finish_and_clear();
+    shown.finish();
     moments
 }
 
@@ -143,12 +179,13 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let pool = thread_pool(args.threads)?;
     let config = &job.config;
     let started = Instant::now();
-    let moments = run_moments(&job, &pool);
+    let moments = run_moments(&job, &pool, &args.progress, "");
     let seconds = started.elapsed().as_secs_f64();
     if let Some(path) = &args.out {
         write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
     }
     let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene).ok(), None);
+    write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;

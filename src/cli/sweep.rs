@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Subcommand};
 
 use super::documents::read_document;
+use super::progress::ProgressArgs;
 use super::run::{read_json, run_moments, write_atomically};
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
@@ -67,6 +68,8 @@ pub struct SweepRunArgs {
     /// Most points the sweep may have.
     #[arg(long, default_value_t = DEFAULT_MAX_POINTS)]
     pub max_points: usize,
+    #[command(flatten)]
+    pub progress: ProgressArgs,
 }
 
 #[derive(Debug, Args)]
@@ -130,14 +133,14 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
     let mut figures = Vec::new();
     for &r in &selected {
         let job = plan.runs[r].spec.validate()?;
-        eprintln!("run {r} of {}: {} ({} iterations)", plan.runs.len(), plan.describe_run(r), job.spec.iterations);
-        let moments = run_moments(&job, &pool);
+        let label = format!("run {r} of {} ({}): ", plan.runs.len(), plan.describe_run(r));
+        let moments = run_moments(&job, &pool, &args.progress, &label);
         if let Some(dir) = &args.out {
             write_atomically(&run_file(dir, r), &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
         }
         figures.extend(run_figures(&plan, r, &moments)?);
     }
-    if task.is_some() {
+    if task.is_some() && !args.progress.quiet {
         eprintln!("run {} written; `optimis sweep collect DIR` builds the table once every run has", selected[0]);
         return Ok(());
     }

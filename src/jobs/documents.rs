@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::resource::{JobResource, JobState};
+use crate::sim::math::csv::{Csv, json_cell, number};
 use crate::sim::solve::report::RunReport;
 use crate::sim::solve::strategy::Strategy;
 
@@ -49,6 +50,20 @@ pub struct HistoryPoint {
 pub struct JobHistory {
     pub job_id: i64,
     pub points: Vec<HistoryPoint>,
+}
+
+impl JobHistory {
+    /// The history as CSV: one row per checkpoint and strategy (`iterations`, `strategy`,
+    /// `luminance` in the model's units, `rms_percent` of one iteration).
+    pub fn to_csv(&self) -> String {
+        let mut csv = Csv::new(["iterations", "strategy", "luminance", "rms_percent"]);
+        for p in &self.points {
+            for s in &p.strategies {
+                csv.row([p.iterations.to_string(), json_cell(&s.strategy), number(s.luminance), number(s.rms_percent)]);
+            }
+        }
+        csv.finish()
+    }
 }
 
 /// Most points a history returns.

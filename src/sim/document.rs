@@ -206,13 +206,19 @@ impl MomentsDocument {
 /// is the first document's with `iterations` set to the total covered and no shard or first
 /// iteration; nothing is merged if any document conflicts with the others.
 pub fn merge_documents(documents: &[MomentsDocument]) -> Result<MomentsDocument, DocumentError> {
+    merge_documents_at(documents).map_err(|(_, e)| e)
+}
+
+/// [`merge_documents`], saying which document (its index) the merge failed at: the first one
+/// that conflicts with those before it, or the last for a total that would leave the bounds.
+pub fn merge_documents_at(documents: &[MomentsDocument]) -> Result<MomentsDocument, (usize, DocumentError)> {
     let (first, rest) =
-        documents.split_first().ok_or_else(|| DocumentError::Inconsistent("nothing to merge".into()))?;
+        documents.split_first().ok_or_else(|| (0, DocumentError::Inconsistent("nothing to merge".into())))?;
     let mut moments = first.moments.clone();
-    for doc in rest {
-        moments.merge(&doc.moments)?;
+    for (i, doc) in rest.iter().enumerate() {
+        moments.merge(&doc.moments).map_err(|e| (i + 1, e.into()))?;
     }
-    moments.check_bounded()?;
+    moments.check_bounded().map_err(|e| (documents.len() - 1, e.into()))?;
     Ok(MomentsDocument::new(merged_spec(&first.spec, &moments), moments))
 }
 

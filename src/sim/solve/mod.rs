@@ -9,13 +9,14 @@
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
-//! * [`report`] — the result document of a run;
+//! * [`report`] — the result document of a run; [`export`] — its tables as CSV;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
 //!   noise components;
 //! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy.
 
 pub mod budget;
 pub mod crossfit;
+pub mod export;
 pub mod noise;
 pub mod options;
 pub mod predict;

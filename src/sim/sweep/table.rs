@@ -6,12 +6,11 @@
 //! `luminance` in the units of docs/model.md (the light's radiance scale), `rms_percent` in percent
 //! of L for one iteration.
 
-use std::fmt::Write;
-
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use super::plan::SweepPlan;
+use crate::sim::math::csv::{Csv, cell, json_cell, number};
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::noise::NoiseRow;
 use crate::sim::solve::predict::{Budget, Prediction, Predictor};
@@ -233,23 +232,17 @@ impl SweepTable {
     /// array is its JSON text.
     pub fn to_csv(&self) -> String {
         let swept: Vec<&String> = self.fields.iter().filter(|f| !COLUMNS.contains(&f.as_str())).collect();
-        let mut out = String::from("point");
-        for name in swept.iter().map(|s| s.as_str()).chain(COLUMNS) {
-            out.push(',');
-            out.push_str(&quoted(name));
-        }
-        out.push_str("\r\n");
-        let number = |x: Option<f64>| x.map(|v| v.to_string()).unwrap_or_default();
+        let mut csv = Csv::new(std::iter::once("point").chain(swept.iter().map(|s| s.as_str())).chain(COLUMNS));
         for r in &self.rows {
             let mut cells = vec![r.point.to_string()];
             cells.extend(swept.iter().map(|f| cell(r.values.get(f.as_str()).unwrap_or(&Value::Null))));
             cells.extend([
-                cell(&serde_json::to_value(r.source).expect("an enum")),
+                json_cell(&r.source),
                 r.light_paths.to_string(),
                 r.camera_paths.to_string(),
                 r.iterations_done.to_string(),
                 r.partial.to_string(),
-                cell(&serde_json::to_value(r.strategy).expect("an enum")),
+                json_cell(&r.strategy),
                 number(r.luminance),
                 number(r.luminance_stderr),
                 number(r.rms_percent),
@@ -257,40 +250,8 @@ impl SweepTable {
                 r.respects_fixed.to_string(),
                 r.recommended.to_string(),
             ]);
-            let _ = write!(out, "{}\r\n", cells.join(","));
+            csv.row(cells);
         }
-        out
-    }
-}
-
-fn cell(v: &Value) -> String {
-    match v {
-        Value::Null => String::new(),
-        Value::String(s) => quoted(s),
-        Value::Number(n) => n.to_string(),
-        Value::Bool(b) => b.to_string(),
-        other => quoted(&other.to_string()),
-    }
-}
-
-/// A CSV field, quoted when it holds a comma, a quote or a line break.
-fn quoted(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn csv_quotes_what_needs_it_and_leaves_nulls_empty() {
-        assert_eq!(cell(&Value::Null), "");
-        assert_eq!(cell(&serde_json::json!("a,b")), "\"a,b\"");
-        assert_eq!(
-            cell(&serde_json::json!({ "kind": "spot", "a": 0.02 })),
-            "\"{\"\"a\"\":0.02,\"\"kind\"\":\"\"spot\"\"}\""
-        );
-        assert_eq!(cell(&serde_json::json!(0.003)), "0.003");
-        assert_eq!(quoted("plain"), "plain");
+        csv.finish()
     }
 }
