@@ -15,7 +15,12 @@ use common::{TestServer, assert_problem};
 use tokio::process::Command;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
-const SCREENSHOTS: [&str; 4] = ["list.png", "job-running.png", "job-finished.png", "sweep.png"];
+const SCREENSHOTS: [&str; 6] =
+    ["list.png", "job-running.png", "job-finished.png", "paper-job.png", "compare.png", "sweep.png"];
+/// The README's screenshots, written to `$OPTIMIS_SCREENSHOT_DIR` (e.g. `docs`) when it is set.
+const DOC_SCREENSHOTS: [&str; 2] = ["dashboard-job.png", "dashboard-compare.png"];
+/// Their size limit, to keep the repository small.
+const DOC_SCREENSHOT_LIMIT: usize = 400_000;
 /// A hang guard: the script has its own limit of 240 s.
 const SCRIPT_TIMEOUT: Duration = Duration::from_secs(300);
 
@@ -73,7 +78,9 @@ async fn browser_available() -> bool {
     false
 }
 
-/// Runs the browser scenario against `server` (signing in with `token` first, if given).
+/// Runs the browser scenario against `server` (signing in with `token` first, if given). Without a
+/// token, the README's screenshots go to `$OPTIMIS_SCREENSHOT_DIR` when it is set (relative to the
+/// crate: `OPTIMIS_SCREENSHOT_DIR=docs` replaces docs/dashboard-job.png and docs/dashboard-compare.png).
 async fn run_scenario(server: &TestServer, token: Option<&str>) {
     let screenshots = tempfile::tempdir().unwrap();
     let mut command = Command::new("node");
@@ -87,6 +94,13 @@ async fn run_scenario(server: &TestServer, token: Option<&str>) {
     if let Some(token) = token {
         command.env("OPTIMIS_TOKEN", token);
     }
+    let doc_dir = std::env::var_os("OPTIMIS_SCREENSHOT_DIR")
+        .filter(|_| token.is_none())
+        .map(|dir| Path::new(env!("CARGO_MANIFEST_DIR")).join(dir));
+    match &doc_dir {
+        Some(dir) => command.env("OPTIMIS_SCREENSHOT_DIR", dir),
+        None => command.env_remove("OPTIMIS_SCREENSHOT_DIR"),
+    };
     let output = tokio::time::timeout(SCRIPT_TIMEOUT, command.output())
         .await
         .expect("the browser test did not finish within 5 minutes")
@@ -97,6 +111,12 @@ async fn run_scenario(server: &TestServer, token: Option<&str>) {
     println!("{stdout}");
     for name in SCREENSHOTS {
         assert_png(&screenshots.path().join(name));
+    }
+    for name in DOC_SCREENSHOTS.iter().filter(|_| doc_dir.is_some()) {
+        let path = doc_dir.as_ref().unwrap().join(name);
+        assert_png(&path);
+        let size = std::fs::metadata(&path).unwrap().len();
+        assert!(size < DOC_SCREENSHOT_LIMIT as u64, "{} is {size} bytes, over {DOC_SCREENSHOT_LIMIT}", path.display());
     }
 }
 
@@ -145,10 +165,16 @@ async fn every_dashboard_file_is_served() {
         "api.js",
         "app.css",
         "app.js",
+        "chartfiles.js",
+        "chartkit.js",
+        "compare.js",
+        "csv.js",
         "form.js",
         "format.js",
         "job.js",
         "list.js",
+        "noisetable.js",
+        "paper.js",
         "plots.js",
         "results.js",
         "sweep.js",

@@ -246,3 +246,39 @@ async fn a_jobs_tables_download_as_csv() {
         "table"
     );
 }
+
+/// Issue 15: a re-solve can be kept under a name, listed beside the job's own options (`default`),
+/// read back (re-solved from the latest checkpoint) and deleted; names and counts are bounded.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn named_solves_are_kept_listed_and_bounded() {
+    let server = TestServer::start().await;
+    let id = server.submit_and_wait(&json!({ "iterations": 60, "light_paths": 1_000_000 })).await;
+    let put = |name: &str, body: Value| {
+        let path = format!("/v1/jobs/{id}/solves/{name}");
+        let server = &server;
+        async move { server.send(server.builder(reqwest::Method::PUT, &path).json(&body)).await }
+    };
+    let saved = put("lambda-0.1", json!({ "lambda": 0.1 })).await;
+    assert_eq!(saved.status, 200, "{}", saved.text());
+    let direct = server.solve(id, &json!({ "lambda": 0.1 })).await.json();
+    assert_eq!(saved.json()["noise_table"], direct["noise_table"], "the kept solve answers what /solve does");
+    let list = server.get_json(&format!("/v1/jobs/{id}/solves")).await;
+    let names: Vec<&str> = list["solves"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["default", "lambda-0.1"]);
+    assert_eq!(list["solves"][0]["default"], true);
+    assert_eq!(list["solves"][1]["solver"]["lambda"], 0.1);
+    let again = server.get_json(&format!("/v1/jobs/{id}/solves/lambda-0.1")).await;
+    assert_eq!(again["noise_table"], direct["noise_table"]);
+    assert_eq!(server.get_json(&format!("/v1/jobs/{id}/solves/default")).await, server.result(id).await);
+    assert_eq!(assert_problem(put("Bad Name", json!({})).await, 422)["field"], "name");
+    assert_eq!(assert_problem(put("default", json!({})).await, 422)["field"], "name");
+    assert_eq!(assert_problem(put("x", json!({ "lambda": -1 })).await, 422)["field"], "solver.lambda");
+    for k in 1..32 {
+        assert_eq!(put(&format!("s{k}"), json!({ "lambda": k as f64 / 100.0 })).await.status, 200);
+    }
+    assert_problem(put("one-too-many", json!({})).await, 409);
+    assert_eq!(put("s1", json!({ "lambda": 0.5 })).await.status, 200, "replacing one is not one more");
+    let deleted = server.request(reqwest::Method::DELETE, &format!("/v1/jobs/{id}/solves/s1"), None).await;
+    assert_eq!(deleted.status, 204);
+    assert_problem(server.get(&format!("/v1/jobs/{id}/solves/s1")).await, 404);
+}

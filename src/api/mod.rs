@@ -16,6 +16,7 @@ mod health;
 mod jobs;
 pub mod limits;
 mod openapi;
+mod solves;
 mod studies;
 mod sweeps;
 
@@ -86,6 +87,8 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::result))
         .routes(routes!(jobs::solve))
         .routes(routes!(jobs::predict))
+        .routes(routes!(solves::list))
+        .routes(routes!(solves::save, solves::get, solves::delete))
         .routes(routes!(jobs::cancel))
         .routes(routes!(jobs::extend))
         .routes(routes!(jobs::moments))

@@ -3,6 +3,7 @@
 //!
 //! Layout (each module imports only those below it):
 //! * [`statistics`] — results, re-solves, the moments export, merges and studies (on the manager);
+//! * [`solves`] — named re-solves kept with a job (on the manager);
 //! * [`sweeps`] — sweeps: their runs queued as jobs, their figures and table (on the manager);
 //! * [`prediction`] — a job's noise table predicted at another ray budget (on the manager);
 //! * [`manager`] — the public handle: submit, get, list, cancel, extend, delete, shutdown;
@@ -24,6 +25,7 @@ pub mod policy;
 pub mod prediction;
 pub mod resource;
 pub mod scheduler;
+pub mod solves;
 pub mod state;
 pub mod statistics;
 pub mod sweeps;

@@ -13,6 +13,7 @@
 //! last such failure for a while so that `/readyz` reports it.
 
 mod jobs;
+mod solves;
 mod state;
 mod sweeps;
 
@@ -26,6 +27,7 @@ use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
+pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;
 

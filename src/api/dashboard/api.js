@@ -1,5 +1,5 @@
 // API: every call to the server (/v1/jobs…, /v1/sweeps…, the job event stream, downloads) and the
-// bearer token they carry.
+// bearer token they carry; saving a file made in the page.
 // Imports nothing of ours: the sign-in banner a 401 asks for is app.js's, hooked in with
 // `whenUnauthorized`.
 
@@ -41,12 +41,21 @@ export function hasToken() {
   return Boolean(sessionStorage.getItem(TOKEN_KEY));
 }
 
-/** Fetches `path` with the token and saves it as `filename` (for downloads a plain link cannot carry the token to). */
+/**
+ * Fetches `path` with the token and saves it (for downloads a plain link cannot carry the token
+ * to), under the name the server's Content-Disposition gives, else `filename`.
+ */
 export async function download(path, filename) {
   const response = await fetch(path, { headers: authHeaders() });
   if (response.status === 401) onUnauthorized();
   if (!response.ok) throw new ApiError(`${response.status} ${response.statusText}`, response.status);
-  const url = URL.createObjectURL(await response.blob());
+  const named = /filename="([^"]+)"/.exec(response.headers.get('content-disposition') ?? '')?.[1];
+  saveBlob(await response.blob(), named || filename);
+}
+
+/** Saves `blob` as a file named `filename` (a download made in the page, such as a CSV or a chart). */
+export function saveBlob(blob, filename) {
+  const url = URL.createObjectURL(blob);
   const link = Object.assign(document.createElement('a'), { href: url, download: filename });
   document.body.append(link);
   link.click();

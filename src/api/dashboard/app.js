@@ -7,17 +7,24 @@
 // This entry module owns the routing and the sign-in banner, and wires the others together:
 //   api.js        calls to the server, downloads, the bearer token    (imports nothing of ours)
 //   format.js     DOM and formatting helpers                          (imports nothing of ours)
-//   plots.js      the uPlot charts of a job, what every chart shares  (format)
-//   results.js    a job's noise table and plots                       (api, format, plots)
 //   form.js       the submit form                                     (api, format)
-//   list.js       the job list page                                   (api, format, form)
+//   csv.js        CSV text (RFC 4180) and its download buttons        (api, format)
+//   paper.js      the paper's Table 1, its configuration, z and SE(L) (imports nothing of ours)
+//   chartkit.js   uPlot plugins: error bars, SE bands, guide lines    (imports nothing of ours)
+//   chartfiles.js a chart's SVG (a serialiser) and PNG downloads      (api, format)
+//   plots.js      the job's charts: Fig. 2, luminance, RMS history    (chartkit, format, paper)
+//   noisetable.js the noise table: paper column, case numbers, z, CSV (format, paper)
+//   results.js    a job's results: loading, table, charts, downloads  (api, chartfiles, csv, format, noisetable, paper, plots)
+//   list.js       the job list page, its selection to compare        (api, format, form)
 //   job.js        the job page                                        (api, format, plots, results)
+//   compare.js    the compare page of 2 to 8 jobs                     (api, chartkit, chartfiles, csv, format, list, plots)
 //   sweepdata.js  a sweep's chart data (no DOM)                       (plots)
-//   sweepplots.js a sweep's charts, with error bars                   (format, plots, sweepdata)
+//   sweepplots.js a sweep's charts, with error bars                   (chartkit, format, plots, sweepdata)
 //   sweeps.js     the sweep list page                                 (api, format)
-//   sweep.js      the sweep page                                      (api, format, plots, sweepdata, sweepplots)
+//   sweep.js      the sweep page                                      (api, chartfiles, format, plots, sweepdata, sweepplots)
 
 import { saveToken, whenUnauthorized } from './api.js';
+import { showCompare } from './compare.js';
 import { h } from './format.js';
 import { showJob } from './job.js';
 import { showList } from './list.js';
@@ -27,17 +34,19 @@ import { showSweeps } from './sweeps.js';
 const app = document.getElementById('app');
 let leavePage = () => {};
 
-// Hash routes: #/jobs/ID, #/sweeps, #/sweeps/ID; anything else is the job list.
+// Hash routes: #/jobs/ID, #/compare?ids=1,2,…, #/sweeps, #/sweeps/ID; anything else is the job list.
 function route() {
   leavePage();
   const hash = location.hash;
   const job = /^#\/jobs\/(\d+)$/.exec(hash);
+  const compare = /^#\/compare(\?.*)?$/.exec(hash);
   const sweep = /^#\/sweeps\/(\d+)$/.exec(hash);
   if (job) leavePage = showJob(app, Number(job[1]));
+  else if (compare) leavePage = showCompare(app, compare[1] ?? '');
   else if (sweep) leavePage = showSweep(app, Number(sweep[1]));
   else if (hash === '#/sweeps') leavePage = showSweeps(app);
   else leavePage = showList(app);
-  const section = job || /^#\/$|^$/.test(hash) ? 'jobs' : sweep || hash === '#/sweeps' ? 'sweeps' : '';
+  const section = job || compare || /^#\/$|^$/.test(hash) ? 'jobs' : sweep || hash === '#/sweeps' ? 'sweeps' : '';
   for (const link of document.querySelectorAll('.topnav a[data-nav]')) {
     if (link.dataset.nav === section) link.setAttribute('aria-current', 'page');
     else link.removeAttribute('aria-current');

@@ -1,7 +1,7 @@
-// The job page: one job, streamed live while it runs, its figures and specification, cancel and
-// extend, and its results (results.js).
+// The job page: one job, streamed live while it runs, its figures and specification, cancel,
+// extend and the moments download, and its results (results.js).
 
-import { TERMINAL, api, streamJob } from './api.js';
+import { TERMINAL, api, download, streamJob } from './api.js';
 import {
   badge, describeBest, formatCount, formatDuration, formatParameter, formatRate, formatTime, h, instantiate, showMessage,
   updateProgress,
@@ -17,9 +17,12 @@ export function showJob(app, id) {
   app.replaceChildren(fragment);
   document.title = `Job ${id} · optimis`;
 
-  const weightsPlot = new PlotSlot(refs['weights-plot']);
-  const historyPlot = new PlotSlot(refs['history-plot']);
-  const results = new ResultsLoader(id, refs, weightsPlot, historyPlot);
+  const plots = {
+    weights: new PlotSlot(refs['weights-plot'], `Job ${id}: recommended w₁ against r₃ (Fig. 2)`),
+    luminance: new PlotSlot(refs['luminance-plot'], `Job ${id}: luminance against iterations (± 1 SE)`),
+    history: new PlotSlot(refs['history-plot'], `Job ${id}: RMS error against iterations`),
+  };
+  const results = new ResultsLoader(id, refs, plots);
   let job = null;
   let closeStream = null;
   let retryTimer = null;
@@ -110,6 +113,12 @@ export function showJob(app, id) {
     }
     if (await act(refs.extend, `/v1/jobs/${id}/extend`, { iterations })) input.value = '';
   });
+  // The moments (sums over iterations, to merge or re-fit elsewhere): fetched with the token, named by the server.
+  refs.moments.addEventListener('click', () => {
+    showMessage(refs['action-error'], '');
+    download(`/v1/jobs/${id}/moments`, `optimis-job-${id}-moments.json`)
+      .catch((error) => alive && showMessage(refs['action-error'], `Cannot download the moments: ${error.message}`));
+  });
   reload();
 
   return () => {
@@ -117,8 +126,7 @@ export function showJob(app, id) {
     clearTimeout(retryTimer);
     if (closeStream) closeStream();
     results.stop();
-    weightsPlot.destroy();
-    historyPlot.destroy();
+    for (const plot of Object.values(plots)) plot.destroy();
   };
 }
 

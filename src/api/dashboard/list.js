@@ -1,10 +1,11 @@
-// The job list page: one page of jobs, polled, with the first running ones streamed live, the
-// state filter and paging, and the submit form (form.js).
+// The job list page: one page of jobs (with each one's engine, N_F, N_B, seed, and whether it is a
+// shard, a merge or a run of a sweep), polled, with the first running ones streamed live, the state
+// filter and paging, the selection of jobs to compare (#/compare?ids=…), and the submit form (form.js).
 
 import { TERMINAL, api, streamJob } from './api.js';
 import {
-  badge, describeBest, formatDuration, formatRate, formatShortTime, formatTime, h, instantiate, isNewer, progressBar,
-  showMessage, updateProgress,
+  badge, describeBest, formatCount, formatDuration, formatParameter, formatRate, formatShortTime, formatTime, h, instantiate,
+  isNewer, progressBar, showMessage, updateProgress,
 } from './format.js';
 import { setupSubmitForm } from './form.js';
 
@@ -13,9 +14,11 @@ const LIST_POLL_MS = 3000;
 // Each event stream holds one of the browser's six HTTP/1.1 connections to this origin, so the list
 // streams at most this many running jobs live and polls for the rest.
 const MAX_LIST_STREAMS = 2;
+// The compare page shows 2 to this many jobs side by side.
+export const MAX_COMPARED = 8;
 
 // Kept across page changes so that coming back from a job shows the same page of the list.
-const listView = { filter: '', cursors: [null] };
+const listView = { filter: '', cursors: [null], selected: new Set() };
 
 /** Shows the list in `app` (the page's #app element); returns what leaving the page does. */
 export function showList(app) {
@@ -83,11 +86,18 @@ export function showList(app) {
   }
 
   function jobRow(job) {
+    const { spec } = job;
+    const pick = h('input', { type: 'checkbox', name: 'compare', value: job.id, 'aria-label': `Compare job ${job.id}` });
+    pick.checked = listView.selected.has(job.id);
     return h('tr', { 'data-job': job.id },
-      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, job.spec.preset,
-        job.sweep_id ? [' · ', h('a', { class: 'sweep-link', href: `#/sweeps/${job.sweep_id}` }, `sweep ${job.sweep_id}`)] : null)),
+      h('td', { class: 'col-pick' }, pick),
+      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, describeKind(job))),
       h('td'),
       h('td', { class: 'col-progress' }, progressBar()),
+      h('td', { 'data-col': 'engine' }, spec.engine || 'brute'),
+      h('td', { class: 'num', 'data-col': 'light_paths' }, formatSize(spec.light_paths)),
+      h('td', { class: 'num', 'data-col': 'camera_paths' }, formatSize(spec.camera_paths)),
+      h('td', { class: 'num', 'data-col': 'seed' }, String(spec.seed)),
       h('td', { class: 'num' }),
       h('td', { class: 'num' }),
       h('td'),
@@ -95,7 +105,7 @@ export function showList(app) {
   }
 
   function fillRow(tr, job) {
-    const [, state, progress, rate, eta, best] = tr.cells;
+    const [, , state, progress, , , , , rate, eta, best] = tr.cells;
     const running = job.state === 'running';
     if (state.textContent !== job.state) state.replaceChildren(badge(job.state));
     updateProgress(progress.firstChild, job);
@@ -149,11 +159,37 @@ export function showList(app) {
     listView.cursors.pop();
     load();
   });
-  // The whole row leads to the job, not only its id.
+  // The whole row leads to the job, not only its id (but not its checkbox).
   refs.rows.addEventListener('click', (event) => {
     const row = event.target.closest('tr[data-job]');
-    if (row && !event.target.closest('a')) location.hash = `#/jobs/${row.dataset.job}`;
+    if (row && !event.target.closest('a, input, .col-pick')) location.hash = `#/jobs/${row.dataset.job}`;
   });
+  refs.rows.addEventListener('change', (event) => {
+    if (event.target.name !== 'compare') return;
+    const id = Number(event.target.value);
+    if (event.target.checked) listView.selected.add(id);
+    else listView.selected.delete(id);
+    renderCompare();
+  });
+  refs.compare.addEventListener('click', () => {
+    location.hash = `#/compare?ids=${[...listView.selected].sort((a, b) => a - b).join(',')}`;
+  });
+  refs['compare-clear'].addEventListener('click', () => {
+    listView.selected.clear();
+    for (const box of refs.rows.querySelectorAll('input[name="compare"]')) box.checked = false;
+    renderCompare();
+  });
+
+  /** The Compare button: enabled for 2 to MAX_COMPARED selected jobs (kept across pages). */
+  function renderCompare() {
+    const n = listView.selected.size;
+    refs.compare.disabled = n < 2 || n > MAX_COMPARED;
+    refs.compare.textContent = `Compare${n ? ` (${n})` : ''}`;
+    refs['compare-clear'].hidden = n === 0;
+    refs['compare-hint'].textContent = n > MAX_COMPARED ? `At most ${MAX_COMPARED} jobs at once.`
+      : n < 2 ? 'Tick 2 to 8 jobs to compare their noise and weights.' : '';
+  }
+  renderCompare();
   setupSubmitForm(refs);
   load();
 
@@ -162,4 +198,20 @@ export function showList(app) {
     clearTimeout(pollTimer);
     for (const close of streams.values()) close();
   };
+}
+
+/** A whole number, powers of ten as 10ⁿ: 10⁷ light paths, 100 camera paths. */
+function formatSize(n) {
+  return Number.isInteger(Math.log10(n)) && n >= 1000 ? formatParameter(n) : formatCount(n);
+}
+
+/** The preset, and whether the job is a shard of a study, a merge, or a run of a sweep (linked). */
+function describeKind(job) {
+  const parts = [job.spec.preset];
+  if (job.spec.shard) parts.push(h('span', { class: 'kind', 'data-kind': 'shard' }, `shard ${job.spec.shard.index + 1}/${job.spec.shard.count}`));
+  if (job.merged) parts.push(h('span', { class: 'kind', 'data-kind': 'merged' }, 'merged'));
+  if (job.sweep_id !== null && job.sweep_id !== undefined) {
+    parts.push(h('a', { class: 'sweep-link', 'data-kind': 'sweep', href: `#/sweeps/${job.sweep_id}` }, `sweep ${job.sweep_id}`));
+  }
+  return parts.flatMap((p, i) => (i === 0 ? [p] : [' · ', p]));
 }

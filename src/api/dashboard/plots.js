@@ -1,10 +1,14 @@
-// Plots: the uPlot charts of a job's result (the fitted weights per cell, the RMS history per
-// strategy), and what every chart shares (the chart slot, the strategies' colours, the weights'
-// range). uPlot is the vendored library, loaded before this module as a classic script (a global).
+// Plots: the uPlot charts of a job's result — the recommended w₁ against r₃ (the paper's Fig. 2,
+// ± 1 SE bars, the r₃ = a marker), the luminance against iterations (± 1 SE bands, the quadrature
+// reference) and the RMS against iterations — and what every chart shares (the chart slot, the
+// strategies' colours, the weights' range). uPlot is the vendored library, loaded before this
+// module as a classic script (a global); the plugins are chartkit.js's.
 
 /* global uPlot */
 
-import { fixed, formatCount, formatParameter, formatRms, h, showMessage } from './format.js';
+import { bands, errorBars, extent, guides, linearRange } from './chartkit.js';
+import { fixed, formatCount, formatLuminance, formatParameter, formatRms, h, showMessage } from './format.js';
+import { luminanceStderr } from './paper.js';
 
 export const STRATEGIES = [
   'plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware',
@@ -17,10 +21,14 @@ export const STRATEGY_COLORS = {
 // in the hundreds, which would flatten every other cell to a line.
 export const WEIGHT_RANGE = [-1, 2];
 
-/** One uPlot chart in a container, rebuilt only when its series change; follows the page width. */
+/**
+ * One uPlot chart in a container, rebuilt only when its series change; follows the page width.
+ * `title` names it in its downloads; `bars`, `bands` and `guides` are its extras (chartkit.js).
+ */
 export class PlotSlot {
-  constructor(container) {
+  constructor(container, title = '') {
     this.container = container;
+    this.title = title;
     this.plot = null;
     this.signature = '';
     this.onResize = () => this.plot?.setSize(this.size());
@@ -55,106 +63,8 @@ export class PlotSlot {
   }
 }
 
-function formatInterval([lo, hi]) {
-  return hi === null ? `≥ ${formatParameter(lo)}` : `∈ [${formatParameter(lo)}, ${formatParameter(hi)})`;
-}
-
-/** Unique intervals of one coordinate of the cells, in order. */
-function intervals(cells, key) {
-  const seen = new Map();
-  for (const cell of cells) seen.set(cell[key][0], cell[key]);
-  return [...seen.values()].sort((a, b) => a[0] - b[0]);
-}
-
 // Cells whose weights the server copied from a neighbour because the data say nothing about them.
 export const UNFITTED = new Set(['empty', 'uninformative']);
-
-/**
- * The optimal w₁ and w₂ per (r₂ band, r₃ cell), the mean over the φ bins that were fitted (cells
- * without informative samples become gaps). x is the r₃ cell centre; the open tail cell [lo, ∞) is put
- * one previous-cell width past lo.
- */
-function weightSeries(weights) {
-  const r2Bands = intervals(weights, 'r2');
-  const r3Cells = intervals(weights, 'r3');
-  const x = r3Cells.map(([lo, hi], i) => {
-    if (hi !== null) return (lo + hi) / 2;
-    return i > 0 ? lo + (lo - r3Cells[i - 1][0]) : lo;
-  });
-  const bands = r2Bands.map((band) => {
-    const mean = (component) => r3Cells.map((cell) => {
-      const values = weights
-        .filter((w) => w.r2[0] === band[0] && w.r3[0] === cell[0] && !UNFITTED.has(w.status))
-        .map((w) => w[component]);
-      return values.length ? values.reduce((a, b) => a + b, 0) / values.length : null;
-    });
-    const w1 = mean('w1');
-    const lo = w1.map((w, i) => (w === null ? null : w - 2 * (spread(i) ?? NaN)));
-    const hi = w1.map((w, i) => (w === null ? null : w + 2 * (spread(i) ?? NaN)));
-    // The jackknife SE of w₁ (root mean square over the φ bins), for the ± 2σ lines.
-    function spread(i) {
-      const ses = weights
-        .filter((w) => w.r2[0] === band[0] && w.r3[0] === r3Cells[i][0] && !UNFITTED.has(w.status) && w.w1_stderr !== null)
-        .map((w) => w.w1_stderr);
-      return ses.length ? Math.sqrt(ses.reduce((a, b) => a + b * b, 0) / ses.length) : null;
-    }
-    const finite = (v) => (v === null || Number.isNaN(v) ? null : v);
-    return { band, w1, w2: mean('w2'), w1lo: lo.map(finite), w1hi: hi.map(finite) };
-  });
-  return { x, tail: r3Cells.at(-1), tailX: x.at(-1), bands };
-}
-
-const BAND_DASHES = [[], [8, 4], [2, 3], [12, 3, 2, 3]];
-const W1_COLORS = ['#1f5fa8', '#5b9bd5', '#9cc3e6', '#0b3d6b'];
-const W2_COLORS = ['#c4561d', '#f08c4a', '#f5b88d', '#7a3510'];
-
-export function drawWeights(slot, note, weights, phiBins, fit) {
-  if (weights.length === 0) {
-    slot.clear('No fitted weights in this result.');
-    showMessage(note, '');
-    return;
-  }
-  const { x, tail, tailX, bands } = weightSeries(weights);
-  const phi = phiBins > 1 ? ` · mean of ${phiBins} φ bins` : '';
-  const series = [{ label: `r₃${phi}`, value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
-  const data = [x];
-  bands.forEach(({ band, w1, w2, w1lo, w1hi }, i) => {
-    const dash = BAND_DASHES[i % BAND_DASHES.length];
-    const r2 = `r₂ ${formatInterval(band)}`;
-    series.push(weightLine(`w₁, ${r2}`, W1_COLORS[i % W1_COLORS.length], dash));
-    series.push(weightLine(`w₂, ${r2}`, W2_COLORS[i % W2_COLORS.length], dash));
-    data.push(w1, w2);
-    if (w1lo.some((v) => v !== null)) {
-      series.push(errorLine(`w₁ − 2 SE, ${r2}`, W1_COLORS[i % W1_COLORS.length]));
-      series.push(errorLine(`w₁ + 2 SE, ${r2}`, W1_COLORS[i % W1_COLORS.length]));
-      data.push(w1lo, w1hi);
-    }
-  });
-  const tailLabel = tail[1] === null ? `; tail r₃ ≥ ${formatParameter(tail[0])} drawn at ${formatParameter(tailX)}` : '';
-  slot.draw({
-    series,
-    scales: { x: { time: false }, y: { range: weightRange } },
-    axes: [{ label: `r₃ (cell centre${tailLabel})` }, { label: 'weight' }],
-    cursor: { drag: { x: true, y: false } },
-  }, data);
-  const clipped = data.slice(1).flat().filter((v) => v !== null && (v < WEIGHT_RANGE[0] || v > WEIGHT_RANGE[1])).length;
-  const which = fit
-    ? (fit.strategy === 'optimal'
-      ? `Weights fitted in-sample on all iterations at λ = ${formatParameter(fit.lambda)}. `
-      : `Recommended weights: ${fit.strategy}, λ = ${formatParameter(fit.lambda)} chosen by cross-validation, fitted on all iterations; thin lines: w₁ ± 2 jackknife standard errors. `)
-    : '';
-  const gaps = `${which}Gaps are cells without informative samples.`;
-  const cut = clipped ? ` ${clipped} value${clipped > 1 ? 's lie' : ' lies'} outside [${WEIGHT_RANGE.join(', ')}] and ${clipped > 1 ? 'are' : 'is'} cut off (usually cells with few samples).` : '';
-  showMessage(note, gaps + cut);
-}
-
-function errorLine(label, stroke) {
-  return { label, stroke, width: 1, dash: [3, 3], points: { show: false }, value: (u, v) => (v === null ? '—' : fixed(v, 3)) };
-}
-
-function weightLine(label, stroke, dash) {
-  return { label, stroke, dash, width: 2, points: { show: true, size: 4 }, value: (u, v) => (v === null ? '—' : fixed(v, 3)) };
-}
 
 /** Fits the data, but never beyond WEIGHT_RANGE, and always shows 0 and 1. */
 export function weightRange(u, min, max) {
@@ -162,6 +72,128 @@ export function weightRange(u, min, max) {
   const hi = Math.min(WEIGHT_RANGE[1], Math.max(max ?? 1, 1));
   const pad = 0.05 * (hi - lo);
   return [lo - pad, hi + pad];
+}
+
+/** An interval of a cell coordinate in words: `[0, 0.5)`, `[0.5, ∞)`. */
+export const formatInterval = ([lo, hi]) => `[${formatParameter(lo)}, ${hi === null ? '∞' : formatParameter(hi)})`;
+
+/** The lower edges of a coordinate's bins among `weights`, in order. */
+export const binsOf = (weights, key) => [...new Map(weights.map((w) => [w[key][0], w[key]])).values()].sort((a, b) => a[0] - b[0]);
+
+/**
+ * The paper's Fig. 2 from a result's `weights`: w₁ against the r₃ cell midpoint, one series per r₂
+ * bin, in the first φ bin (the paper finds the weights independent of φ); the open tail cell of r₃
+ * is left out, and cells whose weights were copied from a neighbour are gaps. `err` is the
+ * jackknife standard error of w₁.
+ */
+export function figure2(weights) {
+  const phi = binsOf(weights, 'phi')[0];
+  const cells = weights.filter((w) => w.phi[0] === phi[0] && w.r3[1] !== null);
+  const mid = (w) => (w.r3[0] + w.r3[1]) / 2;
+  const x = [...new Set(cells.map(mid))].sort((a, b) => a - b);
+  const series = binsOf(cells, 'r2').map((r2) => {
+    const at = new Map(cells.filter((w) => w.r2[0] === r2[0] && !UNFITTED.has(w.status)).map((w) => [mid(w), w]));
+    return { r2, y: x.map((v) => at.get(v)?.w1 ?? null), err: x.map((v) => at.get(v)?.w1_stderr ?? null) };
+  });
+  return { x, series, phi, phiBins: binsOf(weights, 'phi').length };
+}
+
+const R2_COLORS = ['#1f5fa8', '#c4561d', '#2ca02c', '#9467bd'];
+
+/** The value shown in a legend: w₁ ± its SE. */
+const withBar = (slot, k) => (u, v, si, i) => {
+  const e = slot.bars?.[k]?.err[i];
+  return v === null ? '—' : `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
+};
+
+/** The spot's radius a as a vertical guide (the switch strategy's r₃ ≤ a), when the light is a spot. */
+export function spotGuide(illumination, label = 'r₃ = a') {
+  return illumination.kind === 'spot' ? [{ value: illumination.a, label: `${label} = ${formatParameter(illumination.a)}` }] : [];
+}
+
+export function drawWeights(slot, note, weights, spec, fit) {
+  if (weights.length === 0) {
+    slot.clear('No fitted weights in this result.');
+    showMessage(note, '');
+    return;
+  }
+  const { x, series: bins, phi, phiBins } = figure2(weights);
+  slot.bars = bins.map((b, k) => ({ err: b.err, color: R2_COLORS[k % R2_COLORS.length] }));
+  slot.guides = { x: spotGuide(spec.scene.illumination), y: [] };
+  const series = [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
+  bins.forEach((b, k) => series.push({
+    label: `w₁, r₂ ∈ ${formatInterval(b.r2)}`, stroke: slot.bars[k].color, width: 2, dash: k ? [8, 4] : [],
+    points: { show: true, size: 5 }, value: withBar(slot, k),
+  }));
+  slot.draw({
+    series,
+    scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
+    axes: [{ label: `r₃ (cell midpoint)${phiBins > 1 ? `, φ ∈ ${formatInterval(phi.map((v) => Number(v.toFixed(3))))}` : ''}` }, { label: 'w₁' }],
+    cursor: { drag: { x: true, y: false } },
+    plugins: [errorBars(slot), guides(slot)],
+  }, [x, ...bins.map((b) => b.y)]);
+  const clipped = bins.flatMap((b) => b.y).filter((v) => v !== null && (v < WEIGHT_RANGE[0] || v > WEIGHT_RANGE[1])).length;
+  const w0 = spec.solver.fixed?.w0;
+  const parts = [fit
+    ? (fit.strategy === 'optimal'
+      ? `Weights fitted in-sample on all iterations at λ = ${formatParameter(fit.lambda)} (the cross-validated fit failed).`
+      : `Recommended weights: ${fit.strategy}, λ = ${formatParameter(fit.lambda)} chosen by cross-validation, fitted on all iterations.`)
+    : '',
+  'Bars: ± 1 jackknife standard error of w₁.',
+  w0 === 0 ? 'w₂ = 1 − w₁ (w₀ = 0 is fixed), so it is not drawn.' : 'w₂ = 1 − w₀ − w₁; w₀ and w₂ are in the weights CSV.',
+  `The open tail cell r₃ ≥ ${formatParameter(x.length ? binsOf(weights, 'r3').at(-1)[0] : 0)} is left out; gaps are cells without informative samples.`];
+  if (phiBins > 1) parts.push(`First of ${phiBins} φ bins.`);
+  if (slot.guides.x.length) parts.push('Dashed line: the spot radius a, where the switch strategy changes plane.');
+  if (clipped) parts.push(`${clipped} value${clipped > 1 ? 's lie' : ' lies'} outside [${WEIGHT_RANGE.join(', ')}] and ${clipped > 1 ? 'are' : 'is'} cut off.`);
+  showMessage(note, parts.filter(Boolean).join(' '));
+}
+
+// Shown at first on the luminance chart (the others are a click on the legend away): the paper's
+// fixed cases and the recommended fit; the in-sample optimum is optimistic, the heuristics crowd it.
+const LUMINANCE_SHOWN = new Set(['plane1', 'plane2', 'plane3', 'switch', 'optimal_cv']);
+
+/**
+ * The luminance of every strategy against iterations (× 10⁵, as the table), each with a band of
+ * ± 1 SE, SE(L) = L · (RMS/100) / √M, and the quadrature reference as a horizontal line.
+ */
+export function drawLuminance(slot, note, points, reference) {
+  if (points.length === 0) {
+    slot.clear('No checkpoints yet.');
+    showMessage(note, '');
+    return;
+  }
+  const x = points.map((p) => p.iterations);
+  const series = [{ label: 'iterations', value: (u, v) => (v === null ? '—' : formatCount(v)) }];
+  const data = [x];
+  slot.bands = [];
+  for (const strategy of STRATEGIES) {
+    const rows = points.map((p) => p.strategies.find((s) => s.strategy === strategy) ?? null);
+    const y = rows.map((r) => (r && Number.isFinite(r.luminance) ? r.luminance * 1e5 : null));
+    const se = rows.map((r, i) => (y[i] === null ? null : luminanceStderr(r.luminance, r.rms_percent, points[i].iterations)));
+    data.push(y);
+    slot.bands.push({
+      lo: y.map((v, i) => (v === null || se[i] === null ? null : v - se[i] * 1e5)),
+      hi: y.map((v, i) => (v === null || se[i] === null ? null : v + se[i] * 1e5)),
+      color: STRATEGY_COLORS[strategy],
+    });
+    const k = slot.bands.length - 1;
+    series.push({
+      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: STRATEGY_COLORS[strategy], width: 2,
+      show: LUMINANCE_SHOWN.has(strategy), points: { show: points.length < 40, size: 4 },
+      value: (u, v, si, i) => {
+        const band = slot.bands[k];
+        return v === null ? '—' : `${fixed(v, 2)}${band?.hi[i] === null ? '' : ` ± ${fixed(band.hi[i] - v, 2)}`}`;
+      },
+    });
+  }
+  slot.guides = { x: [], y: reference === null ? [] : [{ value: reference * 1e5, label: `reference (quadrature) ${formatLuminance(reference)}` }] };
+  slot.draw({
+    series,
+    scales: { x: { time: false }, y: { range: (u) => linearRange(extent(u, slot, false)) } },
+    axes: [{ label: 'iterations M' }, { label: 'L·10⁵ (± 1 SE band)', size: 60 }],
+    plugins: [bands(slot), guides(slot)],
+  }, data);
+  showMessage(note, `Bands: ± 1 standard error, L · (RMS/100) / √M at each checkpoint. Dashed: the quadrature reference${reference === null ? ' (none for this scene)' : ''}. Click a legend entry to show or hide a strategy; the in-sample optimum is optimistic.${points.length === 1 ? ' One checkpoint so far: lines appear from the second on.' : ''}`);
 }
 
 export function drawHistory(slot, note, points) {

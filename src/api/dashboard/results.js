@@ -1,17 +1,35 @@
-// Results of a job: fetching its result and history as checkpoints arrive, the noise table, and
-// the plots drawn from them (plots.js).
+// Results of a job: fetching its result and history as checkpoints arrive, and showing them — the
+// noise table (noisetable.js), the charts (plots.js) — with the CSV downloads of the noise table,
+// the weights and the history, and the SVG/PNG downloads of the charts (chartfiles.js).
 
 import { TERMINAL, api } from './api.js';
-import { fixed, formatCount, formatLuminance, formatParameter, formatRms, h, showMessage, withError } from './format.js';
-import { drawHistory, drawWeights } from './plots.js';
+import { chartDownloads } from './chartfiles.js';
+import { csvButton } from './csv.js';
+import { fixed, formatCount, formatLuminance, h, showMessage, withError } from './format.js';
+import { noiseCsv, noiseRows, paperNote } from './noisetable.js';
+import { luminanceStderr } from './paper.js';
+import { drawHistory, drawLuminance, drawWeights } from './plots.js';
 
 /**
  * Fetches the result and history whenever a new checkpoint is written or the job ends, one fetch
- * at a time (a change during a fetch triggers one more).
+ * at a time (a change during a fetch triggers one more). `plots`: the PlotSlots of the weights,
+ * luminance and history charts.
  */
 export class ResultsLoader {
-  constructor(id, refs, weightsPlot, historyPlot) {
-    Object.assign(this, { id, refs, weightsPlot, historyPlot, shownKey: null, busy: false, again: false, stopped: false });
+  constructor(id, refs, plots) {
+    Object.assign(this, { id, refs, plots, shownKey: null, busy: false, again: false, stopped: false, result: null, history: null });
+    this.addDownloads();
+  }
+
+  addDownloads() {
+    const { refs, plots, id } = this;
+    refs['noise-downloads'].append(
+      csvButton('Noise table (CSV)', `optimis-job-${id}-noise.csv`, () => noiseCsv(this.result, this.job.spec)),
+      csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.result)),
+      csvButton('History (CSV)', `optimis-job-${id}-history.csv`, () => historyCsv(this.history)));
+    refs['weights-downloads'].append(chartDownloads(plots.weights, `optimis-job-${id}-fig2-w1`));
+    refs['luminance-downloads'].append(chartDownloads(plots.luminance, `optimis-job-${id}-luminance`));
+    refs['history-downloads'].append(chartDownloads(plots.history, `optimis-job-${id}-rms-history`));
   }
 
   /** Leaves the page: answers still on their way are dropped. */
@@ -62,95 +80,70 @@ export class ResultsLoader {
     const refs = this.refs;
     showMessage(refs['no-results'], text);
     refs['noise-table'].hidden = true;
+    refs['noise-downloads'].hidden = true;
     refs['result-status'].replaceChildren();
     showMessage(refs.reference, '');
+    showMessage(refs['paper-note'], '');
     showMessage(refs['solve-error'], '');
     refs.gain.textContent = '';
     refs.warnings.hidden = true;
     refs.merges.textContent = '';
-    this.weightsPlot.clear('The weights appear after the first checkpoint.');
-    this.historyPlot.clear('The RMS history appears after the first checkpoint.');
+    this.plots.weights.clear('The weights appear after the first checkpoint.');
+    this.plots.luminance.clear('The luminance appears after the first checkpoint.');
+    this.plots.history.clear('The RMS history appears after the first checkpoint.');
   }
 
   show(result, history) {
+    this.result = result;
+    this.history = history;
     const refs = this.refs;
     showMessage(refs['no-results'], '');
     refs['noise-table'].hidden = false;
+    refs['noise-downloads'].hidden = false;
     refs['result-status'].replaceChildren(result.partial
       ? h('span', { class: 'badge badge-partial', title: 'The numbers change as the job runs' },
         `partial · ${formatCount(result.iterations)} iterations`)
       : h('span', { class: 'badge badge-final' }, `final · ${formatCount(result.iterations)} iterations`));
     showMessage(refs.reference, result.reference_luminance === null ? ''
-      : `Reference (quadrature): L·10⁵ = ${formatLuminance(result.reference_luminance)}`);
-    const best = this.job.progress.best?.strategy;
-    const recommended = result.recommended?.strategy;
-    refs['noise-rows'].replaceChildren(...result.noise_table.map((row) => noiseRow(row, this.job.spec, best, recommended, result.folds)));
+      : `Reference (quadrature): L·10⁵ = ${formatLuminance(result.reference_luminance)}; z = (L − L_ref) / SE(L).`);
+    const { rows, paper } = noiseRows(result, this.job);
+    for (const th of refs['noise-table'].querySelectorAll('thead .paper-col')) th.hidden = !paper;
+    refs['noise-rows'].replaceChildren(...rows);
+    showMessage(refs['paper-note'], paperNote(this.job.spec));
     showMessage(refs['solve-error'], result.solve_error ? `The weight fit failed: ${result.solve_error}` : '');
     refs.gain.textContent = describeGain(result.gain);
     refs.warnings.replaceChildren(...result.warnings.map((w) => h('li', { 'data-code': w.code },
       h('code', {}, w.code), ` ${w.message}`, w.cells?.length ? ` (cells ${w.cells.join(', ')})` : '')));
     refs.warnings.hidden = result.warnings.length === 0;
     refs.merges.textContent = describeMerges(result.merges_per_iteration);
-    drawWeights(this.weightsPlot, refs['weights-note'], result.weights, this.job.spec.cells.phi_bins, result.weights_fit);
-    drawHistory(this.historyPlot, refs['history-note'], history.points);
+    drawWeights(this.plots.weights, refs['weights-note'], result.weights, this.job.spec, result.weights_fit);
+    drawLuminance(this.plots.luminance, refs['luminance-note'], history.points, result.reference_luminance);
+    drawHistory(this.plots.history, refs['history-note'], history.points);
   }
 }
 
-function noiseRow(row, spec, best, recommended, folds) {
-  const numbers = row.error
-    ? [h('td', { class: 'row-error', colspan: 2 }, row.error)]
-    : [
-      h('td', { class: 'num' }, withError(row.luminance, row.luminance_stderr, formatLuminance)),
-      h('td', { class: 'num' }, withError(row.rms_percent, row.rms_percent_stderr, formatRms)),
-    ];
-  return h('tr', { 'data-strategy': row.strategy, class: row.strategy === best ? 'best' : null },
-    h('th', { scope: 'row' }, h('code', {}, row.strategy),
-      row.strategy === best ? h('span', { class: 'best-mark', title: "Lowest honest RMS among the rows that keep the solver's fixed weights (in-sample fits are left out)" }, 'best') : null,
-      row.strategy === recommended ? h('span', { class: 'recommended-mark', title: 'The weights table and chart show these weights' }, 'recommended') : null,
-      row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)' }, 'in-sample') : null,
-      row.respects_fixed === false ? h('span', { class: 'outside-mark', title: "Does not keep the solver's fixed weights: shown for comparison, never best" }, 'outside fixed weights') : null),
-    h('td', {}, describeWeights(row, spec, folds)),
-    ...numbers);
+/** Every cell's weights as CSV rows (an open interval's upper edge empty). */
+function weightsCsv(result) {
+  const columns = ['r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2', 'w0_stderr', 'w1_stderr', 'w2_stderr', 'samples', 'status'];
+  const rows = result.weights.map((w) => ({
+    r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
+    w0: w.w0, w1: w.w1, w2: w.w2, w0_stderr: w.w0_stderr, w1_stderr: w.w1_stderr, w2_stderr: w.w2_stderr,
+    samples: w.samples, status: w.status,
+  }));
+  return { columns, rows };
 }
 
-/** The weights of each strategy in words, as in the paper's Table 1. */
-function describeWeights(row, spec, folds) {
-  switch (row.strategy) {
-    case 'plane1': return 'w₀ = 1';
-    case 'plane2': return 'w₁ = 1';
-    case 'plane3': return 'w₂ = 1';
-    case 'switch': return describeSwitch(spec.scene.illumination);
-    case 'optimal': return `fitted and scored on all iterations (${describeSolver(spec.solver)})`;
-    case 'optimal_holdout': return `fitted, ${folds}-fold cross-fitted (${describeSolver(spec.solver)})`;
-    case 'optimal_cv': return describeCrossValidation(row, folds);
-    case 'balance': return 'balance heuristic';
-    case 'power': return 'power heuristic';
-    case 'correlation_aware': return 'correlation-aware heuristic';
-    default: return '';
-  }
-}
-
-/** Mirrors the server's switch radius: the spot's a, the innermost ring, none for uniform light. */
-function describeSwitch(ill) {
-  const a = ill.kind === 'spot' ? ill.a : ill.kind === 'rings' ? ill.rings[0].outer_radius : null;
-  return a === null ? 'w₂ = 1 (no bright core to switch on)' : `w₁ = 1 if r₃ ≤ a, else w₂ = 1 (a = ${formatParameter(a)})`;
-}
-
-function describeSolver(solver) {
-  const names = { w0: 'w₀', w1: 'w₁', w2: 'w₂' };
-  const fixedWeights = Object.keys(names)
-    .filter((w) => solver.fixed[w] !== undefined && solver.fixed[w] !== null)
-    .map((w) => `${names[w]} = ${formatParameter(solver.fixed[w])}`);
-  const parts = fixedWeights.length > 0 ? fixedWeights : ['all weights free'];
-  if (solver.lambda > 0) parts.push(`λ = ${formatParameter(solver.lambda)}`);
-  return parts.join(', ');
-}
-
-function describeCrossValidation(row, folds) {
-  const parts = [];
-  if (row.lambda !== null) parts.push(`λ = ${formatParameter(row.lambda)}`);
-  if (row.in_sample_rms_percent !== null) parts.push(`in-sample RMS ${formatRms(row.in_sample_rms_percent)} %`);
-  return `fitted, λ by cross-validation, ${folds}-fold cross-fitted${parts.length ? ` (${parts.join('; ')})` : ''}`;
+/** The history, one row per checkpoint and strategy, with SE(L) = L · (RMS/100) / √M. */
+function historyCsv(history) {
+  const columns = ['iterations', 'strategy', 'luminance_model_units', 'luminance_stderr_model_units', 'rms_percent'];
+  const rows = history.points.flatMap((p) => p.strategies.map((s) => ({
+    iterations: p.iterations,
+    strategy: s.strategy,
+    luminance_model_units: s.luminance,
+    luminance_stderr_model_units: luminanceStderr(s.luminance, s.rms_percent, p.iterations),
+    rms_percent: s.rms_percent,
+  })));
+  return { columns, rows };
 }
 
 function describeGain(gain) {

@@ -1,11 +1,12 @@
 // The sweep page: one sweep, polled while it runs — its progress (runs by state, iterations), its
 // specification, the table of its points with their jobs, the CSV download, cancel, and the charts
-// (sweepplots.js).
+// (sweepplots.js) with their SVG/PNG downloads.
 
 import { TERMINAL, api, download, hasToken } from './api.js';
 import {
   badge, formatCount, formatRms, formatTime, h, instantiate, showMessage, updateProgress, withError,
 } from './format.js';
+import { chartDownloads } from './chartfiles.js';
 import { PlotSlot } from './plots.js';
 import { describeValue } from './sweepdata.js';
 import { RmsChart, drawW1 } from './sweepplots.js';
@@ -21,7 +22,8 @@ export function showSweep(app, id) {
   const csv = `/v1/sweeps/${id}/table?format=csv`;
   refs.csv.href = csv;
   refs.csv.download = `sweep-${id}.csv`;
-  const w1Plot = new PlotSlot(refs['w1-plot']);
+  const w1Plot = new PlotSlot(refs['w1-plot'], `Sweep ${id}: recommended w₁ against r₃`);
+  refs['w1-plot'].parentElement.append(chartDownloads(w1Plot, `optimis-sweep-${id}-w1`));
   let charts = null; // one RmsChart per swept field, made with the first answer
   let rows = null; // point index → its <tr>
   let timer = null;

@@ -1,79 +1,18 @@
 // The sweep page's charts: per swept field, the RMS of every strategy against the field's value
 // (with a selector per other axis of a grid), and the recommended w₁ against r₃ of every point,
-// both with error bars (± 1 standard error) drawn by a small uPlot plugin. The numbers come from
-// sweepdata.js.
+// both with error bars (± 1 standard error; chartkit.js) and SVG/PNG downloads (chartfiles.js).
+// The numbers come from sweepdata.js.
 
 /* global uPlot */
 
+import { errorBars, extent, logRange } from './chartkit.js';
+import { chartDownloads } from './chartfiles.js';
 import { fixed, formatParameter, formatRms, h, showMessage } from './format.js';
 import { PlotSlot, STRATEGY_COLORS, weightRange } from './plots.js';
 import { describeValue, hasSelectors, rmsAgainst, w1AgainstR3 } from './sweepdata.js';
 
 const POINT_COLORS = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
 const POINT_DASHES = [[], [6, 4], [2, 3], [12, 3, 2, 3]];
-
-/**
- * Draws a vertical bar of ± err around every value of the series in `slot.bars` (by series, with
- * its colour), clipped to the plot; on a log scale a bar reaching zero runs to the bottom edge.
- * Writes how many bars it drew to the container's `data-error-bars` (the browser test reads it).
- */
-function errorBars(slot) {
-  const draw = (u) => {
-    const { ctx } = u;
-    const { left, top, width, height } = u.bbox;
-    const log = u.scales.y.distr === 3;
-    const cap = 3 * devicePixelRatio;
-    let drawn = 0;
-    ctx.save();
-    ctx.beginPath();
-    ctx.rect(left, top, width, height);
-    ctx.clip();
-    ctx.lineWidth = devicePixelRatio;
-    ctx.setLineDash([]);
-    slot.bars.forEach(({ err, color }, s) => {
-      if (!u.series[s + 1]?.show) return;
-      ctx.strokeStyle = color;
-      ctx.beginPath();
-      err.forEach((e, i) => {
-        const y = u.data[s + 1][i];
-        if (y === null || e === null || !(e > 0)) return;
-        const x = u.valToPos(u.data[0][i], 'x', true);
-        const hi = u.valToPos(y + e, 'y', true);
-        const floor = log && y - e <= 0;
-        const lo = floor ? top + height : u.valToPos(y - e, 'y', true);
-        ctx.moveTo(x, lo);
-        ctx.lineTo(x, hi);
-        ctx.moveTo(x - cap, hi);
-        ctx.lineTo(x + cap, hi);
-        if (!floor) {
-          ctx.moveTo(x - cap, lo);
-          ctx.lineTo(x + cap, lo);
-        }
-        drawn += 1;
-      });
-      ctx.stroke();
-    });
-    ctx.restore();
-    slot.container.dataset.errorBars = drawn;
-  };
-  return { hooks: { draw: [draw] } };
-}
-
-/** The lowest and highest value ± its error over the data of `slot`'s bars (lows ≤ 0 skipped when `log`). */
-function extent(u, slot, log) {
-  let lo = Infinity;
-  let hi = -Infinity;
-  u.data.slice(1).forEach((ys, s) => ys.forEach((y, i) => {
-    if (y === null || y === undefined) return;
-    const e = slot.bars[s]?.err[i] ?? 0;
-    lo = Math.min(lo, log && y - e <= 0 ? y : y - e);
-    hi = Math.max(hi, y + e);
-  }));
-  return Number.isFinite(lo) ? [lo, hi] : null;
-}
-
-/** A log scale around [lo, hi] (1 % to 100 % when there is nothing to show). */
-const logRange = (e) => (e ? uPlot.rangeLog(e[0], e[1], 10, false) : [1, 100]);
 
 /** The x scale and axis of a field: its values (a log scale when they span a decade or more), or its values' indices named by `labels`. */
 function xAxisOf(data, field) {
@@ -114,6 +53,7 @@ function drawRms(slot, note, data, field, sweep) {
     return;
   }
   const { scale, axis } = xAxisOf(data, field);
+  slot.xLabels = data.numeric ? null : data.labels;
   const xValue = (u, v) => (v === null ? '—' : data.numeric ? formatParameter(v) : data.labels[v]);
   const series = [{ label: field, value: xValue }];
   slot.bars = data.series.map((s) => ({ err: s.err, color: STRATEGY_COLORS[s.strategy] ?? '#444' }));
@@ -159,7 +99,8 @@ export class RmsChart {
       h('h2', { id }, 'RMS error against ', h('code', {}, this.field)),
       selectors.some(Boolean) ? h('div', { class: 'chart-controls' }, selectors) : null,
       plot, this.note);
-    this.slot = new PlotSlot(plot);
+    this.slot = new PlotSlot(plot, `Sweep ${sweep.id}: RMS error against ${this.field}`);
+    this.card.append(chartDownloads(this.slot, `optimis-sweep-${sweep.id}-rms-${this.field.replace(/[^A-Za-z0-9_.-]/g, '_')}`));
   }
 
   selector(axis, b) {

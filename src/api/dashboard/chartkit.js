@@ -1,0 +1,194 @@
+// Chart kit: the uPlot plugins the charts share — error bars (± 1 standard error), shaded bands
+// around a line (± 1 SE), and guide lines (a vertical marker such as r₃ = a, a horizontal reference
+// such as the quadrature luminance) — and the y range that keeps all of them in view.
+//
+// A chart's extras live on its PlotSlot (plots.js), indexed like the y series, so that a redraw
+// with new data needs no new plugin and the chart files (chartfiles.js) can draw the same things:
+//   slot.bars   [{ err: [...], color }]       error bars of series s + 1
+//   slot.bands  [{ lo: [...], hi: [...], color }]  a shaded band under series s + 1
+//   slot.guides { x: [{ value, label }], y: [{ value, label }] }
+// Every plugin writes what it drew to the container's data attributes (the browser test reads
+// them): data-error-bars, data-bands, data-guides.
+
+/* global uPlot */
+
+/** A colour with transparency: '#1f77b4' → 'rgba(31, 119, 180, alpha)'. */
+export function withAlpha(color, alpha) {
+  const m = /^#([0-9a-f]{2})([0-9a-f]{2})([0-9a-f]{2})$/i.exec(color);
+  if (!m) return color;
+  return `rgba(${m.slice(1).map((c) => parseInt(c, 16)).join(', ')}, ${alpha})`;
+}
+
+/**
+ * Draws a vertical bar of ± err around every value of the series in `slot.bars` (by series, with
+ * its colour), clipped to the plot; on a log scale a bar reaching zero runs to the bottom edge.
+ */
+export function errorBars(slot) {
+  const draw = (u) => {
+    const { ctx } = u;
+    const { left, top, width, height } = u.bbox;
+    const log = u.scales.y.distr === 3;
+    const cap = 3 * devicePixelRatio;
+    let drawn = 0;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(left, top, width, height);
+    ctx.clip();
+    ctx.lineWidth = devicePixelRatio;
+    ctx.setLineDash([]);
+    (slot.bars ?? []).forEach(({ err, color }, s) => {
+      if (!u.series[s + 1]?.show) return;
+      ctx.strokeStyle = color;
+      ctx.beginPath();
+      err.forEach((e, i) => {
+        const y = u.data[s + 1][i];
+        if (y === null || e === null || !(e > 0)) return;
+        const x = u.valToPos(u.data[0][i], 'x', true);
+        const hi = u.valToPos(y + e, 'y', true);
+        const floor = log && y - e <= 0;
+        const lo = floor ? top + height : u.valToPos(y - e, 'y', true);
+        ctx.moveTo(x, lo);
+        ctx.lineTo(x, hi);
+        ctx.moveTo(x - cap, hi);
+        ctx.lineTo(x + cap, hi);
+        if (!floor) {
+          ctx.moveTo(x - cap, lo);
+          ctx.lineTo(x + cap, lo);
+        }
+        drawn += 1;
+      });
+      ctx.stroke();
+    });
+    ctx.restore();
+    slot.container.dataset.errorBars = drawn;
+  };
+  return { hooks: { draw: [draw] } };
+}
+
+/** Shades `slot.bands` (lo to hi, per shown series) under the lines: drawn after the axes, before the series. */
+export function bands(slot) {
+  const draw = (u) => {
+    const { ctx } = u;
+    const { left, top, width, height } = u.bbox;
+    let drawn = 0;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(left, top, width, height);
+    ctx.clip();
+    (slot.bands ?? []).forEach(({ lo, hi, color }, s) => {
+      if (!u.series[s + 1]?.show) return;
+      ctx.fillStyle = withAlpha(color, 0.14);
+      for (const run of runs(lo, hi)) {
+        ctx.beginPath();
+        run.forEach((i, k) => {
+          const x = u.valToPos(u.data[0][i], 'x', true);
+          const y = u.valToPos(hi[i], 'y', true);
+          if (k === 0) ctx.moveTo(x, y);
+          else ctx.lineTo(x, y);
+        });
+        for (const i of [...run].reverse()) ctx.lineTo(u.valToPos(u.data[0][i], 'x', true), u.valToPos(lo[i], 'y', true));
+        ctx.closePath();
+        ctx.fill();
+      }
+      drawn += 1;
+    });
+    ctx.restore();
+    slot.container.dataset.bands = drawn;
+  };
+  return { hooks: { drawAxes: [draw] } };
+}
+
+/** The index runs where both lo and hi are numbers (a band is broken at gaps). */
+export function runs(lo, hi) {
+  const out = [];
+  let run = [];
+  lo.forEach((l, i) => {
+    if (l === null || hi[i] === null || !Number.isFinite(l) || !Number.isFinite(hi[i])) {
+      if (run.length) out.push(run);
+      run = [];
+    } else {
+      run.push(i);
+    }
+  });
+  if (run.length) out.push(run);
+  return out;
+}
+
+/** Dashed guide lines with their labels: `slot.guides.x` vertical, `slot.guides.y` horizontal. */
+export function guides(slot) {
+  const draw = (u) => {
+    const { ctx } = u;
+    const { left, top, width, height } = u.bbox;
+    const drawn = [];
+    ctx.save();
+    ctx.lineWidth = 1.5 * devicePixelRatio;
+    ctx.setLineDash([6 * devicePixelRatio, 4 * devicePixelRatio]);
+    ctx.strokeStyle = '#333';
+    ctx.fillStyle = '#333';
+    ctx.font = `${12 * devicePixelRatio}px system-ui, sans-serif`;
+    ctx.textAlign = 'left';
+    ctx.textBaseline = 'alphabetic';
+    for (const [axis, list] of [['x', slot.guides?.x ?? []], ['y', slot.guides?.y ?? []]]) {
+      for (const { value, label } of list) {
+        const p = u.valToPos(value, axis, true);
+        const inside = axis === 'x' ? p >= left && p <= left + width : p >= top && p <= top + height;
+        if (!Number.isFinite(p) || !inside) continue;
+        ctx.beginPath();
+        if (axis === 'x') {
+          ctx.moveTo(p, top);
+          ctx.lineTo(p, top + height);
+        } else {
+          ctx.moveTo(left, p);
+          ctx.lineTo(left + width, p);
+        }
+        ctx.stroke();
+        if (axis === 'x') ctx.fillText(label, p + 4 * devicePixelRatio, top + 14 * devicePixelRatio);
+        else ctx.fillText(label, left + 6 * devicePixelRatio, p - 5 * devicePixelRatio);
+        drawn.push(`${axis}=${value}`);
+      }
+    }
+    ctx.restore();
+    slot.container.dataset.guides = drawn.join(' ');
+  };
+  return { hooks: { draw: [draw] } };
+}
+
+/**
+ * The lowest and highest value over the shown series of `u`, with their error bars and bands, and
+ * the horizontal guides (lows ≤ 0 skipped when `log`); null when there is nothing.
+ */
+export function extent(u, slot, log) {
+  let lo = Infinity;
+  let hi = -Infinity;
+  const take = (v) => {
+    if (v === null || v === undefined || !Number.isFinite(v) || (log && v <= 0)) return;
+    lo = Math.min(lo, v);
+    hi = Math.max(hi, v);
+  };
+  u.data.slice(1).forEach((ys, s) => {
+    if (u.series[s + 1] && !u.series[s + 1].show) return;
+    ys.forEach((y, i) => {
+      if (y === null || y === undefined) return;
+      const e = slot.bars?.[s]?.err[i] ?? 0;
+      take(log && y - e <= 0 ? y : y - e);
+      take(y + e);
+      const band = slot.bands?.[s];
+      if (band) {
+        take(band.lo[i]);
+        take(band.hi[i]);
+      }
+    });
+  });
+  for (const { value } of slot.guides?.y ?? []) take(value);
+  return Number.isFinite(lo) ? [lo, hi] : null;
+}
+
+/** A log scale around [lo, hi] (1 % to 100 % when there is nothing to show). */
+export const logRange = (e) => (e ? uPlot.rangeLog(e[0], e[1], 10, false) : [1, 100]);
+
+/** A linear scale around [lo, hi] with 5 % room on each side. */
+export function linearRange(e) {
+  if (!e) return [0, 1];
+  const pad = e[0] === e[1] ? Math.abs(e[0]) * 0.1 || 1 : 0.05 * (e[1] - e[0]);
+  return [e[0] - pad, e[1] + pad];
+}

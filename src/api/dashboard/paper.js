@@ -1,0 +1,51 @@
+// The paper: its Table 1, when a job runs the paper's configuration (so that its values apply),
+// and the z score of a luminance against the quadrature reference. No DOM here.
+//
+// Source: Ershov, Frolov, Voloboy, Galaktionov (2020), "Direct optimal MIS weights for
+// bidirectional photon mapping", section 5, Table 1 (10⁴ iterations, weights fitted and scored on
+// the same iterations, optimisation constrained to w₀ = 0); transcribed in /work/shared/model.md,
+// "Expected figures", and in examples/python/paper_table1.py.
+
+/** The paper's case number, L (model units) and RMS % of the strategies that have a counterpart here. */
+export const PAPER_TABLE1 = {
+  plane1: { case: 1, luminance: 26.484e-5, rms_percent: 208 },
+  plane2: { case: 2, luminance: 26.352e-5, rms_percent: 254 },
+  plane3: { case: 3, luminance: 25.997e-5, rms_percent: 146 },
+  switch: { case: 4, luminance: 26.352e-5, rms_percent: 61 },
+  optimal: { case: 5, luminance: 25.961e-5, rms_percent: 54 },
+};
+
+// The paper's configuration (the preset paper-table1): what the paper's values depend on.
+// Iterations, seed, engine, cells and λ are left free: the luminance and the per-iteration RMS do
+// not depend on them (the cells and λ only move the optimal row, and the paper's grid is the preset's).
+const PAPER = [
+  ['preset', (s) => s.preset, 'paper-table1'],
+  ['light_paths', (s) => s.light_paths, 1e7],
+  ['camera_paths', (s) => s.camera_paths, 100],
+  ['merge_radius', (s) => s.merge_radius, 0.003],
+  ['scene.l2', (s) => s.scene.l2, 1],
+  ['scene.l3', (s) => s.scene.l3, 3],
+  ['scene.beta_deg', (s) => s.scene.beta_deg, 3],
+  ['scene.illumination.kind', (s) => s.scene.illumination.kind, 'spot'],
+  ['scene.illumination.a', (s) => s.scene.illumination.a, 0.02],
+  ['scene.illumination.r_ls', (s) => s.scene.illumination.r_ls, 20],
+  ['scene.illumination.contrast', (s) => s.scene.illumination.contrast, (20 / 0.02) ** 2 / 300],
+  ['solver.fixed.w0', (s) => s.solver.fixed?.w0, 0],
+];
+
+const same = (a, b) => (typeof b === 'number' ? typeof a === 'number' && Math.abs(a - b) <= 1e-9 * Math.max(1, Math.abs(b)) : a === b);
+
+/** The fields in which `spec` differs from the paper's configuration (none: the paper's values apply). */
+export function paperMismatches(spec) {
+  return PAPER.filter(([, get, want]) => !same(get(spec), want)).map(([name]) => name);
+}
+
+/** z = (L − L_ref) / SE(L), or null when a number is missing. */
+export function zScore(luminance, stderr, reference) {
+  if (luminance === null || luminance === undefined || reference === null || reference === undefined || !(stderr > 0)) return null;
+  return (luminance - reference) / stderr;
+}
+
+/** SE(L) after `iterations` iterations from L and the per-iteration RMS %: L · (RMS/100) / √M. */
+export const luminanceStderr = (luminance, rmsPercent, iterations) =>
+  (luminance === null || rmsPercent === null || !(iterations > 0) ? null : Math.abs(luminance) * (rmsPercent / 100) / Math.sqrt(iterations));

@@ -1,0 +1,126 @@
+// The harness of the browser test: the server and output directory from the command line, checks
+// and their count, the page's problems (page errors, console errors, server errors) with the HTTP
+// errors a step provokes on purpose, calls to the API, waiting, screenshots, and reading a uPlot
+// chart. Shared by the scenario's modules (jobs.mjs, sweeps.mjs, research.mjs, dashboard.mjs).
+
+import path from 'node:path';
+
+export const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware'];
+// Cells whose weights the server copied from a neighbour: gaps in the weight charts, without a bar.
+export const UNFITTED = new Set(['empty', 'uninformative']);
+
+export const [base, outDir] = process.argv.slice(2);
+if (!base || !outDir) {
+  console.error('usage: node dashboard.mjs BASE_URL OUT_DIR');
+  process.exit(2);
+}
+
+export let passed = 0;
+export function check(condition, what) {
+  if (!condition) throw new Error(`check failed: ${what}`);
+  passed += 1;
+  console.log(`ok ${passed} - ${what}`);
+}
+
+// Page errors, console errors and server errors, reported by the next wait or check.
+const problems = [];
+// HTTP errors a step provokes on purpose: Chromium logs each failed request as a console error.
+export const allowedHttpErrors = [];
+// Until the token is entered, the page's API calls are expected to be refused with 401.
+let signedOut = Boolean(process.env.OPTIMIS_TOKEN);
+
+/** The token was accepted: from now on a 401 is a failure. */
+export function signedIn() {
+  signedOut = false;
+}
+
+export function watchPage(page) {
+  page.on('pageerror', (error) => problems.push(`uncaught exception in the page: ${error.stack || error}`));
+  page.on('console', (message) => {
+    if (message.type() !== 'error') return;
+    const status = /status of (\d{3})/.exec(message.text())?.[1];
+    const url = message.location().url;
+    if (signedOut && status === '401') return;
+    const allowed = allowedHttpErrors.findIndex((a) => String(a.status) === status && url === new URL(a.path, base).href);
+    if (allowed >= 0) allowedHttpErrors.splice(allowed, 1);
+    else problems.push(`console error: ${message.text()}${url ? ` (${url})` : ''}`);
+  });
+  page.on('response', (response) => {
+    if (response.status() >= 500) problems.push(`server error ${response.status()} for ${response.url()}`);
+  });
+}
+
+export function assertNoProblems() {
+  if (problems.length > 0) throw new Error(`the page reported problems:\n  ${problems.join('\n  ')}`);
+}
+
+export const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
+const authHeaders = () => (process.env.OPTIMIS_TOKEN ? { Authorization: `Bearer ${process.env.OPTIMIS_TOKEN}` } : {});
+
+/** Calls the server's API directly (not through the page): { status, body } with the body parsed if JSON. */
+export async function callApi(urlPath, { method = 'GET', body } = {}) {
+  const headers = { ...authHeaders(), ...(body === undefined ? {} : { 'Content-Type': 'application/json' }) };
+  const response = await fetch(new URL(urlPath, base), { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  const text = await response.text();
+  const json = (response.headers.get('content-type') || '').includes('json') ? JSON.parse(text) : null;
+  return { status: response.status, text, json };
+}
+
+/** Polls `probe` until it returns a truthy value, failing early on page problems. */
+export async function waitFor(what, probe, timeoutMs = 30_000) {
+  const deadline = Date.now() + timeoutMs;
+  for (;;) {
+    assertNoProblems();
+    const value = await probe();
+    if (value) return value;
+    if (Date.now() > deadline) throw new Error(`timed out after ${timeoutMs / 1000} s waiting for ${what}`);
+    await sleep(50);
+  }
+}
+
+export async function screenshot(page, name) {
+  const file = path.join(outDir, name);
+  await page.screenshot({ path: file, fullPage: true });
+  console.log(`   screenshot ${file}`);
+}
+
+/** "26.26 ± 0.75" → [26.26, 0.75]; "8.29" → [8.29, null]. */
+export function parseWithError(text) {
+  const numbers = text.replace(/,/g, '').split('±').map((part) => Number.parseFloat(part.trim()));
+  return [numbers[0], numbers.length > 1 ? numbers[1] : null];
+}
+
+/**
+ * What a uPlot chart in `container` shows: its canvas size and drawn pixels, the labels of its
+ * legend (the y series; the x series left out), and what the chart kit's plugins report drawing:
+ * error bars, SE bands, guide lines (`x=0.02 y=26.3`).
+ */
+export async function readPlot(container) {
+  return container.evaluate((el) => {
+    const canvas = el.querySelector('canvas');
+    if (!canvas) return null;
+    const { data } = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height);
+    let inked = 0;
+    for (let i = 3; i < data.length; i += 4) if (data[i] > 0) inked += 1;
+    return {
+      width: canvas.width, height: canvas.height, inked,
+      labels: [...el.querySelectorAll('.u-legend .u-series .u-label')].slice(1).map((l) => l.textContent.trim()),
+      errorBars: el.dataset.errorBars === undefined ? null : Number(el.dataset.errorBars),
+      bands: el.dataset.bands === undefined ? null : Number(el.dataset.bands),
+      guides: el.dataset.guides ?? null,
+    };
+  });
+}
+
+/** The canvas of a uPlot chart has a size, has been drawn on, and its legend names the series. */
+export async function checkPlot(page, ref, what, expectedLabels) {
+  const plot = await readPlot(page.locator(`[data-ref="${ref}"]`));
+  check(plot !== null, `the ${what} plot has a canvas`);
+  check(plot.width > 0 && plot.height > 0 && plot.inked > 1000,
+    `the ${what} plot is ${plot.width}×${plot.height} px with ${plot.inked} drawn pixels`);
+  for (const label of expectedLabels) {
+    check(plot.labels.some((l) => l.startsWith(label)), `the ${what} legend names "${label}"`);
+  }
+}
+

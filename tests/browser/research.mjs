@@ -1,0 +1,251 @@
+// The research steps of the browser test: a job in the paper's configuration and one under uniform
+// light, submitted through the API (2000 iterations of the restricted engine: about a second each);
+// the spot job's page — Table 1 with the paper's column, case numbers and z against the reference,
+// Fig. 2 from the recommended weights with ± 1 SE bars and the r₃ = a marker, the luminance chart
+// with SE bands and the reference line —, its downloads (CSV, SVG, PNG, moments), and the compare
+// page of the two jobs, reached from the list's checkboxes.
+//
+// With OPTIMIS_SCREENSHOT_DIR set, also writes the README's dashboard-job.png and dashboard-compare.png there.
+
+import { readFile } from 'node:fs/promises';
+import path from 'node:path';
+
+import { STRATEGIES, UNFITTED, callApi, check, parseWithError, readPlot, screenshot, sleep, waitFor } from './harness.mjs';
+
+const SPOT_JOB = { preset: 'paper-table1', iterations: 2000 };
+const UNIFORM_JOB = { preset: 'uniform-illumination', iterations: 2000 };
+// The paper's Table 1 (Ershov et al. 2020): case, L·10⁵ and RMS % as the page prints them.
+const PAPER = {
+  plane1: ['1', '26.484', '208'], plane2: ['2', '26.352', '254'], plane3: ['3', '25.997', '146'],
+  switch: ['4', '26.352', '61'], optimal: ['5', '25.961', '54'],
+};
+const PNG_SIGNATURE = Buffer.from([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a]);
+const DOC_SCREENSHOT_LIMIT = 400_000;
+
+/** Submits the spot and the uniform job through the API and waits until both have succeeded. */
+export async function submitPaperPair() {
+  const ids = [];
+  for (const body of [SPOT_JOB, UNIFORM_JOB]) {
+    const response = await callApi('/v1/jobs', { method: 'POST', body });
+    if (response.status !== 202) throw new Error(`submitting ${JSON.stringify(body)} answered ${response.status}`);
+    ids.push(response.json.id);
+  }
+  await waitFor('the spot and the uniform job to succeed', async () => {
+    const states = await Promise.all(ids.map(async (id) => (await callApi(`/v1/jobs/${id}`)).json.state));
+    if (states.some((s) => s === 'failed' || s === 'cancelled')) throw new Error(`a paper job ended ${states}`);
+    return states.every((s) => s === 'succeeded');
+  }, 120_000);
+  check(true, `a paper-table1 job (#${ids[0]}) and a uniform-illumination job (#${ids[1]}) of 2000 iterations succeed`);
+  return { spot: ids[0], uniform: ids[1] };
+}
+
+/** "−1.56 †" → -1.56 */
+const parseZ = (text) => Number.parseFloat(text.replace('−', '-').replace('+', ''));
+
+/** The bars Fig. 2 draws for `weights` in r₂ bins `r2s` (lower edges): first φ bin, tail left out, fitted, SE > 0. */
+function expectedBars(weights, r2s) {
+  const phi = Math.min(...weights.map((w) => w.phi[0]));
+  return weights.filter((w) => r2s.includes(w.r2[0]) && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status) && w.w1_stderr > 0).length;
+}
+
+/**
+ * Saves a screenshot for the README when OPTIMIS_SCREENSHOT_DIR is set: the page from the top of
+ * `from` (or of the page) to the bottom of the card holding `until`.
+ */
+async function docScreenshot(page, name, from, until) {
+  const dir = process.env.OPTIMIS_SCREENSHOT_DIR;
+  if (!dir) return;
+  const [top, bottom] = await page.evaluate(([a, b]) => [
+    a ? document.querySelector(a).getBoundingClientRect().top + window.scrollY - 12 : 0,
+    document.querySelector(b).closest('.card').getBoundingClientRect().bottom + window.scrollY + 12,
+  ], [from, until]);
+  const file = path.join(dir, name);
+  await page.screenshot({ path: file, fullPage: true, clip: { x: 0, y: Math.max(0, Math.floor(top)), width: page.viewportSize().width, height: Math.ceil(bottom - top) } });
+  const size = (await readFile(file)).length;
+  check(size < DOC_SCREENSHOT_LIMIT, `${file} is ${Math.round(size / 1000)} KB (under ${DOC_SCREENSHOT_LIMIT / 1000} KB)`);
+}
+
+/** Clicks `button` and returns the download: its suggested name and its bytes. */
+async function downloadFrom(page, button) {
+  const [download] = await Promise.all([page.waitForEvent('download'), button.click()]);
+  return { name: download.suggestedFilename(), bytes: await readFile(await download.path()) };
+}
+
+/** A CSV text as rows of fields (RFC 4180: CRLF lines, quoted fields with doubled quotes). */
+function parseCsv(text) {
+  const rows = [];
+  let row = [];
+  let field = '';
+  let quoted = false;
+  for (let i = 0; i < text.length; i += 1) {
+    const c = text[i];
+    if (quoted) {
+      if (c === '"' && text[i + 1] === '"') { field += '"'; i += 1; } else if (c === '"') quoted = false; else field += c;
+    } else if (c === '"') quoted = true;
+    else if (c === ',') { row.push(field); field = ''; } else if (c === '\r' && text[i + 1] === '\n') {
+      row.push(field); rows.push(row); row = []; field = ''; i += 1;
+    } else field += c;
+  }
+  return rows;
+}
+
+/** The spot job's page: Table 1 with the paper's column, Fig. 2 and the luminance chart. */
+export async function checkPaperJob(page, id) {
+  await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
+  await waitFor('the paper job\'s final results', async () =>
+    (await page.locator('[data-ref="result-status"]').textContent()).startsWith('final')
+    && (await page.locator('[data-ref="weights-plot"] canvas').count()) > 0);
+  const result = (await callApi(`/v1/jobs/${id}/result`)).json;
+  check(await page.locator('table.noise-table thead th.paper-col:visible').count() === 2,
+    'the paper configuration shows the columns "Paper L·10⁵" and "Paper RMS %"');
+  const rows = await page.locator('table.noise-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
+    strategy: tr.dataset.strategy,
+    cells: Object.fromEntries([...tr.querySelectorAll('td[data-col]')].map((td) => [td.dataset.col, td.textContent.trim()])),
+    optimistic: tr.querySelector('td[data-col="z"]')?.classList.contains('optimistic') ?? false,
+  })));
+  for (const row of rows) {
+    const [kase, luminance, rms] = PAPER[row.strategy] ?? ['', '', ''];
+    check(row.cells.case === kase && row.cells['paper-luminance'] === luminance && row.cells['paper-rms'] === rms,
+      `${row.strategy}: paper case "${row.cells.case}", L·10⁵ "${row.cells['paper-luminance']}", RMS "${row.cells['paper-rms']}"`);
+  }
+  const zs = rows.map((row) => {
+    const api = result.noise_table.find((r) => r.strategy === row.strategy);
+    const z = (api.luminance - result.reference_luminance) / api.luminance_stderr;
+    return { row, z, shown: parseZ(row.cells.z), api };
+  });
+  check(zs.every(({ z, shown }) => Math.abs(z - shown) < 0.006),
+    `every row's z = (L − L_ref)/SE(L) matches the API's numbers (${zs.map((r) => r.row.cells.z).join(', ')})`);
+  check(zs.every(({ row, api }) => row.optimistic === api.in_sample && row.cells.z.endsWith('†') === api.in_sample),
+    'only the in-sample row\'s z is marked optimistic (†)');
+  const note = await page.locator('[data-ref="paper-note"]').textContent();
+  check(note.includes('Ershov et al. 2020, Table 1'), `the paper's column cites its source ("${note.slice(0, 50)}…")`);
+
+  const fig2 = await readPlot(page.locator('[data-ref="weights-plot"]'));
+  check(JSON.stringify(fig2.labels) === JSON.stringify(['w₁, r₂ ∈ [0, 0.5)', 'w₁, r₂ ∈ [0.5, ∞)']),
+    `Fig. 2 has one w₁ series per r₂ bin and nothing redundant (${fig2.labels.join(' | ')})`);
+  const bars = expectedBars(result.weights, [0, 0.5]);
+  check(fig2.errorBars === bars && bars > 20, `Fig. 2 draws ${fig2.errorBars} error bars: ± 1 SE of the recommended (${result.weights_fit.strategy}) w₁, tail cell left out`);
+  check(fig2.guides === 'x=0.02', `Fig. 2 marks r₃ = a = 0.02 (${fig2.guides})`);
+
+  const lum = await readPlot(page.locator('[data-ref="luminance-plot"]'));
+  check(lum.inked > 1000 && STRATEGIES.every((s) => lum.labels.some((l) => l.startsWith(s))),
+    `the luminance chart has a series per strategy (${lum.inked} pixels)`);
+  check(lum.bands === 5, `it shades ± 1 SE bands under the ${lum.bands} series shown at first`);
+  check(lum.guides === `y=${result.reference_luminance * 1e5}`, `it draws the quadrature reference as a horizontal line (${lum.guides})`);
+  await screenshot(page, 'paper-job.png');
+  await docScreenshot(page, 'dashboard-job.png', '[aria-labelledby="noise-heading"]', '[data-ref="weights-plot"]');
+  return result;
+}
+
+/** The spot job's downloads: the noise table and history as CSV, Fig. 2 as SVG, a chart as PNG, the moments. */
+export async function checkDownloads(page, id, result) {
+  const quoting = await page.evaluate(async () => (await import('/assets/csv.js')).toCsv(['a', 'b'], [{ a: 'x,"y"', b: 'line\nbreak' }, { a: 1.5, b: null }]));
+  check(quoting === 'a,b\r\n"x,""y""","line\nbreak"\r\n1.5,\r\n', 'the CSV writer quotes as RFC 4180 says');
+
+  const csv = await downloadFrom(page, page.getByRole('button', { name: 'Noise table (CSV)' }));
+  const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
+  const col = (name) => header.indexOf(name);
+  check(csv.name === `optimis-job-${id}-noise.csv` && header.includes('luminance_model_units') && header.includes('rms_percent')
+    && header.includes('z_vs_reference') && header.includes('paper_rms_percent') && rows.length === result.noise_table.length,
+    `"Noise table (CSV)" saves ${csv.name}: ${rows.length} rows under ${header.length} named columns`);
+  check(rows.every((r, i) => Number(r[col('luminance_model_units')]) === result.noise_table[i].luminance
+    && Number(r[col('rms_percent')]) === result.noise_table[i].rms_percent && r[col('strategy')] === result.noise_table[i].strategy),
+  'its luminance (model units) and RMS (percent) are the API\'s numbers, in full');
+  const plane1 = rows.find((r) => r[col('strategy')] === 'plane1');
+  check(plane1[col('paper_case')] === '1' && Number(plane1[col('paper_luminance_model_units')]) === 26.484e-5 && plane1[col('paper_rms_percent')] === '208',
+    'it carries the paper\'s case and values');
+
+  const history = (await callApi(`/v1/jobs/${id}/history`)).json;
+  const historyCsv = await downloadFrom(page, page.getByRole('button', { name: 'History (CSV)' }));
+  const historyRows = parseCsv(historyCsv.bytes.toString('utf8'));
+  check(historyRows[0].join() === 'iterations,strategy,luminance_model_units,luminance_stderr_model_units,rms_percent'
+    && historyRows.length === 1 + history.points.reduce((n, p) => n + p.strategies.length, 0),
+  `"History (CSV)" saves one row per checkpoint and strategy (${historyRows.length - 1})`);
+
+  const svg = await downloadFrom(page, page.locator('[data-ref="weights-downloads"] button[data-download="svg"]'));
+  const text = svg.bytes.toString('utf8');
+  const count = (needle) => text.split(needle).length - 1;
+  check(svg.name === `optimis-job-${id}-fig2-w1.svg` && text.startsWith('<svg xmlns="http://www.w3.org/2000/svg"'),
+    `Fig. 2's "SVG" saves ${svg.name}, an SVG document`);
+  const bars = expectedBars(result.weights, [0, 0.5]);
+  check(count('class="series"') === 2 && count('class="error-bar"') === bars && count('class="guide" data-axis="x" data-value="0.02"') === 1
+    && text.includes('w₁, r₂ ∈ [0.5, ∞)') && text.includes('<title>Job'),
+  `the SVG draws the 2 series as paths, their ${bars} error bars, the r₃ = a marker and a legend`);
+  const wellFormed = await page.evaluate((doc) => {
+    const parsed = new DOMParser().parseFromString(doc, 'image/svg+xml');
+    return parsed.documentElement.nodeName === 'svg' && parsed.getElementsByTagName('parsererror').length === 0;
+  }, text);
+  check(wellFormed, 'the SVG is well-formed XML');
+
+  const png = await downloadFrom(page, page.locator('[data-ref="luminance-downloads"] button[data-download="png"]'));
+  check(png.name === `optimis-job-${id}-luminance.png` && png.bytes.subarray(0, 8).equals(PNG_SIGNATURE) && png.bytes.length > 5000,
+    `the luminance chart's "PNG" saves ${png.name} (${Math.round(png.bytes.length / 1000)} KB)`);
+
+  const moments = await downloadFrom(page, page.getByRole('button', { name: 'Download moments' }));
+  const doc = JSON.parse(moments.bytes.toString('utf8'));
+  check(moments.name === `optimis-job-${id}-moments.json` && typeof doc === 'object' && doc !== null,
+    `"Download moments" saves ${moments.name} (named by the server's Content-Disposition)`);
+}
+
+/** Ticks the two jobs in the list, compares them, and checks the compare page. */
+export async function checkCompare(page, { spot, uniform }, results) {
+  await page.locator('.topnav').getByRole('link', { name: 'Jobs' }).click();
+  const row = page.locator(`tr[data-job="${spot}"]`);
+  await waitFor(`job ${spot} in the list`, async () => (await row.count()) > 0);
+  const cells = await row.locator('td[data-col]').evaluateAll((tds) => Object.fromEntries(tds.map((td) => [td.dataset.col, td.textContent])));
+  check(cells.engine === 'restricted' && cells.light_paths === '10⁷' && cells.camera_paths === '100' && cells.seed === '1',
+    `the list shows job ${spot}'s engine, N_F, N_B and seed (${Object.values(cells).join(', ')})`);
+  const compare = page.locator('button[data-ref="compare"]');
+  check(await compare.isDisabled(), 'Compare is disabled until two jobs are ticked');
+  for (const id of [uniform, spot]) await page.locator(`tr[data-job="${id}"] input[name="compare"]`).check();
+  check(await compare.isEnabled() && (await compare.textContent()) === 'Compare (2)', 'ticking two jobs enables "Compare (2)"');
+  check(new URL(page.url()).hash === '#/', 'ticking a box does not open the job');
+  await compare.click();
+  await waitFor('the compare page', () => page.locator('h1', { hasText: 'Compare jobs' }).isVisible());
+  check(new URL(page.url()).hash === `#/compare?ids=${spot},${uniform}`, `it opens ${new URL(page.url()).hash}`);
+  await waitFor('the compare chart', async () => (await readPlot(page.locator('[data-ref="w1-plot"]')))?.inked > 1000);
+
+  const params = await page.locator('.compare-table tbody.params tr').evaluateAll((trs) => Object.fromEntries(
+    trs.map((tr) => [tr.dataset.param, [...tr.querySelectorAll('td')].map((td) => td.textContent)])));
+  check(params.preset.join() === 'paper-table1,uniform-illumination' && params.illumination.join() === 'spot a = 0.02,uniform'
+    && params.light_paths.join('|') === '10,000,000|10,000,000' && params.camera_paths.join() === '100,100'
+    && params.merge_radius.join() === '0.003,0.003' && params.iterations.join('|') === '2,000|2,000' && params.seed.join() === '1,1',
+  `the compare table heads each job's column with its parameters (${params.illumination.join(' | ')})`);
+  const table = await page.locator('.compare-table tbody:not(.params) tr').evaluateAll((trs) => trs.map((tr) => ({
+    strategy: tr.dataset.strategy, cells: [...tr.querySelectorAll('td')].map((td) => td.textContent),
+  })));
+  check(table.map((r) => r.strategy).join() === STRATEGIES.join(), 'it has a row per strategy');
+  const agree = table.every(({ strategy, cells: [a, b] }) => [a, b].every((text, k) => {
+    const row = results[k].noise_table.find((r) => r.strategy === strategy);
+    return Math.abs(parseWithError(text)[0] - row.rms_percent) < 0.06;
+  }));
+  check(agree, 'each cell is its job\'s RMS %');
+
+  const plot = await readPlot(page.locator('[data-ref="w1-plot"]'));
+  check(plot.labels.join(' | ') === `#${spot} paper-table1 (spot a = 0.02) | #${uniform} uniform-illumination (uniform)`,
+    `the w₁(r₃) overlay has one series per job (${plot.labels.join(' | ')})`);
+  const first = results.reduce((n, r) => n + expectedBars(r.weights, [0]), 0);
+  check(plot.errorBars === first && plot.guides === 'x=0.02', `it draws ${plot.errorBars} error bars in the first r₂ bin and the spot's r₃ = a`);
+  await page.locator('select[data-ref="r2"]').selectOption({ index: 1 });
+  const second = results.reduce((n, r) => n + expectedBars(r.weights, [0.5]), 0);
+  await waitFor('the second r₂ bin', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === second, 5_000);
+  check(true, `the r₂ selector redraws it for r₂ ∈ [0.5, ∞) (${second} bars)`);
+  await page.locator('select[data-ref="r2"]').selectOption({ index: 0 });
+  await waitFor('the first r₂ bin again', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === first, 5_000);
+
+  const csv = await downloadFrom(page, page.getByRole('button', { name: 'Compare table (CSV)' }));
+  const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
+  const ids = new Set(rows.map((r) => r[header.indexOf('job_id')]));
+  check(header.slice(0, 3).join() === 'job_id,preset,illumination' && rows.length === 20 && ids.size === 2 && ids.has(String(spot)),
+    `"Compare table (CSV)" saves ${csv.name}: ${rows.length} rows, one per job and strategy`);
+  await sleep(300); // the chart's first draw settles
+  await screenshot(page, 'compare.png');
+  await docScreenshot(page, 'dashboard-compare.png', null, '[data-ref="w1-plot"]');
+
+  await page.goto(`${page.url().split('#')[0]}#/compare?ids=${spot}`);
+  const error = await waitFor('the refusal', async () => {
+    const el = page.locator('[data-ref="load-error"]');
+    return (await el.isVisible()) && el.textContent();
+  });
+  check(error.includes('Compare 2 to 8 different jobs'), `#/compare with one job says "${error}"`);
+}

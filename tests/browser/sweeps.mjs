@@ -1,0 +1,161 @@
+// The sweep steps of the browser test: a 2 × 2 sweep created through the API and followed on its
+// page to the end — its summary, points, CSV, charts and links — and a long one cancelled.
+
+import { readFile } from 'node:fs/promises';
+
+import { UNFITTED, base, callApi, check, readPlot, waitFor } from './harness.mjs';
+
+// A 2 × 2 grid at a small budget (restricted engine: well under a second per run).
+const SWEEP = {
+  base: { iterations: 300, light_paths: 1000000, seed: 3 },
+  axes: [{ field: 'merge_radius', values: [0.003, 0.01] }, { field: 'scene.l3', values: [1, 3] }],
+  mode: 'grid',
+};
+// Runs far longer than the test: cancelled from its page.
+const LONG_SWEEP = { base: { iterations: 1000000, light_paths: 1000000 }, axes: [{ field: 'seed', values: [1, 2] }] };
+
+/** A sweep's values in the page's words: `merge_radius=0.003, scene.l3=1`. */
+const describePoint = (sweep, point) => sweep.fields.map((f) => `${f}=${JSON.stringify(point.values[f])}`).join(', ');
+
+/** The error bars the RMS chart of `field` should draw: rows with a positive RMS and standard error at the points where the other axes take the values `fixed`. */
+function expectedRmsBars(sweep, field, fixed) {
+  const points = sweep.points.filter((p) => Object.entries(fixed).every(([f, v]) => f === field || p.values[f] === v));
+  return points.flatMap((p) => p.figures.noise_table).filter((r) => r.rms_percent > 0 && r.rms_percent_stderr > 0).length;
+}
+
+/** The error bars of the w₁(r₃) chart: per point, the fitted cells of the first r₂ and φ bins, tail left out, with a positive SE. */
+function expectedW1Bars(sweep) {
+  return sweep.points.map(({ figures: { weights } }) => {
+    const r2 = Math.min(...weights.map((w) => w.r2[0]));
+    const phi = Math.min(...weights.map((w) => w.phi[0]));
+    return weights.filter((w) => w.r2[0] === r2 && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status)
+      && w.w1_stderr > 0).length;
+  }).reduce((a, b) => a + b, 0);
+}
+
+/** The sweep list (from the header) leads to a sweep created through the API; its page follows it to the end. */
+export async function openSweep(page) {
+  const created = await callApi('/v1/sweeps', { method: 'POST', body: SWEEP });
+  check(created.status === 201, `POST /v1/sweeps creates a 2 × 2 sweep (${created.status})`);
+  const id = created.json.id;
+  await page.locator('.topnav').getByRole('link', { name: 'Sweeps' }).click();
+  const row = page.locator(`tr[data-sweep="${id}"]`);
+  await waitFor(`sweep ${id} in the sweep list`, async () => (await row.count()) > 0);
+  const axes = (await row.locator('td').nth(2).textContent()).replace(/\s+/g, ' ').trim();
+  check(axes === 'merge_radius (2) × scene.l3 (2)', `the sweep list shows sweep ${id} with its axes "${axes}"`);
+  await row.getByRole('link', { name: `#${id}` }).click();
+  await waitFor('the sweep page', () => page.locator('h1', { hasText: `Sweep ${id}` }).isVisible());
+  check(new URL(page.url()).hash === `#/sweeps/${id}`, `the list links to the sweep page #/sweeps/${id}`);
+  await waitFor('the sweep to succeed', async () => {
+    const badge = await page.locator('[data-ref="state"] .badge').textContent().catch(() => '');
+    if (badge === 'failed' || badge === 'cancelled') throw new Error(`the sweep ended ${badge}`);
+    return badge === 'succeeded';
+  }, 150_000);
+  const sweep = (await callApi(`/v1/sweeps/${id}`)).json;
+  check(sweep.state === 'succeeded' && sweep.points.every((p) => p.figures && !p.figures.partial),
+    'the API agrees: the sweep succeeded and every point has final figures');
+  return sweep;
+}
+
+export async function checkSweepSummary(page, sweep) {
+  const progress = await page.locator('[data-ref="progress"] .progress-text').textContent();
+  check(progress === '1,200 / 1,200', `the sweep's progress bar reads ${progress} (4 runs × 300 iterations)`);
+  const runs = (await page.locator('[data-ref="runs-by-state"]').textContent()).replace(/\s+/g, ' ').trim();
+  check(runs === 'succeeded 4', `the runs by state read "${runs}"`);
+  check(await page.locator('[data-ref="cancel"]').isHidden(), 'a finished sweep has no Cancel button');
+  const rows = await page.locator('.points-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
+    cells: [...tr.cells].map((td) => td.textContent.trim()),
+    job: tr.querySelector('a')?.getAttribute('href'),
+  })));
+  check(rows.length === 4, `the points table has the ${rows.length} points`);
+  sweep.points.forEach((p, i) => {
+    const [index, radius, l3, job, state, , rms] = rows[i].cells;
+    const chosen = p.figures.noise_table.find((r) => r.strategy === p.figures.recommended.strategy);
+    const shown = Number.parseFloat(rms.replace(/,/g, ''));
+    check(index === String(p.index) && radius === String(p.values.merge_radius) && l3 === String(p.values['scene.l3'])
+      && job === `#${p.job_id}` && rows[i].job === `#/jobs/${p.job_id}` && state === 'succeeded'
+      && Math.abs(shown - chosen.rms_percent) < 0.06 && rms.includes(chosen.strategy),
+      `point ${p.index}: ${radius}, ${l3}, job ${job}, recommended RMS ${rms}`);
+  });
+}
+
+/** The CSV link points at the table, and clicking it downloads the same bytes as the API serves. */
+export async function checkCsv(page, sweep) {
+  const href = `/v1/sweeps/${sweep.id}/table?format=csv`;
+  const link = page.getByRole('link', { name: 'Download the table (CSV)' });
+  check(await link.getAttribute('href') === href, `the CSV link is ${href}`);
+  const [download] = await Promise.all([page.waitForEvent('download'), link.click()]);
+  const text = await readFile(await download.path(), 'utf8');
+  const expected = await callApi(href);
+  const lines = text.trimEnd().split('\r\n');
+  const rows = sweep.points.reduce((n, p) => n + p.figures.noise_table.length, 0);
+  check(download.suggestedFilename() === `sweep-${sweep.id}.csv` && lines[0].startsWith('point,merge_radius,scene.l3,source,')
+    && lines.length === 1 + rows, `clicking it downloads ${download.suggestedFilename()}: a header and ${lines.length - 1} rows`);
+  check(text === expected.text, 'the download is the table the API serves');
+}
+
+export async function checkSweepCharts(page, sweep) {
+  const strategies = [...new Set(sweep.points.flatMap((p) => p.figures.noise_table.map((r) => r.strategy)))];
+  const outside = new Set(sweep.points.flatMap((p) => p.figures.noise_table.filter((r) => !r.respects_fixed).map((r) => r.strategy)));
+  const first = Object.fromEntries(sweep.spec.axes.map((a) => [a.field, a.values[0]]));
+  for (const axis of sweep.spec.axes) {
+    const card = page.locator(`[data-field="${axis.field}"]`);
+    const other = sweep.spec.axes.find((a) => a !== axis);
+    const plot = await readPlot(card.locator('.plot'));
+    check(plot !== null && plot.inked > 1000, `the RMS chart of ${axis.field} is drawn (${plot?.inked} pixels)`);
+    check(plot.labels.length === strategies.length && strategies.every((s) => plot.labels.some((l) => l.startsWith(s))),
+      `it has one series per strategy of the noise tables (${plot.labels.length})`);
+    check(plot.labels.every((l) => l.includes('outside fixed weights') === outside.has(l.split(' ')[0])),
+      `the strategies outside the fixed weights are marked (${[...outside].join(', ')})`);
+    const bars = expectedRmsBars(sweep, axis.field, first);
+    check(plot.errorBars === bars && bars > 0, `it draws ${plot.errorBars} error bars, one per row with a standard error`);
+    const select = card.locator(`select[data-axis="${other.field}"]`);
+    const options = await select.locator('option').allTextContents();
+    check(options.join() === other.values.map(String).join(), `a selector fixes ${other.field} (${options.join(', ')})`);
+    await select.selectOption({ index: 1 });
+    const moved = expectedRmsBars(sweep, axis.field, { ...first, [other.field]: other.values[1] });
+    const after = await waitFor('the redrawn chart', async () => {
+      const p = await readPlot(card.locator('.plot'));
+      return p.errorBars === moved && p;
+    }, 5_000);
+    check(after.labels.length === strategies.length, `with ${other.field} = ${other.values[1]} it redraws ${moved} bars, same series`);
+  }
+  const w1 = await readPlot(page.locator('[data-ref="w1-plot"]'));
+  check(w1 !== null && w1.inked > 1000, `the w₁(r₃) chart is drawn (${w1?.inked} pixels)`);
+  const labels = sweep.points.map((p) => describePoint(sweep, p));
+  check(JSON.stringify(w1.labels) === JSON.stringify(labels), `it has one series per point, labelled ${labels.join(' | ')}`);
+  const bars = expectedW1Bars(sweep);
+  check(w1.errorBars === bars && bars > 0, `it draws ${w1.errorBars} error bars (± jackknife SE of w₁)`);
+}
+
+/** A run's job page links back to its sweep, and so does the job list. */
+export async function checkSweepLinks(page, sweep) {
+  const point = sweep.points[1];
+  await page.locator(`.points-table tr[data-point="${point.index}"] a`).click();
+  await waitFor('the job page', () => page.locator('h1', { hasText: `Job ${point.job_id}` }).isVisible());
+  const link = page.locator('[data-ref="sweep"]');
+  check(await link.isVisible() && await link.textContent() === `sweep ${sweep.id}` && await link.getAttribute('href') === `#/sweeps/${sweep.id}`,
+    `job ${point.job_id}'s page shows "sweep ${sweep.id}" linked to the sweep`);
+  await link.click();
+  await waitFor('the sweep page again', () => page.locator('h1', { hasText: `Sweep ${sweep.id}` }).isVisible());
+  check(true, 'the link leads back to the sweep page');
+  await page.locator('.topnav').getByRole('link', { name: 'Jobs' }).click();
+  const inList = page.locator(`tr[data-job="${point.job_id}"] a.sweep-link`);
+  await waitFor(`job ${point.job_id} in the list`, async () => (await inList.count()) > 0);
+  check(await inList.getAttribute('href') === `#/sweeps/${sweep.id}`, `the job list shows job ${point.job_id} as part of sweep ${sweep.id}`);
+}
+
+/** A running sweep is cancelled from its page: every run ends cancelled. */
+export async function checkSweepCancel(page) {
+  const created = await callApi('/v1/sweeps', { method: 'POST', body: LONG_SWEEP });
+  check(created.status === 201, 'a long sweep is created');
+  const { id } = created.json;
+  await page.goto(`${base}/#/sweeps/${id}`);
+  const cancel = page.locator('[data-ref="cancel"]');
+  await waitFor('the Cancel button', () => cancel.isVisible());
+  await cancel.click();
+  await waitFor('the sweep to be cancelled', async () => (await page.locator('[data-ref="state"] .badge').textContent()) === 'cancelled');
+  const sweep = (await callApi(`/v1/sweeps/${id}`)).json;
+  check(sweep.points.every((p) => p.state === 'cancelled') && (await cancel.isHidden()),
+    `Cancel stops every run of sweep ${id} (${JSON.stringify(sweep.progress.runs_by_state)}) and goes away`);
+}
