@@ -177,6 +177,7 @@ async fn every_dashboard_file_is_served() {
         "paper.js",
         "plots.js",
         "results.js",
+        "solves.js",
         "sweep.js",
         "sweepdata.js",
         "sweepplots.js",

@@ -26,6 +26,7 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
     ("plots.js", JS, include_bytes!("dashboard/plots.js")),
     ("noisetable.js", JS, include_bytes!("dashboard/noisetable.js")),
     ("results.js", JS, include_bytes!("dashboard/results.js")),
+    ("solves.js", JS, include_bytes!("dashboard/solves.js")),
     ("form.js", JS, include_bytes!("dashboard/form.js")),
     ("list.js", JS, include_bytes!("dashboard/list.js")),
     ("job.js", JS, include_bytes!("dashboard/job.js")),

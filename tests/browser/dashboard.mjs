@@ -27,7 +27,7 @@ import {
   checkDirectLoad, checkInvalidSubmission, checkJobInList, checkListPage, checkNoiseTable, checkPagination, followProgress,
   submitJob,
 } from './jobs.mjs';
-import { checkCompare, checkDownloads, checkPaperJob, submitPaperPair } from './research.mjs';
+import { checkCompare, checkDownloads, checkPaperJob, checkSolves, submitPaperPair } from './research.mjs';
 import { checkCsv, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
 
 const OVERALL_TIMEOUT_MS = 240_000;
@@ -66,6 +66,7 @@ async function run(browser) {
   const pair = await submitPaperPair();
   const spotResult = await checkPaperJob(page, pair.spot);
   await checkDownloads(page, pair.spot, spotResult);
+  await checkSolves(page, pair.spot);
   await checkCompare(page, pair, [spotResult, (await callApi(`/v1/jobs/${pair.uniform}/result`)).json]);
   const sweep = await openSweep(page);
   await checkSweepSummary(page, sweep);

@@ -249,3 +249,31 @@ export async function checkCompare(page, { spot, uniform }, results) {
   });
   check(error.includes('Compare 2 to 8 different jobs'), `#/compare with one job says "${error}"`);
 }
+
+/** A kept solve: free w₀ under a name, shown instead of the job's own options, then back. */
+export async function checkSolves(page, id) {
+  await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
+  const select = page.locator('[data-ref="solve-select"]');
+  await waitFor('the solves selector', async () => (await select.locator('option').count()) === 1);
+  check((await select.inputValue()) === 'default', 'the solves selector starts at the job\'s own options (default)');
+  const rmsCell = page.locator('table.noise-table tbody tr[data-strategy="optimal_cv"] td[data-col="rms"]');
+  await waitFor('the noise table', async () => (await rmsCell.count()) === 1);
+  const ownText = (await rmsCell.textContent()).trim();
+  const own = (await callApi(`/v1/jobs/${id}/result`)).json.noise_table.find((r) => r.strategy === 'optimal_cv');
+  await page.locator('.solve-form input[name="name"]').fill('free-w0');
+  await page.locator('.solve-form input[name="free-w0"]').check();
+  await page.locator('.solve-form button[type="submit"]').click();
+  await waitFor('the kept solve shown', async () => (await select.inputValue()) === 'free-w0'
+    && (await rmsCell.textContent()).trim() !== ownText);
+  const kept = (await callApi(`/v1/jobs/${id}/solves/free-w0`)).json.noise_table.find((r) => r.strategy === 'optimal_cv');
+  check(kept.rms_percent < own.rms_percent,
+    `freeing w₀ lowers the cross-fitted optimum's RMS (${kept.rms_percent.toFixed(2)} < ${own.rms_percent.toFixed(2)} %)`);
+  const keptText = (await rmsCell.textContent()).trim();
+  check(keptText.startsWith(kept.rms_percent.toFixed(1)), `the page shows the kept solve's optimal_cv RMS (${keptText})`);
+  const listed = (await callApi(`/v1/jobs/${id}/solves`)).json.solves;
+  check(listed.length === 2 && listed[0].default && listed[1].name === 'free-w0' && listed[1].solver.fixed.w0 === undefined,
+    'the server keeps it after the default, with w₀ freed');
+  await select.selectOption('default');
+  await waitFor('the job\'s own options shown again', async () => (await rmsCell.textContent()).trim() === ownText);
+  check(true, `choosing default shows the job's own table again (${ownText})`);
+}

@@ -1,4 +1,5 @@
-// Results of a job: fetching its result and history as checkpoints arrive, and showing them — the
+// Results of a job: fetching its result (or a kept solve's, solves.js) and history as checkpoints
+// arrive, and showing them — the
 // noise table (noisetable.js), the charts (plots.js) — with the CSV downloads of the noise table,
 // the weights and the history, and the SVG/PNG downloads of the charts (chartfiles.js).
 
@@ -9,6 +10,7 @@ import { fixed, formatCount, formatLuminance, h, showMessage, withError } from '
 import { noiseCsv, noiseRows, paperNote } from './noisetable.js';
 import { luminanceStderr } from './paper.js';
 import { drawHistory, drawLuminance, drawWeights } from './plots.js';
+import { SolvesPanel } from './solves.js';
 
 /**
  * Fetches the result and history whenever a new checkpoint is written or the job ends, one fetch
@@ -18,7 +20,12 @@ import { drawHistory, drawLuminance, drawWeights } from './plots.js';
 export class ResultsLoader {
   constructor(id, refs, plots) {
     Object.assign(this, { id, refs, plots, shownKey: null, busy: false, again: false, stopped: false, result: null, history: null });
+    this.solve = 'default';
     this.addDownloads();
+    this.solves = new SolvesPanel(id, refs.solves, (name) => {
+      this.solve = name;
+      if (this.job) this.fetch();
+    });
   }
 
   addDownloads() {
@@ -57,7 +64,7 @@ export class ResultsLoader {
     this.busy = true;
     try {
       const [result, history] = await Promise.all([
-        api(`/v1/jobs/${this.id}/result`),
+        api(this.solve === 'default' ? `/v1/jobs/${this.id}/result` : `/v1/jobs/${this.id}/solves/${encodeURIComponent(this.solve)}`),
         api(`/v1/jobs/${this.id}/history`),
       ]);
       if (!this.stopped) this.show(result, history);
