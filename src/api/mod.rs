@@ -6,6 +6,7 @@
 //! checks that the committed `openapi.yaml` equals [`openapi_yaml`].
 
 mod auth;
+mod bodies;
 mod csv;
 mod dashboard;
 pub mod error;

@@ -7,9 +7,9 @@ use axum::http::StatusCode;
 use axum::http::request::Parts;
 
 use super::AppState;
+use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody};
-use super::jobs::SolverPatch;
 use crate::jobs::documents::JobResult;
 use crate::jobs::solves::SolveList;
 

@@ -13,9 +13,9 @@ use serde::Deserialize;
 use utoipa::ToSchema;
 
 use super::AppState;
+use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{DocumentBody, JobId};
-use super::jobs::SolverPatch;
 use crate::jobs::documents::JobResult;
 use crate::jobs::resource::JobResource;
 use crate::sim::document::MomentsDocument;
