@@ -136,6 +136,31 @@ impl<S: Send + Sync> FromRequestParts<S> for SweepId {
     }
 }
 
+/// A list's page: `limit` (default `default`, at most `max`) and the `cursor` a previous page
+/// returned (an id), both named in a 422 when invalid.
+pub fn page(
+    limit: Option<u32>,
+    cursor: Option<String>,
+    default: u32,
+    max: u32,
+) -> Result<(u32, Option<i64>), ApiError> {
+    let limit = limit.unwrap_or(default);
+    if !(1..=max).contains(&limit) {
+        return Err(ApiError::Invalid {
+            field: "limit".into(),
+            message: format!("must be in [1, {max}], got {limit}"),
+        });
+    }
+    let cursor = match cursor {
+        None => None,
+        Some(c) => Some(c.parse::<i64>().ok().filter(|&c| c > 0).ok_or_else(|| ApiError::Invalid {
+            field: "cursor".into(),
+            message: format!("not a cursor returned by this list: {c:?}"),
+        })?),
+    };
+    Ok((limit, cursor))
+}
+
 /// Deserialises a typed request from a JSON value, naming the offending field on failure.
 pub fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, ApiError> {
     serde_path_to_error::deserialize(value).map_err(|e| {

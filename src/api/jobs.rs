@@ -13,7 +13,7 @@ use super::AppState;
 use super::bodies::{JobSubmission, SolverPatch};
 use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
-use super::extract::{JobId, JsonBody, typed};
+use super::extract::{JobId, JsonBody, page, typed};
 use crate::jobs::documents::{JobHistory, JobList, JobResult};
 use crate::jobs::prediction::{JobPrediction, PredictRequest};
 use crate::jobs::resource::{JobResource, JobState};
@@ -164,17 +164,7 @@ pub async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    let limit = q.limit.unwrap_or(50);
-    if !(1..=500).contains(&limit) {
-        return Err(ApiError::Invalid { field: "limit".into(), message: format!("must be in [1, 500], got {limit}") });
-    }
-    let cursor = match q.cursor {
-        None => None,
-        Some(c) => Some(c.parse::<i64>().ok().filter(|&c| c > 0).ok_or_else(|| ApiError::Invalid {
-            field: "cursor".into(),
-            message: format!("not a cursor returned by this list: {c:?}"),
-        })?),
-    };
+    let (limit, cursor) = page(q.limit, q.cursor, 50, 500)?;
     Ok(Json(state.jobs.list(q.state, cursor, limit).await?))
 }
 

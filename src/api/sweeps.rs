@@ -12,7 +12,7 @@ use utoipa::IntoParams;
 use super::AppState;
 use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
-use super::extract::{JsonBody, SweepId};
+use super::extract::{JsonBody, SweepId, page};
 use super::jobs::query_problem;
 use crate::jobs::sweeps::{SweepList, SweepResource};
 use crate::sim::sweep::{SweepSpec, SweepTable};
@@ -77,17 +77,7 @@ pub async fn list(
     query: Result<Query<SweepListQuery>, QueryRejection>,
 ) -> Result<Json<SweepList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    let limit = q.limit.unwrap_or(20);
-    if !(1..=100).contains(&limit) {
-        return Err(ApiError::Invalid { field: "limit".into(), message: format!("must be in [1, 100], got {limit}") });
-    }
-    let cursor = match q.cursor {
-        None => None,
-        Some(c) => Some(c.parse::<i64>().ok().filter(|&c| c > 0).ok_or_else(|| ApiError::Invalid {
-            field: "cursor".into(),
-            message: format!("not a cursor returned by this list: {c:?}"),
-        })?),
-    };
+    let (limit, cursor) = page(q.limit, q.cursor, 20, 100)?;
     Ok(Json(state.jobs.list_sweeps(cursor, limit).await?))
 }
 

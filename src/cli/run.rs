@@ -14,7 +14,7 @@ use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::MomentsDocument;
-use crate::sim::model::params::merge_patch;
+use crate::sim::model::params::{merge_patch, path_patch};
 use crate::sim::runner::run_iterations;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
 use crate::sim::solve::report::{RunReport, build_report};
@@ -92,14 +92,9 @@ fn set_patch(assignment: &str) -> Result<Value, SpecError> {
     let (path, text) = assignment
         .split_once('=')
         .ok_or_else(|| SpecError::new("--set", format!("expected PATH=VALUE, got {assignment:?}")))?;
-    let segments: Vec<&str> = path.split('.').collect();
-    let identifier =
-        |s: &&str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
-    if !segments.iter().all(identifier) {
-        return Err(SpecError::new("--set", format!("{path:?} is not a dotted path of field names (e.g. scene.l3)")));
-    }
     let value = serde_json::from_str(text).unwrap_or_else(|_| Value::String(text.to_string()));
-    Ok(segments.iter().rev().fold(value, |inner, key| json!({ *key: inner })))
+    path_patch(path, &value)
+        .ok_or_else(|| SpecError::new("--set", format!("{path:?} is not a dotted path of field names (e.g. scene.l3)")))
 }
 
 /// Reads a JSON file.

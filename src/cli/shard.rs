@@ -18,6 +18,34 @@ pub fn parse_shard(text: &str) -> Result<Shard, String> {
     Ok(Shard { index, count })
 }
 
+/// The index a batch scheduler gives this task, where it came from, and the array's size when the
+/// scheduler says it.
+pub struct TaskIndex {
+    pub index: u64,
+    pub source: &'static str,
+    pub count: Option<u64>,
+}
+
+/// The task index of `SLURM_ARRAY_TASK_ID` (minus `SLURM_ARRAY_TASK_MIN`, with
+/// `SLURM_ARRAY_TASK_COUNT`) or `JOB_COMPLETION_INDEX`, if either is set.
+pub fn task_index(env: &HashMap<String, String>) -> Result<Option<TaskIndex>, SpecError> {
+    let number = |name: &str| -> Result<Option<u64>, SpecError> {
+        match env.get(name) {
+            None => Ok(None),
+            Some(v) => v.trim().parse().map(Some).map_err(|_| SpecError::new(name, format!("is not a number: {v:?}"))),
+        }
+    };
+    if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
+        let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+        let index = id
+            .checked_sub(min)
+            .ok_or_else(|| SpecError::new("SLURM_ARRAY_TASK_ID", "is below SLURM_ARRAY_TASK_MIN"))?;
+        let count = number("SLURM_ARRAY_TASK_COUNT")?;
+        return Ok(Some(TaskIndex { index, source: "SLURM_ARRAY_TASK_ID", count }));
+    }
+    Ok(number("JOB_COMPLETION_INDEX")?.map(|index| TaskIndex { index, source: "JOB_COMPLETION_INDEX", count: None }))
+}
+
 /// The shard of this run: the flag if given, else the scheduler's index (with the count from the
 /// flag, the scheduler or the spec), else none. `env` is the process environment.
 pub fn resolve_shard(
@@ -29,24 +57,10 @@ pub fn resolve_shard(
     if flag.is_some() {
         return Ok(flag);
     }
-    let number = |name: &str| -> Result<Option<u64>, SpecError> {
-        match env.get(name) {
-            None => Ok(None),
-            Some(v) => v.trim().parse().map(Some).map_err(|_| SpecError::new(name, format!("is not a number: {v:?}"))),
-        }
-    };
     let spec_count = spec_shard.map(|s| s.count);
-    let (index, count, source) = if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
-        let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-        let index = id
-            .checked_sub(min)
-            .ok_or_else(|| SpecError::new("SLURM_ARRAY_TASK_ID", "is below SLURM_ARRAY_TASK_MIN"))?;
-        (index, count_flag.or(number("SLURM_ARRAY_TASK_COUNT")?).or(spec_count), "SLURM_ARRAY_TASK_ID")
-    } else if let Some(index) = number("JOB_COMPLETION_INDEX")? {
-        (index, count_flag.or(spec_count), "JOB_COMPLETION_INDEX")
-    } else {
-        return Ok(spec_shard);
-    };
+    let Some(task) = task_index(env)? else { return Ok(spec_shard) };
+    let count = count_flag.or(task.count).or(spec_count);
+    let (index, source) = (task.index, task.source);
     let count = count.ok_or_else(|| {
         SpecError::new(
             "shard.count",

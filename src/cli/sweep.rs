@@ -16,6 +16,7 @@ use clap::{Args, Subcommand};
 use super::documents::read_document;
 use super::progress::ProgressArgs;
 use super::run::{read_json, run_moments, write_atomically};
+use super::shard::task_index;
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::MomentsDocument;
@@ -220,20 +221,6 @@ fn write_table(plan: &SweepPlan, results: &[PointResults], json: bool, csv: Opti
 
 /// The task index a batch scheduler gives this process, if any.
 fn scheduler_index() -> Result<Option<usize>, CliError> {
-    let number = |name: &str| -> Result<Option<usize>, CliError> {
-        match std::env::var(name) {
-            Err(_) => Ok(None),
-            Ok(v) => {
-                v.trim().parse().map(Some).map_err(|_| SpecError::new(name, format!("is not a number: {v:?}")).into())
-            }
-        }
-    };
-    if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
-        let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-        return id
-            .checked_sub(min)
-            .map(Some)
-            .ok_or_else(|| SpecError::new("SLURM_ARRAY_TASK_ID", "is below SLURM_ARRAY_TASK_MIN").into());
-    }
-    number("JOB_COMPLETION_INDEX")
+    let environment: std::collections::HashMap<String, String> = std::env::vars().collect();
+    Ok(task_index(&environment)?.map(|t| t.index as usize))
 }

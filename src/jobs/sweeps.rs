@@ -282,7 +282,7 @@ impl JobManager {
         if figures {
             for (r, view) in run_views.iter().enumerate() {
                 if let Some(v) = view {
-                    all.extend(self.run_figures(plan, r, v.id).await?);
+                    all.extend(self.run_figures(plan, r, v.id, v.progress.iterations_checkpointed > 0).await?);
                 }
             }
         }
@@ -318,12 +318,22 @@ impl JobManager {
         })
     }
 
-    /// The figures of run `r`'s points from its job's latest checkpoint (none before the first).
-    async fn run_figures(&self, plan: &SweepPlan, r: usize, job: i64) -> Result<Vec<(usize, PointFigures)>, JobError> {
-        let Some((_, _, checksum)) = self.inner.store.load_result(job).await? else { return Ok(Vec::new()) };
+    /// The figures of run `r`'s points from its job's latest checkpoint (none before the first):
+    /// its stored result for measured points; for predicted ones a prediction from its moments,
+    /// cached per checkpoint so that a poll reads only the result's checksum.
+    async fn run_figures(
+        &self,
+        plan: &SweepPlan,
+        r: usize,
+        job: i64,
+        checkpointed: bool,
+    ) -> Result<Vec<(usize, PointFigures)>, JobError> {
+        if !checkpointed {
+            return Ok(Vec::new());
+        }
         let predicted = plan.points.iter().any(|p| p.run == r && p.predicted.is_some());
-        let result = self.result(job).await?;
         if !predicted {
+            let result = self.result(job).await?;
             let spec = &plan.runs[r].spec;
             let budget =
                 crate::sim::solve::predict::Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
@@ -331,12 +341,14 @@ impl JobManager {
             let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
             return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
+        let Some((_, _, checksum)) = self.inner.store.load_result(job).await? else { return Ok(Vec::new()) };
         let running = self.active(job).is_some();
         if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&job)
             && (hit.checksum == checksum || (running && hit.made.elapsed() < REFIT_INTERVAL))
         {
             return Ok(hit.figures.as_ref().clone());
         }
+        let result = self.result(job).await?;
         let (state, _, spec, merged) = self.state_and_total(job).await?;
         let (moments, _) = self.checkpoint_moments(job, &spec, merged).await?;
         let plan = plan.clone();

@@ -181,6 +181,33 @@ async fn thin_history(tx: &mut sqlx::SqliteConnection, id: i64) -> Result<(), St
     Ok(())
 }
 
+/// Inserts a queued job (a run of sweep `sweep.0`, number `sweep.1`, if given) in `tx`.
+pub(super) async fn insert_queued_row(
+    tx: &mut sqlx::SqliteConnection,
+    job: &NewJob,
+    sweep: Option<(i64, usize)>,
+) -> Result<JobRow, StoreError> {
+    let row = sqlx::query(concat!(
+        "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
+         request_hash, sweep_id, sweep_run, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
+        job_columns!()
+    ))
+    .bind(JobState::Queued.as_str())
+    .bind(&job.spec)
+    .bind(&job.fingerprint)
+    .bind(job.iterations_total as i64)
+    .bind(job.reference_luminance)
+    .bind(&job.idempotency_key)
+    .bind(&job.request_hash)
+    .bind(sweep.map(|s| s.0))
+    .bind(sweep.map(|s| s.1 as i64))
+    .bind(job.now)
+    .bind(job.now)
+    .fetch_one(&mut *tx)
+    .await?;
+    Ok(job_from_row(&row)?)
+}
+
 impl Store {
     /// Inserts a queued job, honouring an idempotency key. The row is committed before its id is
     /// returned.
@@ -205,26 +232,7 @@ impl Store {
     }
 
     async fn insert_queued(&self, job: &NewJob) -> Result<JobRow, StoreError> {
-        self.transaction(async |tx| {
-            let row = sqlx::query(concat!(
-                "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, idempotency_key, \
-             request_hash, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
-                job_columns!()
-            ))
-            .bind(JobState::Queued.as_str())
-            .bind(&job.spec)
-            .bind(&job.fingerprint)
-            .bind(job.iterations_total as i64)
-            .bind(job.reference_luminance)
-            .bind(&job.idempotency_key)
-            .bind(&job.request_hash)
-            .bind(job.now)
-            .bind(job.now)
-            .fetch_one(&mut *tx)
-            .await?;
-            Ok(job_from_row(&row)?)
-        })
-        .await
+        self.transaction(async |tx| insert_queued_row(tx, job, None).await).await
     }
 
     async fn find_by_key(&self, key: &str, hash: Option<&str>) -> Result<Option<Inserted>, StoreError> {

@@ -5,8 +5,8 @@
 
 use sqlx::Row;
 
-use super::jobs::{JobRow, NewJob, job_columns, job_from_row};
-use super::{JobState, Store, StoreError};
+use super::jobs::{JobRow, NewJob, insert_queued_row, job_columns, job_from_row};
+use super::{Store, StoreError};
 
 /// A sweep as stored.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,23 +29,8 @@ impl Store {
                     .await?;
                 let mut rows = Vec::with_capacity(runs.len());
                 for (run, job) in runs.iter().enumerate() {
-                    let row = sqlx::query(concat!(
-                        "INSERT INTO jobs (state, spec, fingerprint, iterations_total, reference_luminance, \
-                         sweep_id, sweep_run, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING ",
-                        job_columns!()
-                    ))
-                    .bind(JobState::Queued.as_str())
-                    .bind(&job.spec)
-                    .bind(&job.fingerprint)
-                    .bind(job.iterations_total as i64)
-                    .bind(job.reference_luminance)
-                    .bind(id)
-                    .bind(run as i64)
-                    .bind(now)
-                    .bind(now)
-                    .fetch_one(&mut *tx)
-                    .await?;
-                    rows.push(job_from_row(&row)?);
+                    let job = NewJob { now, ..job.clone() };
+                    rows.push(insert_queued_row(tx, &job, Some((id, run))).await?);
                 }
                 Ok((id, rows))
             })

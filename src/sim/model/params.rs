@@ -285,6 +285,28 @@ pub fn merge_patch(base: &mut Value, patch: &Value) {
     }
 }
 
+/// Most identifiers in a dotted field path (`scene.illumination.a` has 3).
+pub const MAX_PATH_SEGMENTS: usize = 8;
+/// Most bytes of a dotted field path.
+const MAX_PATH_BYTES: usize = 200;
+
+/// The merge patch that sets the field at dotted `path` to `value` (`scene.l3` → `{"scene": {"l3":
+/// value}}`), or None when `path` is not a dotted path of at most [`MAX_PATH_SEGMENTS`] lower-case
+/// identifiers. Sweep axes and the CLI's `--set` name fields this way.
+pub fn path_patch(path: &str, value: &Value) -> Option<Value> {
+    let segments: Vec<&str> = path.split('.').collect();
+    let identifier =
+        |s: &&str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
+    if path.len() > MAX_PATH_BYTES || segments.len() > MAX_PATH_SEGMENTS || !segments.iter().all(identifier) {
+        return None;
+    }
+    Some(segments.iter().rev().fold(value.clone(), |inner, key| {
+        let mut map = serde_json::Map::new();
+        map.insert((*key).to_string(), inner);
+        Value::Object(map)
+    }))
+}
+
 fn kind_differs(a: &Value, b: &Value) -> bool {
     match (a.get("kind"), b.get("kind")) {
         (Some(x), Some(y)) => x != y,

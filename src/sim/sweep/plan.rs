@@ -6,9 +6,9 @@
 //! with checked arithmetic, so a hostile document cannot make the expansion itself the cost.
 
 use serde::{Deserialize, Serialize};
-use serde_json::{Map, Value};
+use serde_json::Value;
 
-use crate::sim::model::params::{SpecError, merge_patch};
+use crate::sim::model::params::{MAX_PATH_SEGMENTS, SpecError, merge_patch, path_patch};
 use crate::sim::solve::predict::Budget;
 use crate::sim::spec::{JobSpec, parse_job_spec};
 
@@ -16,10 +16,6 @@ use crate::sim::spec::{JobSpec, parse_job_spec};
 pub const MAX_AXES: usize = 4;
 /// Most values of one axis.
 pub const MAX_AXIS_VALUES: usize = 256;
-/// Most identifiers in an axis path (`scene.illumination.a` has 3).
-pub const MAX_PATH_SEGMENTS: usize = 8;
-/// Most bytes of an axis path.
-const MAX_PATH_BYTES: usize = 200;
 
 /// A sweep: a base job document varied along axes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -229,9 +225,7 @@ fn check_axes(spec: &SweepSpec) -> Result<(), SpecError> {
     for (a, axis) in spec.axes.iter().enumerate() {
         let at = |what: &str| format!("axes[{a}].{what}");
         let segments: Vec<&str> = axis.field.split('.').collect();
-        let identifier =
-            |s: &&str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
-        if axis.field.len() > MAX_PATH_BYTES || segments.len() > MAX_PATH_SEGMENTS || !segments.iter().all(identifier) {
+        if path_patch(&axis.field, &Value::Null).is_none() {
             return Err(SpecError::new(
                 at("field"),
                 format!(
@@ -312,13 +306,9 @@ fn picks(spec: &SweepSpec, index: usize) -> Vec<usize> {
     }
 }
 
-/// `{"a": {"b": value}}` for the path `a.b`.
+/// The patch of a checked axis path.
 fn patch(path: &str, value: &Value) -> Value {
-    path.rsplit('.').fold(value.clone(), |inner, key| {
-        let mut map = Map::new();
-        map.insert(key.to_string(), inner);
-        Value::Object(map)
-    })
+    path_patch(path, value).expect("axis paths are checked first")
 }
 
 /// The error of a point's job, named after the axis whose field it concerns (else the point's last
