@@ -98,9 +98,11 @@ impl From<JobError> for ApiError {
             JobError::NotFound(id) => ApiError::NotFound(format!("no job with id {id}")),
             JobError::SweepNotFound(id) => ApiError::NotFound(format!("no sweep with id {id}")),
             JobError::Conflict(m) => ApiError::Conflict(m),
-            JobError::Document(e @ DocumentError::Merge(MergeError::Overlap(_) | MergeError::Fingerprint { .. })) => {
-                ApiError::Conflict(format!("the statistics cannot be merged: {e}"))
-            }
+            JobError::Document(
+                e @ DocumentError::Merge(
+                    MergeError::Overlap(_) | MergeError::Fingerprint { .. } | MergeError::FormatMix { .. },
+                ),
+            ) => ApiError::Conflict(format!("the statistics cannot be merged: {e}")),
             JobError::Document(e) => ApiError::Invalid { field: String::new(), message: e.to_string() },
             JobError::Peer { field, message } => ApiError::Invalid { field, message },
             JobError::PeerNotAllowed { field, message } => ApiError::Forbidden(format!("{field}: {message}")),

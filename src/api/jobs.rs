@@ -15,9 +15,11 @@ use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, page, typed};
 use crate::jobs::documents::{JobHistory, JobList, JobResult};
+use crate::jobs::evaluation::JobEvaluation;
 use crate::jobs::prediction::{JobPrediction, PredictRequest};
 use crate::jobs::resource::{JobResource, JobState};
 use crate::sim::document::MomentsDocument;
+use crate::sim::solve::evaluate::GivenWeights;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
 /// Longest accepted `Idempotency-Key`.
 const MAX_KEY_LEN: usize = 255;
@@ -269,6 +271,32 @@ pub async fn predict(
 ) -> Result<Json<JobPrediction>, ApiError> {
     let request: PredictRequest = typed(&body)?;
     Ok(Json(state.jobs.predict(id, &request).await?))
+}
+
+/// Score given weights on the job's latest checkpoint: another run's `/result` (its recommended
+/// table, heuristics stacked on it included) or a table of one's own (`weights`, `heuristics`);
+/// L, RMS and their standard errors beside the job's per-path strategies, each with the paired
+/// variance ratio. Nothing is run or stored.
+#[utoipa::path(
+    post, operation_id = "evaluate_weights", path = "/v1/jobs/{id}/evaluate", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    request_body(content = GivenWeights, description = "The weights: a result document, or `weights` (one entry per cell of the job's grid) and `heuristics`"),
+    responses(
+        (status = 200, description = "The weights' figures on this job's iterations", body = JobEvaluation),
+        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "The weights do not fit this job (another grid, a heuristic without a column, cells that do not sum to 1 − Σβ); `field` names the part", body = Problem, content_type = "application/problem+json"),
+        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn evaluate(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    JsonBody(body): JsonBody,
+) -> Result<Json<JobEvaluation>, ApiError> {
+    let given: GivenWeights = typed(&body)?;
+    Ok(Json(state.jobs.evaluate(id, given).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.

@@ -88,6 +88,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::result))
         .routes(routes!(jobs::solve))
         .routes(routes!(jobs::predict))
+        .routes(routes!(jobs::evaluate))
         .routes(routes!(solves::list))
         .routes(routes!(solves::save, solves::get, solves::delete))
         .routes(routes!(jobs::cancel))

@@ -97,7 +97,7 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
     if args.nested_cv {
         let cf = CrossFitting::new(&doc.moments, &doc.moments.pooled());
-        let [m, s1, s2] = nested_selection(&cf, &job.config.cells, &solver.fixed, &solver.cv_lambdas)
+        let [m, s1, s2] = nested_selection(&cf, &job.config.cells, &solver.fixed, &solver.cv_lambdas, &[])
             .map_err(|e| SpecError::new("--nested-cv", e))?;
         let nested = NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None);
         let selected = report.noise_table.iter().find(|r| r.strategy == Strategy::OptimalCv);

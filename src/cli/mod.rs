@@ -1,9 +1,10 @@
-//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `budget`, `sweep`, `serve` and
-//! `openapi`, thin shells around the library.
+//! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `evaluate`, `budget`,
+//! `sweep`, `serve` and `openapi`, thin shells around the library.
 
 mod bench;
 mod budget;
 mod documents;
+mod evaluate;
 mod predict;
 mod progress;
 mod run;
@@ -49,6 +50,9 @@ pub enum Command {
     /// Predict the noise table and re-fit the optimal weights at another N_F and N_B, from a moments
     /// document with noise components.
     Predict(predict::PredictArgs),
+    /// Score given weights (another run's result, or a table) on a moments document: L, RMS and
+    /// their standard errors beside the document's per-path strategies.
+    Evaluate(evaluate::EvaluateArgs),
     /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, from a moments
     /// document with noise components.
     Budget(budget::BudgetArgs),
@@ -72,6 +76,9 @@ pub enum CliError {
     Json { path: PathBuf, source: serde_json::Error },
     #[error("invalid job specification: {0}")]
     Spec(#[from] SpecError),
+    /// An input other than a job specification names a bad field.
+    #[error("invalid {what}: {source}")]
+    Invalid { what: &'static str, source: SpecError },
     /// A flag or the environment is misconfigured (not a job specification).
     #[error("invalid configuration: {0}")]
     Config(String),
@@ -112,6 +119,7 @@ pub fn main() -> ExitCode {
         Command::Merge(args) => documents::merge(args),
         Command::Report(args) => documents::report(args),
         Command::Predict(args) => predict::predict(args),
+        Command::Evaluate(args) => evaluate::evaluate(args),
         Command::Budget(args) => budget::budget(args),
         Command::Sweep(args) => sweep::sweep(args),
         #[cfg(feature = "server")]
@@ -141,10 +149,17 @@ impl CliError {
         use crate::sim::stats::moments::MergeError;
         match self {
             CliError::Document {
-                source: DocumentError::Merge(MergeError::Fingerprint { .. } | MergeError::Overlap(_)),
+                source:
+                    DocumentError::Merge(
+                        MergeError::Fingerprint { .. } | MergeError::FormatMix { .. } | MergeError::Overlap(_),
+                    ),
                 ..
             } => 4,
-            CliError::Spec(_) | CliError::Json { .. } | CliError::Document { .. } | CliError::Config(_) => 3,
+            CliError::Spec(_)
+            | CliError::Invalid { .. }
+            | CliError::Json { .. }
+            | CliError::Document { .. }
+            | CliError::Config(_) => 3,
             CliError::Read { .. } | CliError::Write { .. } | CliError::Output(_) => 5,
             _ => 1,
         }

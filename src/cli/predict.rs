@@ -57,12 +57,15 @@ pub fn predict(args: PredictArgs) -> Result<(), CliError> {
     writeln!(out)?;
     match (&prediction.recommended, &prediction.solve_error) {
         (Some(r), _) => {
-            writeln!(
-                out,
-                "optimal weights re-fitted for this budget ({}, λ = {} chosen by cross-validation; ± jackknife SE over the folds):",
-                r.strategy, r.lambda
-            )?;
-            table::write_weights(&mut out, &prediction.weights)?;
+            writeln!(out, "recommended at this budget: {} — {}", r.strategy, r.reason)?;
+            if let Some(lambda) = r.lambda {
+                table::write_heuristics(&mut out, &r.heuristics)?;
+                writeln!(
+                    out,
+                    "its weights re-fitted for this budget (λ = {lambda} chosen by cross-validation; ± jackknife SE over the folds):",
+                )?;
+                table::write_weights(&mut out, &prediction.weights)?;
+            }
         }
         (None, Some(e)) => writeln!(out, "optimal weights: not available: {e}")?,
         (None, None) => {}

@@ -2,7 +2,7 @@
 
 use std::io::{self, Write};
 
-use crate::sim::solve::noise::NoiseRow;
+use crate::sim::solve::noise::{HeuristicWeight, NoiseRow};
 use crate::sim::solve::report::{RecommendedWeights, RunReport, WeightRow};
 use crate::sim::spec::JobSpec;
 
@@ -53,11 +53,14 @@ pub fn write_report(
         "\nmerge events per iteration: plane 1 {:.4} ± {:.4}, plane 2 {:.3} ± {:.3}, plane 3 {:.3} ± {:.3}",
         m.plane1.mean, m.plane1.stderr, m.plane2.mean, m.plane2.stderr, m.plane3.mean, m.plane3.stderr
     )?;
+    if let Some(r) = &report.recommended {
+        writeln!(out, "recommended: {} — {}", r.strategy, r.reason)?;
+    }
     if let Some(g) = &report.gain {
         let se = g.stderr.map_or_else(|| "?".to_string(), |s| format!("{s:.2}"));
         writeln!(
             out,
-            "gain: Var({}) / Var({}, cross-fitted) = {:.2} ± {se} (jackknife over the folds)",
+            "gain: Var({}) / Var({}) = {:.2} ± {se} (paired jackknife over the folds)",
             g.versus, g.strategy, g.value
         )?;
     }
@@ -73,18 +76,47 @@ pub fn write_report(
     if let Some(e) = &report.solve_error {
         return writeln!(out, "optimal weights: not available: {e}");
     }
-    match &report.weights_fit {
-        Some(f) if report.recommended.is_some_and(|r| r.strategy == f.strategy && r.lambda == f.lambda) => writeln!(
-            out,
-            "recommended weights ({}, λ = {} chosen by cross-validation, fitted on all iterations; ± jackknife SE over the folds):",
-            f.strategy, f.lambda
-        )?,
-        Some(f) => {
+    match (&report.weights_fit, &report.recommended) {
+        (Some(f), Some(r)) if r.strategy == f.strategy && r.lambda == Some(f.lambda) => {
+            write_heuristics(out, &r.heuristics)?;
+            writeln!(
+                out,
+                "recommended weights ({}, λ = {} chosen by cross-validation, fitted on all iterations; ± jackknife SE over the folds, none where the penalty sets a cell):",
+                f.strategy, f.lambda
+            )?
+        }
+        (Some(f), _) => {
             writeln!(out, "weights fitted on all iterations at λ = {} (± jackknife SE over the folds):", f.lambda)?
         }
-        None => {}
+        (None, Some(r)) => {
+            return writeln!(
+                out,
+                "the recommended strategy, {}, weighs each merge by its whole path: it has no table",
+                r.strategy
+            );
+        }
+        (None, None) => {}
     }
     write_weights(out, &report.weights)
+}
+
+/// The heuristics stacked on a table, with β and its standard error, and how to use them.
+pub fn write_heuristics(out: &mut impl Write, heuristics: &[HeuristicWeight]) -> io::Result<()> {
+    if heuristics.is_empty() {
+        return Ok(());
+    }
+    let terms: Vec<String> = heuristics
+        .iter()
+        .map(|h| {
+            let se = h.beta_stderr.map_or_else(String::new, |s| format!(" ± {s:.3}"));
+            format!("β({}) = {:.3}{se}", h.strategy, h.beta)
+        })
+        .collect();
+    writeln!(out, "stacked heuristics: {}", terms.join(", "))?;
+    writeln!(
+        out,
+        "per-path weights w_m = the cell's table weight + Σ β·(the heuristic's w_m); each cell's table sums to 1 − Σβ"
+    )
 }
 
 /// The noise table's rows with their notes (λ, in-sample or cross-fitted, recommended, outside
@@ -95,11 +127,14 @@ pub fn write_noise_rows(
     folds: usize,
     recommended: Option<&RecommendedWeights>,
 ) -> io::Result<()> {
-    writeln!(out, "{:<16} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
+    writeln!(out, "{:<28} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
     for row in rows {
         let mut notes = Vec::new();
         if let Some(l) = row.lambda {
             notes.push(format!("λ = {l}"));
+        }
+        if row.unstable {
+            notes.push("unstable".to_string());
         }
         if row.in_sample {
             notes.push("in-sample (optimistic)".to_string());
@@ -121,7 +156,7 @@ pub fn write_noise_rows(
         let note = notes.join(", ");
         writeln!(
             out,
-            "{:<16} {} {} {} {}  {}",
+            "{:<28} {} {} {} {}  {}",
             row.strategy,
             num(row.luminance, 1e5, 10, 4),
             num(row.luminance_stderr, 1e5, 9, 4),
@@ -142,7 +177,7 @@ pub fn write_weights(out: &mut impl Write, weights: &[WeightRow]) -> io::Result<
     )?;
     let with_se = |w: f64, se: Option<f64>| match se {
         Some(se) => format!("{w:.4} ± {se:.4}"),
-        None => format!("{w:.4}"),
+        None => format!("{w:.4}   (no SE)"),
     };
     for (alpha, w) in weights.iter().enumerate() {
         let status =

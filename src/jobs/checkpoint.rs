@@ -36,7 +36,8 @@ pub(crate) fn decode_checkpoint(
     let moments: Moments = serde_json::from_slice(&checkpoint.moments)
         .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
     moments.check_well_formed().map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
-    if moments.fingerprint != job.config.fingerprint() {
+    // A job an earlier build started keeps its checkpoint's format (and resumes in it).
+    if moments.fingerprint != job.config.fingerprint_of_format(moments.format_version) {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));
     }
     if moments.iterations() != checkpoint.iterations_done {

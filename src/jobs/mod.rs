@@ -6,6 +6,7 @@
 //! * [`solves`] — named re-solves kept with a job (on the manager);
 //! * [`sweeps`] — sweeps: their runs queued as jobs, their figures and table (on the manager);
 //! * [`prediction`] — a job's noise table predicted at another ray budget (on the manager);
+//! * [`evaluation`] — given weights scored on a job's statistics (on the manager);
 //! * [`manager`] — the public handle: submit, get, list, cancel, extend, delete, shutdown;
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
@@ -19,6 +20,7 @@ pub mod checkpoint;
 pub mod documents;
 pub mod driver;
 pub mod error;
+pub mod evaluation;
 pub mod manager;
 pub mod peers;
 pub mod policy;

@@ -57,6 +57,12 @@ fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     wanted.max(light_per_batch_floor).clamp(1, 256).min(memory_cap)
 }
 
+/// Fewest iterations of a restricted batch one rayon piece runs: every piece costs a fresh moments
+/// value and an exact merge of its K folds (≈ 6·10⁴ sums at the paper's grid with the stacked
+/// columns), so a batch of 1024 is cut into at most four pieces — enough to balance two or four
+/// workers, whose iterations cost alike.
+const RESTRICTED_PIECE: usize = 256;
+
 /// Runs iterations `range` of `seed`, adding each to `moments` in index order and calling
 /// `on_batch(&moments, next_iteration)` after every batch; `ControlFlow::Break` ends the run after
 /// that batch. Returns the next iteration to run (`range.end` when all ran).
@@ -87,7 +93,7 @@ pub fn run_iterations(
                 }
             }
             Some(plan) => {
-                let batch = restricted_batch(config, plan, seed, start..end, cancel)?;
+                let batch = restricted_batch(config, plan, seed, start..end, moments, cancel)?;
                 moments.absorb(&batch)?;
             }
         }
@@ -153,6 +159,7 @@ fn restricted_batch(
     plan: &RestrictedPlan,
     seed: u64,
     batch: Range<u64>,
+    like: &Moments,
     cancel: &AtomicBool,
 ) -> Result<Moments, RunError> {
     let (k, norm) = (config.cells.len(), tally_norm(config));
@@ -167,9 +174,9 @@ fn restricted_batch(
     // and a fresh worker.
     (0..(batch.end - batch.start) as usize)
         .into_par_iter()
-        .with_min_len(64)
+        .with_min_len(RESTRICTED_PIECE)
         .try_fold(
-            || (Moments::new(config), worker()),
+            || (like.empty_like(), worker()),
             |(mut moments, mut w), i| {
                 let s = batch.start + i as u64;
                 if cancel.load(Ordering::Relaxed) {
@@ -187,7 +194,7 @@ fn restricted_batch(
         )
         .map(|piece| piece.map(|(moments, _)| moments))
         .try_reduce(
-            || Moments::new(config),
+            || like.empty_like(),
             |mut a, b| {
                 a.absorb(&b)?;
                 Ok(a)

@@ -15,9 +15,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use crate::sim::model::config::{
-    DEFAULT_FOLDS, Engine, MAX_FOLD_SUMS, MAX_FOLDS, MIN_FOLDS, Proposals, SimConfig, folds_allowed,
-};
+use crate::sim::engines::layout::{MAX_FOLD_SUMS, folds_allowed};
+use crate::sim::model::config::{DEFAULT_FOLDS, Engine, MAX_FOLDS, MIN_FOLDS, Proposals, SimConfig};
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
     CellSpec, MIN_LENGTH, SceneSpec, check, check_path_counts, count, merge_patch, optional_count, validate_cells,

@@ -4,6 +4,7 @@
 //!
 //! * [`camera`], [`grid`] — the N_B camera paths and the hash grids of their vertices;
 //! * [`merge`], [`tally`] — what a light path contributes, and the per-chunk/per-iteration tallies;
+//! * [`layout`] — what each moments format keeps of a tally (strategies, moment-vector columns);
 //! * [`pixel`] — the exact pixel tests and the last step of a lobe draw, shared by both engines;
 //! * [`brute`] — the streamed light-path loop (the hot path), in blocks;
 //! * [`restricted`] — the restricted engine: a Poisson process on the light paths that can merge;
@@ -13,6 +14,7 @@ pub mod brute;
 pub mod camera;
 pub mod cost;
 pub mod grid;
+pub mod layout;
 pub mod merge;
 pub mod pixel;
 pub mod restricted;

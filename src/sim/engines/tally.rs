@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use std::f64::consts::PI;
 
+use super::layout::Layout;
 use crate::sim::math::rng::{StreamRng, uniform};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
@@ -36,12 +37,49 @@ pub enum PathStrategy {
     /// The correlation-aware balance heuristic (Grittmann et al. 2021), its effective sample counts
     /// derived for the N_F × N_B pairs of an iteration (`model::heuristics`).
     CorrelationAware,
+    /// The balance heuristic over planes 2 and 3 only (w0 = 0, the other two renormalised): the
+    /// variant that keeps the paper's fixed weight, so the stacked optimum can contain it.
+    BalancePlanes23,
+    /// The power heuristic over planes 2 and 3 only (w0 = 0).
+    PowerPlanes23,
+    /// The correlation-aware heuristic over planes 2 and 3 only (w0 = 0).
+    CorrelationAwarePlanes23,
 }
 
 impl PathStrategy {
-    pub const ALL: [PathStrategy; 7] =
-        [Self::Plane1, Self::Plane2, Self::Plane3, Self::Switch, Self::Balance, Self::Power, Self::CorrelationAware];
+    /// Every per-path strategy, in the order the moments keep their sums. Strategies are only
+    /// ever appended: a moments format keeps a prefix of this list (`stats::layout`).
+    pub const ALL: [PathStrategy; 10] = [
+        Self::Plane1,
+        Self::Plane2,
+        Self::Plane3,
+        Self::Switch,
+        Self::Balance,
+        Self::Power,
+        Self::CorrelationAware,
+        Self::BalancePlanes23,
+        Self::PowerPlanes23,
+        Self::CorrelationAwarePlanes23,
+    ];
     pub const COUNT: usize = Self::ALL.len();
+
+    /// The strategies whose weights are not constant per cell, and so can widen the tabulated
+    /// weights (docs/model.md §7, the stacked optimum): every per-path strategy but the three
+    /// single-plane cases, which a table already contains.
+    pub const STACKABLE: [PathStrategy; 7] = [
+        Self::Switch,
+        Self::Balance,
+        Self::Power,
+        Self::CorrelationAware,
+        Self::BalancePlanes23,
+        Self::PowerPlanes23,
+        Self::CorrelationAwarePlanes23,
+    ];
+
+    /// Position in [`PathStrategy::ALL`] (the index of its sums in the moments).
+    pub fn index(self) -> usize {
+        self as usize
+    }
 
     /// Whether this is one of the paper's fixed cases 1–4 (a weight of one on a plane, or the
     /// switch), as opposed to a heuristic that weighs each merge by its path densities.
@@ -58,7 +96,9 @@ impl PathStrategy {
             Self::Plane1 => [Some(1.0), Some(0.0), Some(0.0)],
             Self::Plane2 => [Some(0.0), Some(1.0), Some(0.0)],
             Self::Plane3 => [Some(0.0), Some(0.0), Some(1.0)],
-            Self::Switch => [Some(0.0), None, None],
+            Self::Switch | Self::BalancePlanes23 | Self::PowerPlanes23 | Self::CorrelationAwarePlanes23 => {
+                [Some(0.0), None, None]
+            }
             Self::Balance | Self::Power | Self::CorrelationAware => [None, None, None],
         }
     }
@@ -68,7 +108,7 @@ impl PathStrategy {
     /// effective sample counts do; the cases and the VCM balance and power heuristics (whose pdfs
     /// are the techniques' relative densities) do not.
     pub fn depends_on_budget(self) -> bool {
-        matches!(self, Self::CorrelationAware)
+        matches!(self, Self::CorrelationAware | Self::CorrelationAwarePlanes23)
     }
 
     /// The name used in results.
@@ -81,6 +121,9 @@ impl PathStrategy {
             Self::Balance => "balance",
             Self::Power => "power",
             Self::CorrelationAware => "correlation_aware",
+            Self::BalancePlanes23 => "balance_planes23",
+            Self::PowerPlanes23 => "power_planes23",
+            Self::CorrelationAwarePlanes23 => "correlation_aware_planes23",
         }
     }
 }
@@ -132,8 +175,23 @@ pub fn strategy_weights(
     let light_start = scene.illumination.density(x3_light[0].hypot(x3_light[1]));
     let area = PI * config.merge_radius * config.merge_radius;
     let sharing = Sharing::new(&geometry.vertex_densities(scene), light_start, area);
-    let correlated = correlation_aware(p, &sharing, config.light_paths as f64, config.camera_paths as f64);
-    [one_hot(0), one_hot(1), one_hot(2), switch, balance(p)[plane], power(p)[plane], correlated[plane]]
+    let (nf, nb) = (config.light_paths as f64, config.camera_paths as f64);
+    let correlated = correlation_aware(p, &sharing, nf, nb);
+    // The w0 = 0 variants: the same heuristics with technique 0 removed (p₀ = 0), i.e. renormalised
+    // over planes 2 and 3 — what the paper's fixed weights allow.
+    let p23 = [0.0, p[1], p[2]];
+    [
+        one_hot(0),
+        one_hot(1),
+        one_hot(2),
+        switch,
+        balance(p)[plane],
+        power(p)[plane],
+        correlated[plane],
+        balance(p23)[plane],
+        power(p23)[plane],
+        correlation_aware(p23, &sharing, nf, nb)[plane],
+    ]
 }
 
 /// The four blocks of an iteration's pairs when its light and camera paths are split in halves
@@ -417,40 +475,52 @@ impl IterationTally {
         self.block_strategies = block_strategies.map(|b| b.map(|v| v * 4.0 * norm));
     }
 
-    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B) of docs/model.md as sparse (index, value) pairs in
-    /// index order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α, and B = Σ_α C⁽²⁾_α at
-    /// 2K.
-    pub fn moment_vector(&self, cells: usize) -> Vec<(usize, f64)> {
+    /// The moment vector Y_s = (A⁽⁰⁾, A⁽¹⁾, B, H) of docs/model.md §7 in `layout`, as sparse (index,
+    /// value) pairs in index order: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α for m = 0, 1 at index m·K + α,
+    /// B = Σ_α C⁽²⁾_α at 2K, then each of the layout's stackable strategies' C_s (H_h).
+    pub fn moment_vector(&self, layout: Layout) -> Vec<(usize, f64)> {
         let mut y = Vec::new();
-        moment_vector_into(&self.cell_values, cells, &mut y);
+        moment_vector_into(&self.cell_values, &self.strategies, layout, &mut y);
         y
     }
 
     /// The moment vector of block `b` (noise components), into `y`: empty when the iteration
     /// kept no blocks (no components, or no merge).
-    pub fn block_moment_vector(&self, b: usize, cells: usize, y: &mut Vec<(usize, f64)>) {
+    pub fn block_moment_vector(&self, b: usize, layout: Layout, y: &mut Vec<(usize, f64)>) {
         y.clear();
         if !self.block_values.is_empty() {
-            moment_vector_into(&self.block_values[b * 3 * cells..(b + 1) * 3 * cells], cells, y);
+            let slots = 3 * layout.cells;
+            moment_vector_into(&self.block_values[b * slots..(b + 1) * slots], &self.block_strategies[b], layout, y);
         }
     }
 }
 
-/// Y = (A⁽⁰⁾, A⁽¹⁾, B) from per-slot values C⁽ᵐ⁾_α (see [`IterationTally::moment_vector`]).
-fn moment_vector_into(values: &[f64], cells: usize, y: &mut Vec<(usize, f64)>) {
-    {
-        let c = |m: usize, a: usize| values[m * cells + a];
-        for m in 0..2 {
-            for a in 0..cells {
-                let v = c(m, a) - c(2, a);
-                if v != 0.0 {
-                    y.push((m * cells + a, v));
-                }
+/// Y = (A⁽⁰⁾, A⁽¹⁾, B, H) from per-slot values C⁽ᵐ⁾_α and per-path strategy values (see
+/// [`IterationTally::moment_vector`]).
+fn moment_vector_into(
+    values: &[f64],
+    strategies: &[f64; PathStrategy::COUNT],
+    layout: Layout,
+    y: &mut Vec<(usize, f64)>,
+) {
+    let cells = layout.cells;
+    let c = |m: usize, a: usize| values[m * cells + a];
+    for m in 0..2 {
+        for a in 0..cells {
+            let v = c(m, a) - c(2, a);
+            if v != 0.0 {
+                y.push((m * cells + a, v));
             }
         }
-        let b: f64 = (0..cells).map(|a| c(2, a)).sum();
-        if b != 0.0 {
-            y.push((2 * cells, b));
+    }
+    let b: f64 = (0..cells).map(|a| c(2, a)).sum();
+    if b != 0.0 {
+        y.push((2 * cells, b));
+    }
+    for (i, h) in layout.heuristics().iter().enumerate() {
+        let v = strategies[h.index()];
+        if v != 0.0 {
+            y.push((2 * cells + 1 + i, v));
         }
     }
 }
@@ -462,23 +532,40 @@ mod tests {
     #[test]
     fn chunks_reduce_in_order_and_normalise() {
         let cells = 2;
-        let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25, 0.125];
+        let w = [1.0, 0.0, 0.0, 0.0, 0.5, 0.25, 0.125, 0.0, 0.0, 0.0];
         let mut scratch = ChunkScratch::new(cells);
         scratch.record(Technique::Plane1, 1, cells, 4.0, &w, CameraPaths::All);
         scratch.count_merge(Technique::Plane1);
-        scratch.record(Technique::Plane3, 0, cells, 2.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875], CameraPaths::One(0));
+        scratch.record(
+            Technique::Plane3,
+            0,
+            cells,
+            2.0,
+            &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875, 1.0, 1.0, 1.0],
+            CameraPaths::One(0),
+        );
         scratch.count_merge(Technique::Plane3);
         let a = scratch.take();
         assert_eq!(a.entries, vec![(1, 4.0, 1), (4, 2.0, 1)], "slots sorted, counts kept");
         assert_eq!(scratch.take(), ChunkTally::default(), "take resets the scratch");
-        scratch.record(Technique::Plane3, 0, cells, 6.0, &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875], CameraPaths::One(1));
+        scratch.record(
+            Technique::Plane3,
+            0,
+            cells,
+            6.0,
+            &[0.0, 0.0, 1.0, 1.0, 0.5, 0.75, 0.875, 1.0, 1.0, 1.0],
+            CameraPaths::One(1),
+        );
         let b = scratch.take();
         let t = IterationTally::from_chunks(3, cells, 0.5, [&a, &b]);
         assert_eq!(t.cell_values, vec![0.0, 2.0, 0.0, 0.0, 4.0, 0.0]);
         assert_eq!(t.cell_counts, vec![0, 1, 0, 0, 2, 0]);
-        assert_eq!(t.strategies, [2.0, 0.0, 4.0, 4.0, 3.0, 3.5, 3.75]);
+        assert_eq!(t.strategies, [2.0, 0.0, 4.0, 4.0, 3.0, 3.5, 3.75, 4.0, 4.0, 4.0]);
         assert_eq!(t.merges, [1, 0, 1]);
         // Y = (A0, A1, B): A0 = C0 − C2 = (0 − 4, 2 − 0), A1 = (0 − 4, 0), B = 4.
-        assert_eq!(t.moment_vector(cells), vec![(0, -4.0), (1, 2.0), (2, -4.0), (4, 4.0)]);
+        assert_eq!(t.moment_vector(Layout::new(cells, 2)), vec![(0, -4.0), (1, 2.0), (2, -4.0), (4, 4.0)]);
+        // Format 3 appends the stackable strategies' values: switch 4, balance 3, power 3.5, …
+        let y = t.moment_vector(Layout::new(cells, 3));
+        assert_eq!(&y[4..], &[(5, 4.0), (6, 3.0), (7, 3.5), (8, 3.75), (9, 4.0), (10, 4.0), (11, 4.0)]);
     }
 }

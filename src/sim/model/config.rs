@@ -24,10 +24,13 @@ pub enum Proposals {
     Reverse,
 }
 
-/// Version of the moments layout; part of the fingerprint. Format 2 (issue 13) keeps K folds by
-/// iteration index s mod K, for K-fold cross-fitting; format 1 kept two (even, odd) and cannot be
-/// split into more, so its documents and checkpoints are refused with a message that says so.
-pub const MOMENTS_FORMAT_VERSION: u32 = 2;
+/// Version of the moments layout this build writes; part of the fingerprint. Format 3 (issue 21)
+/// adds the w0 = 0 heuristics and one moment-vector column per stackable strategy
+/// (`stats::layout`); format 2 (issue 13) keeps K folds by iteration index s mod K, for K-fold
+/// cross-fitting, and is still read (its jobs even resume in it); format 1 kept two folds (even,
+/// odd) that cannot be split into more, so its documents and checkpoints are refused with a message
+/// that says so.
+pub const MOMENTS_FORMAT_VERSION: u32 = 3;
 
 /// Fewest and most cross-fitting folds K.
 pub const MIN_FOLDS: usize = 2;
@@ -36,11 +39,6 @@ pub const MAX_FOLDS: usize = 20;
 /// all-data fit the result recommends than 2-fold's half), and the jackknife over 10 fold fits has
 /// 9 degrees of freedom (2σ intervals cover ≈ 92% under normality, against 88% with K = 5).
 pub const DEFAULT_FOLDS: usize = 10;
-/// Most exact sums all folds' ΣYYᵀ may hold together: what two folds of the largest grid need
-/// (the bound before K-fold moments), so documents, checkpoints and their parsers stay as large as
-/// they were; finer grids get fewer folds (see [`folds_allowed`]).
-pub const MAX_FOLD_SUMS: usize = 2 * packed_len(2 * super::cells::MAX_CELLS + 1);
-
 /// Length of a packed upper triangle of side n.
 pub const fn packed_len(n: usize) -> usize {
     n * (n + 1) / 2
@@ -52,14 +50,6 @@ pub fn packed_index(n: usize, i: usize, j: usize) -> usize {
     debug_assert!(i <= j && j < n);
     // Rows 0..i hold n, n−1, …, n−i+1 entries: i·n − i(i−1)/2 in all; then j − i into row i.
     i * n - i * (i + 1) / 2 + j
-}
-
-/// Most folds a grid of `cells` cells may have (at least [`MIN_FOLDS`]); with noise components
-/// every fold holds four packed matrices instead of one (ΣYYᵀ and the three component sums of
-/// `stats::components`), so a quarter as many.
-pub fn folds_allowed(cells: usize, noise_components: bool) -> usize {
-    let per_fold = packed_len(2 * cells + 1) * if noise_components { 4 } else { 1 };
-    (MAX_FOLD_SUMS / per_fold).clamp(MIN_FOLDS, MAX_FOLDS)
 }
 
 /// Light paths per chunk: the unit of parallel work and of random streams (stream c of an
@@ -161,10 +151,16 @@ impl SimConfig {
     }
 
     fn compute_fingerprint(&self) -> String {
+        self.fingerprint_of_format(MOMENTS_FORMAT_VERSION)
+    }
+
+    /// The fingerprint the same configuration had in moments `format` (a supported one): what a
+    /// checkpoint or document written by an earlier build carries.
+    pub fn fingerprint_of_format(&self, format: u32) -> String {
         let Self { scene, merge_radius, light_paths, camera_paths, cells, engine, folds, noise_components, .. } =
             self.clone();
         let input = FingerprintInput {
-            format: MOMENTS_FORMAT_VERSION,
+            format,
             generator: GENERATOR_ID,
             engine: (engine != Engine::Brute).then(|| engine.id()),
             scene: &scene.spec,
@@ -214,11 +210,6 @@ impl SimConfig {
     /// Light paths in chunk `c`.
     pub fn chunk_len(&self, c: u64) -> u64 {
         (self.light_paths - c * LIGHT_CHUNK).min(LIGHT_CHUNK)
-    }
-
-    /// Dimension of the moment vector Y = (A⁽⁰⁾, A⁽¹⁾, B): 2K + 1.
-    pub fn dimension(&self) -> usize {
-        2 * self.cells.len() + 1
     }
 }
 

@@ -4,23 +4,30 @@
 //! * [`options`] — how the weights are fitted, and the one way to patch and validate that;
 //! * [`solver`] — the optimal weights by direct minimisation of the variance;
 //! * [`crossfit`] — K-fold cross-fitting of fitted weights and the jackknife over the fold fits;
-//! * [`noise`] — luminance and RMS of every strategy with standard errors, the recommended weights
-//!   and the gain;
+//! * [`row`] — one row of the noise table (L, RMS and their standard errors) and the per-path rows;
+//! * [`fitted`] — the fitted rows: the table, the stacked optimum, each heuristic corrected;
+//! * [`recommend`] — which row to recommend, with its guard, and the gain;
+//! * [`noise`] — the noise table: every row, the recommendation and the gain;
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
 //! * [`report`] — the result document of a run; [`export`] — its tables as CSV;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
 //!   noise components;
-//! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy.
+//! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy;
+//! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run.
 
 pub mod budget;
 pub mod crossfit;
+pub mod evaluate;
 pub mod export;
+pub mod fitted;
 pub mod noise;
 pub mod options;
 pub mod predict;
+pub mod recommend;
 pub mod report;
+pub mod row;
 pub mod solver;
 pub mod strategy;
 pub mod warnings;

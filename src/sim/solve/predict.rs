@@ -19,12 +19,15 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::{CrossFitting, jackknife_se, select_lambda};
+use super::fitted::{Fitted, scored_row};
 use super::noise::{NoiseRow, respects_fixed};
 use super::options::SolverOptions;
+use super::recommend::{FoldSums, recommend};
 use super::report::{RecommendedWeights, WeightRow, weight_rows};
-use super::solver::fit;
+use super::solver::stackable;
 use super::strategy::Strategy;
 use super::ystats::{YStats, unpack};
+use crate::sim::engines::layout::Layout;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::components::{CAMERA, CROSS, LIGHT};
@@ -60,12 +63,15 @@ pub struct Prediction {
     /// Iterations of the run (the standard errors of L are for as many at the new budget).
     pub iterations: u64,
     pub folds: usize,
-    /// Rows as in a job's noise table: the per-path strategies, then `optimal_cv` re-fitted for the
-    /// new budget (cross-fitted).
+    /// Rows as in a job's noise table: the per-path strategies, then `optimal_cv` and
+    /// `optimal_stacked` re-fitted for the new budget (cross-fitted, with the jackknife SE of
+    /// their RMS over the folds; the stacked family without the heuristics whose weights depend
+    /// on the budget).
     pub noise_table: Vec<NoiseRow>,
-    /// The re-fitted weights (`optimal_cv`'s λ, fitted on all folds' predicted sums).
+    /// The row recommended at the new budget, by the same guard as a job's result.
     pub recommended: Option<RecommendedWeights>,
-    /// Their table, with jackknife standard errors over the folds.
+    /// Its re-fitted table (fitted on all folds' predicted sums), with jackknife standard errors;
+    /// empty when a per-path strategy is recommended.
     pub weights: Vec<WeightRow>,
     /// Why there are no re-fitted weights, if there are none.
     pub solve_error: Option<String>,
@@ -93,9 +99,9 @@ fn rescale(v: f64, [ul, uc, u0]: [f64; 3], from: Budget, to: Budget) -> f64 {
 }
 
 impl ComponentStats {
-    fn from_fold(fold: &FoldMoments, cells: usize) -> Option<Self> {
+    fn from_fold(fold: &FoldMoments, layout: Layout) -> Option<Self> {
         let c = fold.components.as_ref()?;
-        let n = 2 * cells + 1;
+        let n = layout.dimension();
         let parts = [LIGHT, CAMERA, CROSS].map(|k| unpack(c.matrix(k), n));
         let strategies = fold
             .strategies
@@ -103,7 +109,7 @@ impl ComponentStats {
             .zip(&c.strategies)
             .map(|(p, u)| [p[0].value(), p[1].value(), u[0].value(), u[1].value(), u[2].value()])
             .collect();
-        Some(Self { y: YStats::from_fold(fold, cells), parts, strategies })
+        Some(Self { y: YStats::from_fold(fold, layout), parts, strategies })
     }
 
     fn without(&self, part: &Self) -> Self {
@@ -142,7 +148,7 @@ impl ComponentStats {
     /// (M, Σ C, predicted Σ C²) of per-path strategy `k` at `to`.
     fn strategy_sums(&self, k: usize, from: Budget, to: Budget) -> Option<[f64; 3]> {
         let m = self.y.m;
-        let [s1, s2, ul, uc, u0] = self.strategies[k];
+        let [s1, s2, ul, uc, u0] = *self.strategies.get(k)?;
         (m >= 2.0).then(|| {
             let v = (s2 - s1 * s1 / m) / (m - 1.0);
             let predicted = rescale(v, [ul / m, uc / m, u0 / m], from, to);
@@ -168,24 +174,35 @@ pub struct Predictor {
     /// The folds that hold iterations, and their complements.
     test: Vec<ComponentStats>,
     train: Vec<ComponentStats>,
+    /// The fold index of each `test` entry.
+    fold_index: Vec<usize>,
 }
 
 impl Predictor {
     /// Reads `moments`, drawn at `measured`.
     pub fn new(moments: &Moments, measured: Budget) -> Result<Self, PredictError> {
-        let cells = moments.cells;
-        let all = ComponentStats::from_fold(&moments.pooled(), cells).ok_or(PredictError::NoComponents)?;
+        let layout = moments.layout();
+        let all = ComponentStats::from_fold(&moments.pooled(), layout).ok_or(PredictError::NoComponents)?;
         if all.y.m < 2.0 {
             return Err(PredictError::TooFewIterations(moments.iterations()));
         }
-        let test: Vec<ComponentStats> = moments
-            .folds
+        let used: Vec<(usize, &FoldMoments)> =
+            moments.folds.iter().enumerate().filter(|(_, f)| f.iterations > 0).collect();
+        let fold_index = used.iter().map(|(f, _)| *f).collect();
+        let test: Vec<ComponentStats> = used
             .iter()
-            .filter(|f| f.iterations > 0)
-            .map(|f| ComponentStats::from_fold(f, cells).expect("every fold keeps components"))
+            .map(|(_, f)| ComponentStats::from_fold(f, layout).expect("every fold keeps components"))
             .collect();
         let train = test.iter().map(|f| all.without(f)).collect();
-        Ok(Self { measured, iterations: moments.iterations(), folds: moments.fold_count(), all, test, train })
+        Ok(Self {
+            measured,
+            iterations: moments.iterations(),
+            folds: moments.fold_count(),
+            all,
+            test,
+            train,
+            fold_index,
+        })
     }
 
     /// The noise table and the re-fitted optimum at `to`.
@@ -204,27 +221,60 @@ impl Predictor {
                 train: self.train.iter().map(predicted).collect::<Option<_>>()?,
             })
         })();
-        let mut recommended = None;
-        let mut weights = Vec::new();
-        let mut solve_error = None;
-        let optimum = cf.as_ref().ok_or_else(|| "every fold needs at least 2 iterations".to_string()).and_then(|cf| {
-            let chosen = select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas)
-                .map_err(|f| format!("no λ of the grid could be cross-fitted ({})", f.join("; ")))?;
-            let all_fit = fit(&cf.all, grid, &solver.fixed, chosen.lambda).map_err(|e| e.to_string())?;
-            Ok((chosen, all_fit))
-        });
-        rows.push(match optimum {
-            Ok((chosen, all_fit)) => {
-                let [m, s1, s2] = chosen.totals();
-                recommended = Some(RecommendedWeights { strategy: Strategy::OptimalCv, lambda: chosen.lambda });
-                weights = weight_rows(grid, &all_fit, chosen.weight_stderr().as_deref());
-                NoiseRow { lambda: Some(chosen.lambda), ..NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None) }
+        let mut fitted: Vec<Fitted> = Vec::new();
+        match &cf {
+            None => rows.push(NoiseRow::failed(Strategy::OptimalCv, "every fold needs at least 2 iterations".into())),
+            Some(cf) => {
+                // Heuristics whose weights depend on N_F and N_B have no column at another budget.
+                let family: Vec<PathStrategy> = stackable(cf.all.layout, &solver.fixed)
+                    .into_iter()
+                    .filter(|h| from == to || !h.depends_on_budget())
+                    .collect();
+                let mut families = vec![(Strategy::OptimalCv, Vec::new())];
+                if !family.is_empty() {
+                    families.push((Strategy::OptimalStacked, family));
+                }
+                for (name, family) in families {
+                    match select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas, &family) {
+                        Ok(selection) => {
+                            rows.push(scored_row(name, &selection.chosen, cf, false));
+                            fitted.push(Fitted { strategy: name, scored: selection.chosen });
+                        }
+                        Err(f) => rows.push(NoiseRow::failed(
+                            name,
+                            format!("no λ of the grid could be cross-fitted ({})", f.join("; ")),
+                        )),
+                    }
+                }
             }
-            Err(e) => {
-                solve_error = Some(e.clone());
-                NoiseRow { error: Some(e), ..NoiseRow::from_sums(Strategy::OptimalCv, 0.0, 0.0, 0.0, None) }
+        }
+        let path_sums = |p: PathStrategy| -> FoldSums {
+            if p.depends_on_budget() && from != to {
+                return Vec::new();
             }
-        });
+            let used = (0..self.test.len()).map(|i| (self.fold_index[i], &self.test[i]));
+            used.filter_map(|(f, t)| t.strategy_sums(p.index(), from, to).map(|s| (f, s))).collect()
+        };
+        let choice = recommend(&rows, &fitted, &path_sums);
+        let (mut recommended, mut weights, mut solve_error) = (None, Vec::new(), None);
+        match &choice.recommended {
+            Ok(r) => {
+                recommended = Some(RecommendedWeights {
+                    strategy: r.strategy,
+                    lambda: r.lambda(),
+                    heuristics: rows
+                        .iter()
+                        .find(|x| x.strategy == r.strategy)
+                        .map(|x| x.heuristics.clone())
+                        .unwrap_or_default(),
+                    reason: r.reason.clone(),
+                });
+                if let Some(fit) = r.fit() {
+                    weights = weight_rows(grid, fit, r.weight_stderr().as_deref());
+                }
+            }
+            Err(e) => solve_error = Some(e.clone()),
+        }
         Prediction {
             budget: to,
             measured: from,
@@ -267,6 +317,9 @@ fn path_row(
             s.name()
         ));
         return row;
+    }
+    if k >= all.strategies.len() {
+        return NoiseRow::failed(name, "not in these moments: format 2 does not keep this strategy".into());
     }
     let Some([m, s1, s2]) = all.strategy_sums(k, from, to) else {
         return NoiseRow::from_sums(name, all.y.m, 0.0, 0.0, None);

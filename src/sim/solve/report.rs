@@ -2,13 +2,18 @@
 //!
 //! Its field names are a stable interface (scripts and dashboards read them): `iterations`,
 //! `reference_luminance`, `noise_table` (rows of [`NoiseRow`]), `recommended`, `weights` (rows of
-//! [`WeightRow`]: the recommended weights with standard errors unless a λ was asked for),
-//! `weights_fit`, `gain`, `warnings`, `solve_error`, `merges_per_iteration`, `fingerprint`,
-//! `coverage`.
+//! [`WeightRow`]: the recommended table with standard errors unless a λ was asked for; empty when
+//! a per-path strategy is recommended), `weights_fit`, `gain`, `warnings`, `solve_error`,
+//! `merges_per_iteration`, `fingerprint`, `coverage`.
+//!
+//! A recommended fitted row's per-path weights are w_m(path) = the cell's table weight
+//! + Σ_h β_h·w_h,m(path) over `recommended.heuristics` (docs/model.md §7): each cell's table
+//! weights sum to 1 − Σβ.
 
 use serde::{Deserialize, Serialize};
 
-use super::noise::{Gain, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
+use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
+use super::recommend::Gain;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
 use super::warnings::{Warning, warnings};
@@ -28,8 +33,9 @@ pub struct WeightRow {
     pub w0: f64,
     pub w1: f64,
     pub w2: f64,
-    /// Jackknife standard errors over the K fold fits (null when fewer than two folds hold
-    /// iterations or a fold fit failed; 0 for a fixed weight).
+    /// Jackknife standard errors over the K fold fits, for cells fitted to their own samples (0
+    /// for a fixed weight); null for a cell the penalty sets (`smoothed`), an empty one, or when
+    /// fewer than two folds hold iterations or a fold fit failed.
     pub w0_stderr: Option<f64>,
     pub w1_stderr: Option<f64>,
     pub w2_stderr: Option<f64>,
@@ -51,7 +57,7 @@ pub struct MergesPerIteration {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct WeightsFit {
-    /// `optimal_cv` for the recommended weights; `optimal` for a table asked for at a given λ.
+    /// The recommended fitted row; `optimal` for a table asked for at a given λ.
     pub strategy: Strategy,
     pub lambda: f64,
     /// Always true: a weights table is fitted on all iterations (the figures that say how good
@@ -59,13 +65,19 @@ pub struct WeightsFit {
     pub fitted_on_all_iterations: bool,
 }
 
-/// The recommendation: which strategy's weights to take into a renderer.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// The recommendation: which row's weights to take into a renderer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RecommendedWeights {
     pub strategy: Strategy,
-    /// The λ chosen by cross-validation.
-    pub lambda: f64,
+    /// The λ chosen by cross-validation (null when a per-path strategy is recommended).
+    pub lambda: Option<f64>,
+    /// β of each heuristic stacked on the table (per-path weights = table + Σ β_h·w_h).
+    #[serde(default)]
+    pub heuristics: Vec<HeuristicWeight>,
+    /// Why this row: the guard's verdict in a sentence.
+    #[serde(default)]
+    pub reason: String,
 }
 
 /// The result of a run (or of a re-solve of stored moments).
@@ -79,14 +91,17 @@ pub struct RunReport {
     /// evaluation budget (extreme geometry).
     pub reference_luminance: Option<f64>,
     pub noise_table: Vec<NoiseRow>,
-    /// The recommended weights (`optimal_cv`'s λ fitted on all iterations); null when no λ of the
-    /// grid could be cross-fitted (see `solve_error`).
+    /// The recommended row (the honest row with the lowest RMS that keeps the fixed weights, a
+    /// fitted one only if it beats the best per-path strategy beyond one standard error); null
+    /// when no row could be computed (see `solve_error`).
     pub recommended: Option<RecommendedWeights>,
-    /// The weights table: the recommended weights, or the in-sample fit at the λ asked for; empty
-    /// when that fit failed (see `solve_error`).
+    /// The weights table: the recommended fitted row's table (fitted on all iterations at its λ),
+    /// or the in-sample fit at the λ asked for; empty when a per-path strategy is recommended or
+    /// the fit failed (see `solve_error`).
     pub weights: Vec<WeightRow>,
     pub weights_fit: Option<WeightsFit>,
-    /// Var(best per-path strategy) / Var(recommended weights, cross-fitted), with a jackknife SE.
+    /// Var(best other per-path strategy keeping the fixed weights) / Var(recommended row), with the
+    /// paired jackknife SE.
     pub gain: Option<Gain>,
     /// What the data cannot support (empty when nothing is wrong).
     pub warnings: Vec<Warning>,
@@ -103,7 +118,10 @@ pub(crate) fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]
         .enumerate()
         .map(|(alpha, c)| {
             let b = grid.bounds(alpha);
-            let se = |m: usize| stderr.map(|s| s[alpha][m]);
+            // A data standard error only for weights estimated from the cell's own samples (or
+            // fixed, 0): a smoothed cell's fold-to-fold spread is its neighbours'.
+            let measured = c.status.from_data() || c.status == CellStatus::Fixed;
+            let se = |m: usize| stderr.filter(|_| measured).map(|s| s[alpha][m]);
             WeightRow {
                 r2: b.r2,
                 r3: b.r3,
@@ -132,8 +150,17 @@ pub fn build_report(
 ) -> RunReport {
     let table = noise_table(moments, grid, solver);
     let warnings = warnings(moments, &table);
-    let recommended =
-        table.recommended.as_ref().ok().map(|r| RecommendedWeights { strategy: r.strategy, lambda: r.lambda });
+    let recommended = table.recommended.as_ref().ok().map(|r| RecommendedWeights {
+        strategy: r.strategy,
+        lambda: r.lambda(),
+        heuristics: table
+            .rows
+            .iter()
+            .find(|x| x.strategy == r.strategy)
+            .map(|x| x.heuristics.clone())
+            .unwrap_or_default(),
+        reason: r.reason.clone(),
+    });
     let (weights, weights_fit, solve_error) = match (weights_lambda, &table.recommended) {
         (Some(lambda), _) => match weights_at(&table.cross_fitting, grid, solver, lambda) {
             Ok((fit, se)) => (
@@ -143,11 +170,14 @@ pub fn build_report(
             ),
             Err(e) => (Vec::new(), None, Some(e.to_string())),
         },
-        (None, Ok(r)) => (
-            weight_rows(grid, &r.fit, r.stderr.as_deref()),
-            Some(WeightsFit { strategy: r.strategy, lambda: r.lambda, fitted_on_all_iterations: true }),
-            None,
-        ),
+        (None, Ok(r)) => match (r.fit(), r.lambda()) {
+            (Some(fit), Some(lambda)) => (
+                weight_rows(grid, fit, r.weight_stderr().as_deref()),
+                Some(WeightsFit { strategy: r.strategy, lambda, fitted_on_all_iterations: true }),
+                None,
+            ),
+            _ => (Vec::new(), None, None),
+        },
         (None, Err(e)) => (Vec::new(), None, Some(e.clone())),
     };
     let [plane1, plane2, plane3] = merge_rates_of(&table.pooled);

@@ -1,28 +1,50 @@
-//! Optimal tabulated weights from the moments (model.md, "moments, optimum").
+//! Optimal weights from the moments (docs/model.md §7): a table, or a table with heuristics stacked
+//! on it.
 //!
-//! For cell-wise weights W = (w0_α, w1_α) (w2 = 1 − w0 − w1), one iteration's pixel value is
-//! C_s(W) = ⟨A_s|W⟩ + B_s, and its sample variance over the iterations is
-//! Var(W) = WᵀS_AA W + 2 S_ABᵀW + S_BB with S the sample covariance of Y = (A, B) — model.md's
-//! (D − ĀĀᵀ), (F − B̄Ā) and mean(B²) − B̄². We minimise the dimensionless objective
+//! **The family.** Per-path weights w_m(path) = T_m,α + Σ_h β_h·w_h,m(path): a table T constant on
+//! the cells α of the join path plus β_h times the weights of each stacked per-path heuristic h.
+//! The weights sum to one on every path when every cell's T sums to 1 − Σβ. β = 0 is the paper's
+//! tabulated optimum; T = 0 with β_h = 1 is heuristic h itself; β_h = 1 with T free is "h corrected
+//! by a table"; and every heuristic of the family is contained in its optimum. With the moment
+//! vector Y = (A⁽⁰⁾, A⁽¹⁾, B, H) (§7: A⁽ᵐ⁾_α = C⁽ᵐ⁾_α − C⁽²⁾_α, B = Σ_α C⁽²⁾_α, H_h = heuristic h's
+//! per-iteration value), the pixel value is
 //!
-//!   J(W) = Var(W)/μ² + λ Σ_{neighbouring cells α~β} Σ_{m=0,1,2} (w_m,α − w_m,β)²
+//!   C_s = ⟨A_s|T⟩ + B_s + Σ_h β_h (H_h,s − B_s) = ⟨Y_s|v⟩,   v = (T₀, T₁, 1 − Σβ, β),
 //!
-//! where μ is a fixed luminance scale (the mean of the three single-plane estimates, which does not
-//! depend on W), so that λ is comparable across scenes: Var/μ² is the squared relative RMS.
-//! Fixed weights are constraints: W = W₀ + P·z with z the free weights, and the normal equations
-//! (PᵀS_AA P/μ² + λPᵀΛP) z = −Pᵀ(S_AA W₀ + S_AB)/μ² − λPᵀΛW₀ (Λ the penalty's graph Laplacian)
-//! are solved by Cholesky after Jacobi scaling — no explicit inverse.
+//! linear in (T, β), so its sample variance is the quadratic form vᵀS v (S the sample covariance
+//! of Y) and the optimum is a least-squares problem like the paper's. We minimise
 //!
-//! Failures are values: too few iterations, no signal, and singular systems (with the cells that
-//! span the undetermined directions) are reported as [`SolveError`]s. With λ = 0, cells without
-//! samples do not enter the variance at all; they are left out of the fit, reported as `empty`, and
-//! given the weights of their nearest fitted cell (which matters only for evaluation on other data).
+//!   J = vᵀS v/μ² + λ Σ_{neighbouring cells α~β} Σ_{m=0,1,2} (T_m,α − T_m,β)²
+//!
+//! with μ a fixed luminance scale (the mean of the three single-plane estimates, independent of
+//! the weights), so that Var/μ² is the squared relative RMS and λ compares across scenes. β is not
+//! penalised (it is one number per heuristic, not a surface).
+//!
+//! **Fixed weights** are constraints: with T₀ the table of the fixed values (free components 0),
+//! T = (1 − Σβ)·T₀ + P z keeps every fixed component at its value when each stacked heuristic gives
+//! every path exactly those values ([`admits`]: with the paper's w0 = 0, the switch and the
+//! heuristics renormalised over planes 2–3). So v = v₀ + D x with v₀ = (T₀, 1, 0), x = (z, β),
+//! table columns of D on A and one column per heuristic, e_{H_h} − e_B − T₀. The normal equations
+//! (DᵀSD/μ² + λDᵀΛD) x = −Dᵀ(S v₀/μ² + λΛv₀) (Λ the penalty's graph Laplacian on T) are built
+//! from the sparse columns of D and solved by Cholesky after Jacobi scaling — no explicit inverse.
+//! A heuristic the table can represent exactly (the switch on a grid with an edge at its radius)
+//! would leave a direction undetermined at λ = 0; a ridge of [`BETA_RIDGE`] of β's own curvature
+//! settles it on the table without changing the variance measurably.
+//!
+//! **Cells.** Failures are values: too few iterations, no signal, singular systems (with the cells
+//! that span the undetermined directions). With λ = 0, cells without samples do not enter the
+//! variance at all; they are left out of the fit, reported as `empty`, and take the weights of
+//! their nearest fitted cell. With λ > 0 a cell whose own samples carry less than
+//! [`SMOOTHED_DATA_SHARE`] of its weights' curvature is `smoothed`: the penalty, i.e. its
+//! neighbours, sets its weights, and their spread from fold to fold is not a data standard error.
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
 use super::options::FixedWeights;
 use super::ystats::YStats;
+use crate::sim::engines::layout::Layout;
+use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 
 /// How a cell's weights were determined.
@@ -30,7 +52,7 @@ use crate::sim::model::cells::CellGrid;
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum CellStatus {
-    /// Fitted to the data.
+    /// Fitted to the cell's own samples.
     Fitted,
     /// Every component is fixed by the constraints.
     Fixed,
@@ -40,13 +62,23 @@ pub enum CellStatus {
     /// Samples whose contributions are negligible (they move the variance by < 10⁻¹⁴ of the most
     /// informative weight), λ = 0: treated like an empty cell.
     Uninformative,
-    /// No samples, λ > 0: weights set by the gradient penalty alone.
+    /// λ > 0 and the cell's own samples (none, or few) carry less than half of its weights'
+    /// curvature: the gradient penalty — its neighbours — sets them. No data standard error.
     Smoothed,
+}
+
+impl CellStatus {
+    /// Whether the cell's weights are estimated from its own samples, so that a standard error
+    /// over the fold fits measures them.
+    pub fn from_data(self) -> bool {
+        self == Self::Fitted
+    }
 }
 
 /// Weights of one cell.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct CellWeights {
+    /// The table's (T₀, T₁, T₂); they sum to 1 − Σβ.
     pub w: [f64; 3],
     /// Merge events in the cell, all planes, over the fitted iterations.
     pub samples: u64,
@@ -57,17 +89,33 @@ pub struct CellWeights {
 #[derive(Debug, Clone)]
 pub struct Fit {
     pub cells: Vec<CellWeights>,
+    /// β_h of each stacked heuristic (empty for a plain table).
+    pub heuristics: Vec<(PathStrategy, f64)>,
     /// λ used.
     pub lambda: f64,
-    /// Number of free weights solved for.
+    /// Number of free weights solved for (table weights and β).
     pub free: usize,
 }
 
 impl Fit {
-    /// The full weight vector W = (w0_α, w1_α) of length 2K.
-    pub fn vector(&self) -> DVector<f64> {
+    /// The coefficient vector v on Y (length `layout.dimension()`), C_s = ⟨Y_s|v⟩ (module docs).
+    pub fn coefficients(&self, layout: Layout) -> DVector<f64> {
         let k = self.cells.len();
-        DVector::from_fn(2 * k, |i, _| self.cells[i % k].w[i / k])
+        let mut v = DVector::zeros(layout.dimension());
+        for (a, c) in self.cells.iter().enumerate() {
+            v[a] = c.w[0];
+            v[k + a] = c.w[1];
+        }
+        v[layout.b_index()] = 1.0 - self.beta_sum();
+        for &(h, beta) in &self.heuristics {
+            v[layout.heuristic_index(h).expect("a fit stacks only columns its layout has")] = beta;
+        }
+        v
+    }
+
+    /// Σ_h β_h.
+    pub fn beta_sum(&self) -> f64 {
+        self.heuristics.iter().map(|(_, b)| b).sum()
     }
 }
 
@@ -82,9 +130,26 @@ pub enum SolveError {
         "the weight system is singular (rank {rank} of {dimension}): the data do not determine the weights of cells {cells:?}; add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
     )]
     Singular { dimension: usize, rank: usize, cells: Vec<usize> },
+    #[error(
+        "{} cannot be stacked: its weights break the solver's fixed weights, or these moments (an older format) do not keep its column",
+        .0.name()
+    )]
+    NotStackable(PathStrategy),
 }
 
-/// Free parameterisation of one cell: (w0, w1) = base + Σ_k z_k·coef_k.
+/// Whether heuristic `h` gives every path the weights `fixed` fixes, so that the family with
+/// `h` stacked keeps them (module docs).
+pub fn admits(fixed: &FixedWeights, h: PathStrategy) -> bool {
+    let constant = h.constant_weights();
+    (0..3).all(|m| fixed.get(m).is_none_or(|f| constant[m] == Some(f)))
+}
+
+/// The heuristics that can be stacked on a table of moments in `layout` under `fixed`.
+pub fn stackable(layout: Layout, fixed: &FixedWeights) -> Vec<PathStrategy> {
+    layout.heuristics().iter().copied().filter(|&h| admits(fixed, h)).collect()
+}
+
+/// Free parameterisation of one cell: (T₀, T₁) = base + Σ_k z_k·coef_k.
 fn cell_parameters(fixed: &FixedWeights) -> ([f64; 2], Vec<[f64; 2]>) {
     match (fixed.w0, fixed.w1, fixed.w2) {
         (None, None, None) => ([0.0, 0.0], vec![[1.0, 0.0], [0.0, 1.0]]),
@@ -100,8 +165,24 @@ fn cell_parameters(fixed: &FixedWeights) -> ([f64; 2], Vec<[f64; 2]>) {
 /// Relative pivot below which the Jacobi-scaled system counts as singular.
 const PIVOT_TOLERANCE: f64 = 1e-11;
 
-/// Fits the optimal weights to `stats` with fixed weights `fixed` and penalty `lambda`.
-pub fn fit(stats: &YStats, grid: &CellGrid, fixed: &FixedWeights, lambda: f64) -> Result<Fit, SolveError> {
+/// Ridge on each β, relative to its own curvature (module docs): far above [`PIVOT_TOLERANCE`],
+/// far below anything that moves the variance (it shrinks a determined β by ~10⁻⁷ of itself).
+pub const BETA_RIDGE: f64 = 1e-7;
+
+/// A cell is `smoothed` when its own samples carry less than this share of its free weights'
+/// curvature (data/(data + penalty), the smallest over its free weights): below one half the
+/// neighbours determine the weights more than the cell's merges do.
+pub const SMOOTHED_DATA_SHARE: f64 = 0.5;
+
+/// Fits the optimal weights to `stats` with fixed weights `fixed`, penalty `lambda` and the
+/// heuristics `family` stacked on the table (empty: the paper's table alone).
+pub fn fit(
+    stats: &YStats,
+    grid: &CellGrid,
+    fixed: &FixedWeights,
+    lambda: f64,
+    family: &[PathStrategy],
+) -> Result<Fit, SolveError> {
     let k = grid.len();
     if stats.m < 2.0 {
         return Err(SolveError::TooFewIterations(stats.m as u64));
@@ -110,22 +191,34 @@ pub fn fit(stats: &YStats, grid: &CellGrid, fixed: &FixedWeights, lambda: f64) -
     if stats.cell_samples.iter().all(|&c| c == 0) || mu.is_nan() || mu <= 0.0 {
         return Err(SolveError::NoSignal);
     }
+    let layout = stats.layout;
+    if let Some(&h) = family.iter().find(|&&h| !admits(fixed, h) || layout.heuristic_index(h).is_none()) {
+        return Err(SolveError::NotStackable(h));
+    }
     let (base, coefs) = cell_parameters(fixed);
-    let w0 = DVector::from_fn(2 * k, |i, _| base[i / k]);
+    let mut v0 = DVector::zeros(layout.dimension());
+    for a in 0..k {
+        v0[a] = base[0];
+        v0[k + a] = base[1];
+    }
+    v0[layout.b_index()] = 1.0;
     // Cells that carry free weights: all of them under a penalty, else those with samples.
     let mut active: Vec<usize> =
         (0..k).filter(|&a| !coefs.is_empty() && (lambda > 0.0 || stats.cell_samples[a] > 0)).collect();
     let mut uninformative = vec![false; k];
-    let system = |cells: &[usize]| NormalSystem::new(stats, grid, &w0, &coefs, cells, mu, lambda);
-    let mut sys = system(&active);
+    let columns = |cells: &[usize]| Columns::new(layout, base, &coefs, cells, family);
+    let system = |c: &Columns| NormalSystem::new(stats, grid, &v0, c, mu, lambda);
+    let mut cols = columns(&active);
+    let mut sys = system(&cols);
     if lambda == 0.0 && !active.is_empty() {
         // A cell whose every free weight moves the variance by < 10⁻¹⁴ of the most informative one
         // carries no information (e.g. plane-2 merges at deflections where g(ϑ) underflows): leave
         // it out like an empty cell rather than call the system singular.
-        let max_diag = sys.h.diagonal().iter().copied().fold(0.0, f64::max);
+        let table = cols.table_columns;
+        let max_diag = (0..table).map(|i| sys.data_diag[i]).fold(0.0, f64::max);
         let per_cell = coefs.len();
         for (i, &a) in active.iter().enumerate() {
-            let informative = (0..per_cell).any(|c| sys.h[(i * per_cell + c, i * per_cell + c)] > 1e-14 * max_diag);
+            let informative = (0..per_cell).any(|c| sys.data_diag[i * per_cell + c] > 1e-14 * max_diag);
             uninformative[a] = !informative;
         }
         if uninformative.iter().any(|&u| u) {
@@ -133,81 +226,152 @@ pub fn fit(stats: &YStats, grid: &CellGrid, fixed: &FixedWeights, lambda: f64) -
             if active.is_empty() {
                 return Err(SolveError::NoSignal);
             }
-            sys = system(&active);
+            cols = columns(&active);
+            sys = system(&cols);
         }
     }
-    let z = if sys.columns.is_empty() { DVector::zeros(0) } else { solve_spd(sys.h, sys.g, &sys.columns)? };
-    let p = sys.p;
-    let nfree = sys.columns.len();
-    let w = &w0 + &p * &z;
+    let share = sys.data_share(&cols);
+    let z = if cols.entries.is_empty() { DVector::zeros(0) } else { solve_spd(sys.h, sys.g, &cols.cells)? };
+    let mut v = v0.clone();
+    for (zi, entries) in z.iter().zip(&cols.entries) {
+        for &(index, coef) in entries {
+            v[index] += zi * coef;
+        }
+    }
+    let heuristics: Vec<(PathStrategy, f64)> =
+        family.iter().enumerate().map(|(i, &h)| (h, z[cols.table_columns + i])).collect();
+    let beta_sum: f64 = heuristics.iter().map(|(_, b)| b).sum();
     let mut cells: Vec<CellWeights> = (0..k)
         .map(|a| {
-            let (x0, x1) = (w[a], w[k + a]);
+            let (x0, x1) = (v[a], v[k + a]);
             let status = if coefs.is_empty() {
                 CellStatus::Fixed
             } else if uninformative[a] {
                 CellStatus::Uninformative
+            } else if lambda > 0.0 && share[a] < SMOOTHED_DATA_SHARE {
+                CellStatus::Smoothed
             } else if stats.cell_samples[a] > 0 {
                 CellStatus::Fitted
-            } else if lambda > 0.0 {
-                CellStatus::Smoothed
             } else {
                 CellStatus::Empty
             };
-            CellWeights { w: [x0, x1, 1.0 - x0 - x1], samples: stats.cell_samples[a], status }
+            CellWeights { w: [x0, x1, 1.0 - beta_sum - x0 - x1], samples: stats.cell_samples[a], status }
         })
         .collect();
     fill_empty_cells(&mut cells, grid);
-    Ok(Fit { cells, lambda, free: nfree })
+    Ok(Fit { cells, heuristics, lambda, free: cols.entries.len() })
 }
 
-/// The normal equations H z = g of the free weights of `cells`, with W = W₀ + P z.
-struct NormalSystem {
-    p: DMatrix<f64>,
-    h: DMatrix<f64>,
-    g: DVector<f64>,
-    /// (cell, coefficient on (w0, w1)) of each free weight.
-    columns: Vec<(usize, [f64; 2])>,
+/// The columns of D (module docs), sparse: the free table weights of the active cells, then one
+/// per stacked heuristic.
+struct Columns {
+    /// (index on Y, coefficient) pairs of each column.
+    entries: Vec<Vec<(usize, f64)>>,
+    /// The cell of each table column (`usize::MAX` for a β column), for reports of singular systems.
+    cells: Vec<usize>,
+    table_columns: usize,
+    /// Per cell, its table columns' indices.
+    of_cell: Vec<Vec<usize>>,
 }
 
-impl NormalSystem {
-    fn new(
-        stats: &YStats,
-        grid: &CellGrid,
-        w0: &DVector<f64>,
-        coefs: &[[f64; 2]],
-        cells: &[usize],
-        mu: f64,
-        lambda: f64,
-    ) -> Self {
-        let k = grid.len();
-        let columns: Vec<(usize, [f64; 2])> = cells.iter().flat_map(|&a| coefs.iter().map(move |&c| (a, c))).collect();
-        let mut p = DMatrix::zeros(2 * k, columns.len());
-        for (col, &(a, c)) in columns.iter().enumerate() {
-            p[(a, col)] = c[0];
-            p[(k + a, col)] = c[1];
+impl Columns {
+    fn new(layout: Layout, base: [f64; 2], coefs: &[[f64; 2]], active: &[usize], family: &[PathStrategy]) -> Self {
+        let k = layout.cells;
+        let (mut entries, mut cells, mut of_cell) = (Vec::new(), Vec::new(), vec![Vec::new(); k]);
+        for &a in active {
+            for c in coefs {
+                of_cell[a].push(entries.len());
+                entries.push([(a, c[0]), (k + a, c[1])].into_iter().filter(|&(_, x)| x != 0.0).collect());
+                cells.push(a);
+            }
         }
-        // Covariances (1/M normalisation; the minimiser does not depend on it).
-        let mean = &stats.sum_y / stats.m;
-        let cov = &stats.sum_yy / stats.m - &mean * mean.transpose();
-        let s_aa = cov.view((0, 0), (2 * k, 2 * k)).into_owned();
-        let s_ab = cov.view((0, 2 * k), (2 * k, 1)).column(0).into_owned();
-        let inv_mu2 = 1.0 / (mu * mu);
-        let (h, g) = if lambda > 0.0 {
-            let laplacian = penalty_laplacian(grid);
-            (
-                p.transpose() * (&s_aa * inv_mu2 + &laplacian * lambda) * &p,
-                -(p.transpose() * ((&s_aa * w0 + &s_ab) * inv_mu2 + &laplacian * w0 * lambda)),
-            )
-        } else {
-            (p.transpose() * &s_aa * &p * inv_mu2, -(p.transpose() * (&s_aa * w0 + &s_ab) * inv_mu2))
-        };
-        Self { p, h, g, columns }
+        let table_columns = entries.len();
+        for &h in family {
+            let mut column = vec![(layout.heuristic_index(h).expect("checked by fit"), 1.0), (layout.b_index(), -1.0)];
+            for a in 0..k {
+                column.extend([(a, -base[0]), (k + a, -base[1])].into_iter().filter(|&(_, x)| x != 0.0));
+            }
+            entries.push(column);
+            cells.push(usize::MAX);
+        }
+        Self { entries, cells, table_columns, of_cell }
     }
 }
 
-/// The graph Laplacian of the penalty Σ_edges Σ_m (Δw_m)² on W = (w0, w1): per edge, with
-/// Δw2 = −(Δw0 + Δw1), the quadratic form [[2, 1], [1, 2]] on (Δw0, Δw1).
+/// The normal equations H x = g of the free weights, and the data and penalty parts of H's
+/// diagonal.
+struct NormalSystem {
+    h: DMatrix<f64>,
+    g: DVector<f64>,
+    data_diag: Vec<f64>,
+    penalty_diag: Vec<f64>,
+}
+
+impl NormalSystem {
+    fn new(stats: &YStats, grid: &CellGrid, v0: &DVector<f64>, cols: &Columns, mu: f64, lambda: f64) -> Self {
+        let k2 = 2 * grid.len();
+        let s = stats.covariance();
+        let inv_mu2 = 1.0 / (mu * mu);
+        let s_v0 = &s * v0;
+        let laplacian = (lambda > 0.0).then(|| penalty_laplacian(grid));
+        let l_v0 = laplacian.as_ref().map(|l| l * v0.rows(0, k2));
+        let c = cols.entries.len();
+        let mut h = DMatrix::zeros(c, c);
+        let (mut data_diag, mut penalty_diag) = (vec![0.0; c], vec![0.0; c]);
+        let form = |m: &dyn Fn(usize, usize) -> f64, x: &[(usize, f64)], y: &[(usize, f64)]| {
+            x.iter().map(|&(a, p)| y.iter().map(|&(b, q)| p * q * m(a, b)).sum::<f64>()).sum::<f64>()
+        };
+        for i in 0..c {
+            for j in i..c {
+                let (x, y) = (&cols.entries[i], &cols.entries[j]);
+                let data = form(&|a, b| s[(a, b)], x, y) * inv_mu2;
+                let penalty = match &laplacian {
+                    Some(l) => lambda * form(&|a, b| if a < k2 && b < k2 { l[(a, b)] } else { 0.0 }, x, y),
+                    None => 0.0,
+                };
+                h[(i, j)] = data + penalty;
+                h[(j, i)] = data + penalty;
+                if i == j {
+                    data_diag[i] = data;
+                    penalty_diag[i] = penalty;
+                }
+            }
+        }
+        for i in cols.table_columns..c {
+            h[(i, i)] += BETA_RIDGE * h[(i, i)];
+        }
+        let g = DVector::from_fn(c, |i, _| {
+            let x = &cols.entries[i];
+            let data: f64 = x.iter().map(|&(a, p)| p * s_v0[a]).sum::<f64>() * inv_mu2;
+            let penalty = l_v0
+                .as_ref()
+                .map_or(0.0, |lv| lambda * x.iter().filter(|&&(a, _)| a < k2).map(|&(a, p)| p * lv[a]).sum::<f64>());
+            -(data + penalty)
+        });
+        Self { h, g, data_diag, penalty_diag }
+    }
+
+    /// Per cell, the smallest share data/(data + penalty) of its table columns' curvature (1 for
+    /// a cell without free weights or penalty).
+    fn data_share(&self, cols: &Columns) -> Vec<f64> {
+        cols.of_cell
+            .iter()
+            .map(|columns| {
+                columns
+                    .iter()
+                    .map(|&i| {
+                        let total = self.data_diag[i] + self.penalty_diag[i];
+                        if total > 0.0 { self.data_diag[i] / total } else { 0.0 }
+                    })
+                    .fold(1.0, f64::min)
+            })
+            .collect()
+    }
+}
+
+/// The graph Laplacian of the penalty Σ_edges Σ_m (ΔT_m)² on T = (T₀, T₁): per edge, with
+/// ΔT₂ = −(ΔT₀ + ΔT₁) (Σβ is the same in every cell), the quadratic form [[2, 1], [1, 2]] on
+/// (ΔT₀, ΔT₁).
 fn penalty_laplacian(grid: &CellGrid) -> DMatrix<f64> {
     let k = grid.len();
     let mut l = DMatrix::zeros(2 * k, 2 * k);
@@ -227,19 +391,19 @@ fn penalty_laplacian(grid: &CellGrid) -> DMatrix<f64> {
 }
 
 /// Solves H z = g for symmetric positive definite H by Jacobi-scaled Cholesky, or reports the
-/// cells spanning its null space.
-fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, columns: &[(usize, [f64; 2])]) -> Result<DVector<f64>, SolveError> {
+/// cells spanning its null space (`column_cells`: the cell of each column, `usize::MAX` for β).
+fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, column_cells: &[usize]) -> Result<DVector<f64>, SolveError> {
     let n = h.nrows();
     let max_diag = h.diagonal().iter().copied().fold(0.0, f64::max);
     let singular = |rank: usize, cells: Vec<usize>| {
-        let mut cells = cells;
+        let mut cells: Vec<usize> = cells.into_iter().filter(|&c| c != usize::MAX).collect();
         cells.sort_unstable();
         cells.dedup();
         SolveError::Singular { dimension: n, rank, cells }
     };
     // A free weight no sample and no penalty touches is undetermined outright.
     let dead: Vec<usize> =
-        (0..n).filter(|&i| h[(i, i)].is_nan() || h[(i, i)] <= max_diag * 1e-300).map(|i| columns[i].0).collect();
+        (0..n).filter(|&i| h[(i, i)].is_nan() || h[(i, i)] <= max_diag * 1e-300).map(|i| column_cells[i]).collect();
     if !dead.is_empty() || max_diag <= 0.0 {
         return Err(singular(n - dead.len(), dead));
     }
@@ -263,7 +427,7 @@ fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, columns: &[(usize, [f64; 2])]) ->
             continue;
         }
         let v = eig.eigenvectors.column(i);
-        cells.extend((0..n).filter(|&j| v[j].abs() > 0.1).map(|j| columns[j].0));
+        cells.extend((0..n).filter(|&j| v[j].abs() > 0.1).map(|j| column_cells[j]));
     }
     Err(singular(rank, cells))
 }
@@ -301,141 +465,5 @@ fn fill_empty_cells(cells: &mut [CellWeights], grid: &CellGrid) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::sim::math::rng::{stream, uniform};
-
-    /// Synthetic statistics from explicit per-iteration vectors Y_s.
-    fn stats_from(ys: &[DVector<f64>], samples: Vec<u64>) -> YStats {
-        let n = ys[0].len();
-        let mut sum_y = DVector::zeros(n);
-        let mut sum_yy = DMatrix::zeros(n, n);
-        for y in ys {
-            sum_y += y;
-            sum_yy += y * y.transpose();
-        }
-        YStats { m: ys.len() as f64, sum_y, sum_yy, cell_samples: samples }
-    }
-
-    /// A problem whose optimum is known: B_s = −⟨A_s|W*⟩ + L + small noise, so W* makes C_s nearly
-    /// constant. The fit must recover W*, and no perturbation may lower the sample variance.
-    fn synthetic(k: usize, w_star: &DVector<f64>, iterations: usize) -> YStats {
-        let mut rng = stream(42, 0, 0);
-        let ys: Vec<DVector<f64>> = (0..iterations)
-            .map(|_| {
-                let a = DVector::from_fn(2 * k, |_, _| uniform(&mut rng) - 0.5);
-                let noise = 1e-3 * (uniform(&mut rng) - 0.5);
-                let b = 1.0 - a.dot(w_star) + noise;
-                let mut y = DVector::zeros(2 * k + 1);
-                y.rows_mut(0, 2 * k).copy_from(&a);
-                y[2 * k] = b;
-                y
-            })
-            .collect();
-        stats_from(&ys, vec![10; k])
-    }
-
-    fn variance(stats: &YStats, w: &DVector<f64>) -> f64 {
-        let (s1, s2) = stats.evaluate(w);
-        s2 / stats.m - (s1 / stats.m).powi(2)
-    }
-
-    #[test]
-    fn recovers_known_weights_and_beats_every_perturbation() {
-        let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
-        let k = grid.len();
-        let w_star = DVector::from_vec(vec![0.1, -0.3, 0.7, 0.5, 0.2, 0.9]);
-        let stats = synthetic(k, &w_star, 2000);
-        let fit = fit(&stats, &grid, &FixedWeights::default(), 0.0).unwrap();
-        let w = fit.vector();
-        assert!((&w - &w_star).amax() < 1e-3, "fitted {w} vs {w_star}");
-        assert!(
-            fit.cells.iter().all(|c| c.status == CellStatus::Fitted && (c.w.iter().sum::<f64>() - 1.0).abs() < 1e-12)
-        );
-        let best = variance(&stats, &w);
-        let mut rng = stream(43, 0, 0);
-        for _ in 0..500 {
-            let dir = DVector::from_fn(2 * k, |_, _| uniform(&mut rng) - 0.5);
-            for eps in [1e-4, 1e-2, 1.0] {
-                let v = variance(&stats, &(&w + &dir * eps));
-                assert!(v >= best, "perturbation {eps} lowered the variance: {v} < {best}");
-            }
-        }
-    }
-
-    #[test]
-    fn fixed_weights_are_respected() {
-        let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
-        let w_star = DVector::from_vec(vec![0.1, -0.3, 0.7, 0.5, 0.2, 0.9]);
-        let stats = synthetic(3, &w_star, 500);
-        let fixed = FixedWeights { w0: Some(0.0), ..Default::default() };
-        let f = fit(&stats, &grid, &fixed, 0.0).unwrap();
-        assert!(f.cells.iter().all(|c| c.w[0] == 0.0 && (c.w.iter().sum::<f64>() - 1.0).abs() < 1e-12));
-        assert_eq!(f.free, 3);
-        let fixed2 = FixedWeights { w2: Some(0.25), ..Default::default() };
-        let f2 = fit(&stats, &grid, &fixed2, 0.0).unwrap();
-        assert!(f2.cells.iter().all(|c| (c.w[2] - 0.25).abs() < 1e-12));
-        let all = FixedWeights { w0: Some(0.0), w1: Some(1.0), w2: None };
-        let f3 = fit(&stats, &grid, &all, 0.0).unwrap();
-        assert!(f3.cells.iter().all(|c| c.status == CellStatus::Fixed && c.w == [0.0, 1.0, 0.0]));
-    }
-
-    #[test]
-    fn penalty_smooths_towards_neighbours() {
-        let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
-        let w_star = DVector::from_vec(vec![0.1, -0.3, 0.7, 0.5, 0.2, 0.9]);
-        let stats = synthetic(3, &w_star, 500);
-        let spread = |f: &Fit| {
-            f.cells.iter().map(|c| c.w[1]).fold(f64::NEG_INFINITY, f64::max)
-                - f.cells.iter().map(|c| c.w[1]).fold(f64::INFINITY, f64::min)
-        };
-        let free = fit(&stats, &grid, &FixedWeights::default(), 0.0).unwrap();
-        let smooth = fit(&stats, &grid, &FixedWeights::default(), 1e6).unwrap();
-        assert!(spread(&smooth) < 1e-3 && spread(&free) > 0.5, "{} vs {}", spread(&smooth), spread(&free));
-    }
-
-    #[test]
-    fn empty_cells_and_singular_systems_are_reported() {
-        let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
-        // Cell 2 never sees a sample: A is zero there.
-        let mut rng = stream(44, 0, 0);
-        let ys: Vec<DVector<f64>> = (0..200)
-            .map(|_| {
-                let mut y = DVector::zeros(7);
-                for i in [0, 1, 3, 4] {
-                    y[i] = uniform(&mut rng) - 0.5;
-                }
-                y[6] = 1.0 + uniform(&mut rng);
-                y
-            })
-            .collect();
-        let stats = stats_from(&ys, vec![5, 5, 0]);
-        let f = fit(&stats, &grid, &FixedWeights::default(), 0.0).unwrap();
-        assert_eq!(f.cells[2].status, CellStatus::Empty);
-        assert_eq!(f.cells[2].w, f.cells[1].w, "empty cells take their nearest fitted neighbour's weights");
-        let smoothed = fit(&stats, &grid, &FixedWeights::default(), 1e-3).unwrap();
-        assert_eq!(smoothed.cells[2].status, CellStatus::Smoothed);
-
-        // Cells 0 and 1 always move together: their weights are not separately determined.
-        let ys: Vec<DVector<f64>> = (0..200)
-            .map(|_| {
-                let x = uniform(&mut rng) - 0.5;
-                DVector::from_vec(vec![x, x, 0.0, 0.0, 0.0, 0.0, 1.0 + uniform(&mut rng)])
-            })
-            .collect();
-        let stats = stats_from(&ys, vec![5, 5, 0]);
-        let fixed = FixedWeights { w1: Some(0.0), ..Default::default() };
-        match fit(&stats, &grid, &fixed, 0.0) {
-            Err(SolveError::Singular { cells, rank, dimension }) => {
-                assert_eq!(cells, vec![0, 1]);
-                assert_eq!((rank, dimension), (1, 2));
-            }
-            other => panic!("expected a singular system, got {other:?}"),
-        }
-        assert!(fit(&stats, &grid, &fixed, 1e-3).is_ok(), "a penalty resolves it");
-        let one = stats_from(&ys[..1], vec![1, 1, 0]);
-        assert_eq!(fit(&one, &grid, &fixed, 0.0).unwrap_err(), SolveError::TooFewIterations(1));
-        let zero = stats_from(&vec![DVector::zeros(7); 10], vec![0, 0, 0]);
-        assert_eq!(fit(&zero, &grid, &fixed, 0.0).unwrap_err(), SolveError::NoSignal);
-    }
-}
+#[path = "solver_tests.rs"]
+mod tests;

@@ -1,5 +1,7 @@
 //! The strategies of a noise table: the per-path ones, whose weights the engines apply to every
-//! merge (`PathStrategy`), and the fitted ones, whose weights come from the moments.
+//! merge (`PathStrategy`), and the fitted ones, whose weights come from the moments — a table
+//! alone (`optimal`, `optimal_holdout`, `optimal_cv`), a table with every admitted heuristic
+//! stacked on it (`optimal_stacked`), or one heuristic corrected by a table (`…_corrected`).
 //!
 //! Results name them in snake case (`plane1` … `optimal_cv`); code compares the enum, never the
 //! names.
@@ -35,6 +37,29 @@ pub enum Strategy {
     Power,
     /// The correlation-aware balance heuristic (Grittmann et al. 2021) for this estimator.
     CorrelationAware,
+    /// The balance heuristic over planes 2 and 3 (w0 = 0).
+    BalancePlanes23,
+    /// The power heuristic over planes 2 and 3 (w0 = 0).
+    PowerPlanes23,
+    /// The correlation-aware heuristic over planes 2 and 3 (w0 = 0).
+    CorrelationAwarePlanes23,
+    /// The stacked optimum: a table plus β_h times every heuristic that keeps the fixed weights,
+    /// λ chosen by cross-validation, cross-fitted figures (docs/model.md §7).
+    OptimalStacked,
+    /// The switch corrected by a table (β fitted too), at the stacked optimum's λ.
+    SwitchCorrected,
+    /// The balance heuristic corrected by a table.
+    BalanceCorrected,
+    /// The power heuristic corrected by a table.
+    PowerCorrected,
+    /// The correlation-aware heuristic corrected by a table.
+    CorrelationAwareCorrected,
+    /// The balance heuristic over planes 2–3 corrected by a table.
+    BalancePlanes23Corrected,
+    /// The power heuristic over planes 2–3 corrected by a table.
+    PowerPlanes23Corrected,
+    /// The correlation-aware heuristic over planes 2–3 corrected by a table.
+    CorrelationAwarePlanes23Corrected,
 }
 
 impl Strategy {
@@ -48,7 +73,35 @@ impl Strategy {
             PathStrategy::Balance => Self::Balance,
             PathStrategy::Power => Self::Power,
             PathStrategy::CorrelationAware => Self::CorrelationAware,
+            PathStrategy::BalancePlanes23 => Self::BalancePlanes23,
+            PathStrategy::PowerPlanes23 => Self::PowerPlanes23,
+            PathStrategy::CorrelationAwarePlanes23 => Self::CorrelationAwarePlanes23,
         }
+    }
+
+    /// The per-path strategy of this row, if it is one.
+    pub fn path(self) -> Option<PathStrategy> {
+        PathStrategy::ALL.into_iter().find(|&p| Self::of_path(p) == self)
+    }
+
+    /// The row of heuristic `h` corrected by a table (`None` for the single-plane cases, which a
+    /// table already contains).
+    pub fn corrected(h: PathStrategy) -> Option<Self> {
+        Some(match h {
+            PathStrategy::Switch => Self::SwitchCorrected,
+            PathStrategy::Balance => Self::BalanceCorrected,
+            PathStrategy::Power => Self::PowerCorrected,
+            PathStrategy::CorrelationAware => Self::CorrelationAwareCorrected,
+            PathStrategy::BalancePlanes23 => Self::BalancePlanes23Corrected,
+            PathStrategy::PowerPlanes23 => Self::PowerPlanes23Corrected,
+            PathStrategy::CorrelationAwarePlanes23 => Self::CorrelationAwarePlanes23Corrected,
+            PathStrategy::Plane1 | PathStrategy::Plane2 | PathStrategy::Plane3 => return None,
+        })
+    }
+
+    /// Whether the row's weights are fitted to the moments (a table, with or without heuristics).
+    pub fn is_fitted(self) -> bool {
+        self.path().is_none()
     }
 
     /// Whether the row's figures are scored on the iterations its weights were fitted to, and so
@@ -71,6 +124,17 @@ impl Strategy {
             Self::Balance => "balance",
             Self::Power => "power",
             Self::CorrelationAware => "correlation_aware",
+            Self::BalancePlanes23 => "balance_planes23",
+            Self::PowerPlanes23 => "power_planes23",
+            Self::CorrelationAwarePlanes23 => "correlation_aware_planes23",
+            Self::OptimalStacked => "optimal_stacked",
+            Self::SwitchCorrected => "switch_corrected",
+            Self::BalanceCorrected => "balance_corrected",
+            Self::PowerCorrected => "power_corrected",
+            Self::CorrelationAwareCorrected => "correlation_aware_corrected",
+            Self::BalancePlanes23Corrected => "balance_planes23_corrected",
+            Self::PowerPlanes23Corrected => "power_planes23_corrected",
+            Self::CorrelationAwarePlanes23Corrected => "correlation_aware_planes23_corrected",
         }
     }
 }
@@ -94,11 +158,20 @@ mod tests {
             Strategy::OptimalCv,
             Strategy::Power,
             Strategy::CorrelationAware,
+            Strategy::CorrelationAwarePlanes23,
+            Strategy::OptimalStacked,
+            Strategy::CorrelationAwarePlanes23Corrected,
         ] {
             assert_eq!(serde_json::to_value(s).unwrap(), s.name());
         }
         for p in PathStrategy::ALL {
             assert_eq!(Strategy::of_path(p).name(), p.name());
+            assert_eq!(Strategy::of_path(p).path(), Some(p));
+            if let Some(c) = Strategy::corrected(p) {
+                assert_eq!(c.name(), format!("{}_corrected", p.name()));
+                assert!(c.is_fitted());
+            }
         }
+        assert_eq!(PathStrategy::STACKABLE.iter().filter_map(|&h| Strategy::corrected(h)).count(), 7);
     }
 }

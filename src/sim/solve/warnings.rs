@@ -6,9 +6,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::crossfit::UNSTABLE_STDERR;
 use super::noise::{NoiseRow, NoiseTable, central_3_4, power_sums};
-use super::solver::CellStatus;
+use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
+use super::ystats::YStats;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
@@ -17,20 +19,23 @@ use crate::sim::stats::moments::{FoldMoments, Moments};
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum WarningCode {
-    /// Fewer iterations than [`ITERATIONS_PER_FREE_WEIGHT`] per free weight.
+    /// Fewer iterations than [`ITERATIONS_PER_FREE_WEIGHT`] per free weight of the recommended fit.
     TooFewIterations,
-    /// Fitted cells with fewer than [`MIN_CELL_EVENTS`] merge events.
+    /// Cells of the recommended fit that its own samples cannot estimate, where they matter to the
+    /// figure ([`SPARSE_SHARE`]).
     SparseCells,
-    /// Recommended weights whose jackknife standard error exceeds [`UNSTABLE_STDERR`].
+    /// A fitted row reports a lower RMS than the recommended one, but its weights are unstable from
+    /// fold to fold, so it is not recommended.
     UnstableFit,
-    /// The recommended weights are not measurably better than the best per-path strategy.
+    /// The recommended row is not measurably better than the per-path strategy compared with
+    /// (or no fitted row beat the recommended per-path strategy).
     NoGain,
     /// A strategy's values are so heavy-tailed that its standard errors are unreliable.
     HeavyTail,
     /// The in-sample `optimal` row is far from its cross-fitted counterpart.
     InSampleOptimistic,
     /// A per-path strategy outside the solver's fixed weights is measurably less noisy than the
-    /// recommended weights: the constraint costs noise.
+    /// recommended row: the constraint costs noise.
     FixedWeightsCost,
 }
 
@@ -55,10 +60,12 @@ pub const ITERATIONS_PER_FREE_WEIGHT: f64 = 10.0;
 /// Merge events below which a cell's weights rest on too few samples: with n events the relative
 /// error of a cell's second moments is of order 1/√n, above 18% for n < 30.
 pub const MIN_CELL_EVENTS: u64 = 30;
-/// Jackknife standard error of a weight above which the fit is unstable from fold to fold (the
-/// weights of a cell sum to one, so an error of 0.25 is a quarter of the whole range of sensible
-/// weights).
-pub const UNSTABLE_STDERR: f64 = 0.25;
+/// The sparse cells of the recommended fit (not fitted to their own samples, or with fewer than
+/// [`MIN_CELL_EVENTS`] merge events) matter to its figure when they hold more than this share of
+/// the merge events, or when moving their free weights by a whole unit would change the pixel
+/// variance by more than this share (Σ of their Var(A) over Var(C)): below 1% their weights, however
+/// uncertain, cannot move the RMS by more than half a percent.
+pub const SPARSE_SHARE: f64 = 0.01;
 /// Relative standard error of a per-path strategy's RMS above which its standard errors are
 /// unreliable. The delta-method SE of the RMS grows with the kurtosis κ (≈ R·√((κ − 1)/4M)), and the
 /// SE of L is proportional to the RMS: above 10% the SE of L is itself that uncertain, and with heavy
@@ -73,60 +80,59 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
     let mut out = Vec::new();
     let m = moments.iterations() as f64;
     if let Ok(r) = &table.recommended {
-        let free = r.fit.free as f64;
-        if free > 0.0 && m < ITERATIONS_PER_FREE_WEIGHT * free {
+        if let Some(fit) = r.fit() {
+            let free = fit.free as f64;
+            if free > 0.0 && m < ITERATIONS_PER_FREE_WEIGHT * free {
+                out.push(Warning {
+                    code: WarningCode::TooFewIterations,
+                    message: format!(
+                        "{m} iterations for {free} free weights (fewer than {ITERATIONS_PER_FREE_WEIGHT} per weight): the fitted weights are mostly noise; run more iterations, merge shards, fix weights or use coarser cells"
+                    ),
+                    strategy: Some(r.strategy),
+                    cells: Vec::new(),
+                });
+            }
+            out.extend(sparse_cells(&table.cross_fitting.all, fit, m, r.strategy));
+        }
+        if r.fitted.is_none() {
             out.push(Warning {
-                code: WarningCode::TooFewIterations,
-                message: format!(
-                    "{m} iterations for {free} free weights (fewer than {ITERATIONS_PER_FREE_WEIGHT} per weight): the fitted weights are mostly noise and in-sample figures are optimistic; run more iterations, merge shards, fix weights or use coarser cells"
-                ),
+                code: WarningCode::NoGain,
+                message: format!("{} is recommended: {}", r.strategy, r.reason),
                 strategy: Some(r.strategy),
                 cells: Vec::new(),
             });
         }
-        let sparse: Vec<usize> = (0..r.fit.cells.len())
-            .filter(|&a| r.fit.cells[a].status == CellStatus::Fitted && r.fit.cells[a].samples < MIN_CELL_EVENTS)
-            .collect();
-        if !sparse.is_empty() {
-            out.push(Warning {
-                code: WarningCode::SparseCells,
-                message: format!(
-                    "{} fitted cells hold fewer than {MIN_CELL_EVENTS} merge events: their weights rest on too few samples (see the weights' standard errors)",
-                    sparse.len()
-                ),
-                strategy: Some(r.strategy),
-                cells: sparse,
-            });
-        }
-        if let Some(se) = &r.stderr {
-            let unstable: Vec<usize> =
-                (0..se.len()).filter(|&a| se[a].iter().any(|&s| s > UNSTABLE_STDERR || s.is_nan())).collect();
-            if !unstable.is_empty() {
+        let recommended_rms = table.rows.iter().find(|x| x.strategy == r.strategy).and_then(|x| x.rms_percent);
+        for row in table.rows.iter().filter(|x| x.unstable && x.error.is_none()) {
+            if let (Some(a), Some(b)) = (row.rms_percent, recommended_rms)
+                && a < b
+            {
                 out.push(Warning {
                     code: WarningCode::UnstableFit,
                     message: format!(
-                        "the weights of {} cells change from fold to fold by more than {UNSTABLE_STDERR} (jackknife standard error): they are not determined by these data",
-                        unstable.len()
+                        "{} reports a lower RMS ({a:.1}%) than the recommended {} ({b:.1}%), but its weights change from fold to fold by more than {UNSTABLE_STDERR} (jackknife standard error) at every λ of the grid: they are not determined by these data, so it is not recommended",
+                        row.strategy, r.strategy
                     ),
-                    strategy: Some(r.strategy),
-                    cells: unstable,
+                    strategy: Some(row.strategy),
+                    cells: table
+                        .fitted
+                        .iter()
+                        .find(|f| f.strategy == row.strategy)
+                        .map(|f| f.scored.unstable_cells.clone())
+                        .unwrap_or_default(),
                 });
             }
         }
     }
     if let Some(g) = table.gain
+        && table.recommended.as_ref().is_ok_and(|r| r.fitted.is_some())
         && g.value - 1.0 < 2.0 * g.stderr.unwrap_or(f64::INFINITY)
     {
         let se = g.stderr.map_or("unknown".to_string(), |s| format!("{s:.2}"));
-        let verdict = if g.value + 2.0 * g.stderr.unwrap_or(f64::INFINITY) < 1.0 {
-            "noisier than"
-        } else {
-            "not measurably better than"
-        };
         out.push(Warning {
             code: WarningCode::NoGain,
             message: format!(
-                "the recommended weights ({}) are {verdict} {}: variance ratio {:.2} ± {se}, not 2 standard errors above 1",
+                "the recommended weights ({}) are not measurably better than {}: variance ratio {:.2} ± {se}, not 2 standard errors above 1",
                 g.strategy, g.versus, g.value
             ),
             strategy: Some(g.strategy),
@@ -137,10 +143,17 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
         && let Some(se) = g.stderr
         && g.value + 2.0 * se < 1.0
     {
+        let stacked = table.free_stacked.as_ref().map_or_else(String::new, |f| {
+            let se = f.rms_stderr.map_or_else(String::new, |s| format!(" ± {s:.1}"));
+            format!(
+                "; with the fixed weights freed, the stacked optimum (which contains {}) reaches {:.1}%{se} (cross-fitted, λ = {})",
+                g.versus, f.rms_percent, f.cross_fit.lambda
+            )
+        });
         out.push(Warning {
             code: WarningCode::FixedWeightsCost,
             message: format!(
-                "{} does not keep the solver's fixed weights but is less noisy than the recommended weights ({}): variance ratio {:.2} ± {se:.2}; if your renderer can use its merges, free the fixed weights (e.g. \"solver\": {{\"fixed\": {{\"w0\": null}}}})",
+                "{} does not keep the solver's fixed weights but is less noisy than the recommended {}: variance ratio {:.2} ± {se:.2}{stacked}; if your renderer can use its merges, free the fixed weights (e.g. \"solver\": {{\"fixed\": {{\"w0\": null}}}})",
                 g.versus, g.strategy, g.value
             ),
             strategy: Some(g.versus),
@@ -152,6 +165,53 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
     out
 }
 
+/// A [`WarningCode::SparseCells`] when the cells of `fit` that its own samples cannot estimate
+/// matter to its figure ([`SPARSE_SHARE`]), with how many more iterations would give each of them
+/// [`MIN_CELL_EVENTS`] merge events.
+fn sparse_cells(all: &YStats, fit: &Fit, m: f64, strategy: Strategy) -> Option<Warning> {
+    let k = fit.cells.len();
+    let sparse: Vec<usize> = (0..k)
+        .filter(|&a| fit.cells[a].status != CellStatus::Fixed)
+        .filter(|&a| !fit.cells[a].status.from_data() || fit.cells[a].samples < MIN_CELL_EVENTS)
+        .collect();
+    let events: u64 = fit.cells.iter().map(|c| c.samples).sum();
+    let sparse_events: u64 = sparse.iter().map(|&a| fit.cells[a].samples).sum();
+    let merge_share = if events > 0 { sparse_events as f64 / events as f64 } else { 0.0 };
+    let cov = all.covariance();
+    let v = fit.coefficients(all.layout);
+    let variance = v.dot(&(&cov * &v));
+    let sensitivity: f64 = sparse.iter().map(|&a| cov[(a, a)] + cov[(k + a, k + a)]).sum::<f64>() / variance;
+    if sparse.is_empty() || (merge_share <= SPARSE_SHARE && !(sensitivity > SPARSE_SHARE)) {
+        return None;
+    }
+    let factor = sparse
+        .iter()
+        .map(|&a| fit.cells[a].samples)
+        .filter(|&n| n > 0 && n < MIN_CELL_EVENTS)
+        .map(|n| MIN_CELL_EVENTS.div_ceil(n))
+        .max();
+    let empty = sparse.iter().filter(|&&a| fit.cells[a].samples == 0).count();
+    let more = match factor {
+        Some(f) if f > 1 => format!(
+            "; about {f}× the iterations ({:.0}) would give each of those with events {MIN_CELL_EVENTS} or more",
+            m * f as f64
+        ),
+        _ => String::new(),
+    };
+    let none = if empty > 0 { format!("; {empty} have no merge event at all") } else { String::new() };
+    Some(Warning {
+        code: WarningCode::SparseCells,
+        message: format!(
+            "{} cells are not estimated from their own samples (smoothed, or fewer than {MIN_CELL_EVENTS} merge events) and they matter: {:.1}% of the merge events, and a unit change of their weights would move the variance by {:.1}%{more}{none}",
+            sparse.len(),
+            100.0 * merge_share,
+            100.0 * sensitivity
+        ),
+        strategy: Some(strategy),
+        cells: sparse,
+    })
+}
+
 /// A [`WarningCode::HeavyTail`] for every per-path strategy whose RMS (and so its SE) is too
 /// uncertain.
 fn heavy_tails(pooled: &FoldMoments, rows: &[NoiseRow]) -> Vec<Warning> {
@@ -161,7 +221,7 @@ fn heavy_tails(pooled: &FoldMoments, rows: &[NoiseRow]) -> Vec<Warning> {
         .filter_map(|&s| {
             let row = rows.iter().find(|r| r.strategy == Strategy::of_path(s))?;
             let relative = row.rms_percent_stderr? / row.rms_percent?;
-            let sums = power_sums(pooled, s);
+            let sums = power_sums(pooled, s)?;
             let mean = sums[0] / m;
             let m2 = sums[1] / m - mean * mean;
             let (_, m4) = central_3_4(m, sums);

@@ -1,8 +1,11 @@
 //! The second-order sums of the moment vector Y over a set of iterations, as doubles: what a fit
-//! and an evaluation of weights read (model.md, "moments, optimum").
+//! and an evaluation of weights read (docs/model.md §7). Every weighting the solver knows — a
+//! table, a table with heuristics stacked on it — makes the pixel value a linear form C_s = ⟨Y_s|v⟩
+//! in a coefficient vector v, so Σ C_s = ⟨ΣY|v⟩ and Σ C_s² = vᵀΣYYᵀv.
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::sim::engines::layout::Layout;
 use crate::sim::math::exact_sum::ExactSum;
 use crate::sim::stats::moments::{FoldMoments, packed_index};
 
@@ -22,6 +25,8 @@ pub(crate) fn unpack(sums: &[ExactSum], n: usize) -> DMatrix<f64> {
 /// Second-order sums of Y over a set of iterations, as plain doubles.
 #[derive(Debug, Clone)]
 pub struct YStats {
+    /// What Y holds (its H columns).
+    pub layout: Layout,
     /// Number of iterations.
     pub m: f64,
     /// ΣY.
@@ -33,18 +38,19 @@ pub struct YStats {
 }
 
 impl YStats {
-    /// Reads the sums of a fold (or of pooled folds).
-    pub fn from_fold(fold: &FoldMoments, cells: usize) -> Self {
-        let n = 2 * cells + 1;
+    /// Reads the sums of a fold (or of pooled folds) of moments in `layout`.
+    pub fn from_fold(fold: &FoldMoments, layout: Layout) -> Self {
+        let (cells, n) = (layout.cells, layout.dimension());
         let sum_y = DVector::from_iterator(n, fold.sum_y.iter().map(|s| s.value()));
         let sum_yy = unpack(&fold.sum_yy, n);
         let cell_samples = (0..cells).map(|a| (0..3).map(|m| fold.cell_counts[m * cells + a]).sum()).collect();
-        Self { m: fold.iterations as f64, sum_y, sum_yy, cell_samples }
+        Self { layout, m: fold.iterations as f64, sum_y, sum_yy, cell_samples }
     }
 
     /// These sums without those of `part` (a subset of the same iterations).
     pub fn without(&self, part: &YStats) -> Self {
         Self {
+            layout: self.layout,
             m: self.m - part.m,
             sum_y: &self.sum_y - &part.sum_y,
             sum_yy: &self.sum_yy - &part.sum_yy,
@@ -52,26 +58,24 @@ impl YStats {
         }
     }
 
-    fn cells(&self) -> usize {
-        self.cell_samples.len()
+    /// Σ C_s and Σ C_s² of the pixel value C_s = ⟨Y_s|v⟩ for a coefficient vector `v` on Y
+    /// (length n; [`super::solver::Fit::coefficients`] gives it for fitted weights).
+    pub fn evaluate(&self, v: &DVector<f64>) -> (f64, f64) {
+        let sum_c = self.sum_y.dot(v);
+        let sum_c2 = v.dot(&(&self.sum_yy * v));
+        (sum_c, sum_c2)
     }
 
-    /// Σ C_s(W) and Σ C_s(W)² for full weights `w` (length 2K).
-    pub fn evaluate(&self, w: &DVector<f64>) -> (f64, f64) {
-        let k2 = 2 * self.cells();
-        let sum_a = self.sum_y.rows(0, k2);
-        let sum_b = self.sum_y[k2];
-        let s_aa = self.sum_yy.view((0, 0), (k2, k2));
-        let s_ab = self.sum_yy.view((0, k2), (k2, 1));
-        let s_bb = self.sum_yy[(k2, k2)];
-        let sum_c = sum_a.dot(w) + sum_b;
-        let sum_c2 = (w.transpose() * s_aa * w)[(0, 0)] + 2.0 * s_ab.column(0).dot(w) + s_bb;
-        (sum_c, sum_c2)
+    /// The sample covariance of Y with 1/M normalisation (what the solver minimises over; the
+    /// minimiser does not depend on the normalisation).
+    pub(crate) fn covariance(&self) -> DMatrix<f64> {
+        let mean = &self.sum_y / self.m;
+        &self.sum_yy / self.m - &mean * mean.transpose()
     }
 
     /// The luminance scale μ: mean of the plane-1, plane-2 and plane-3 estimates.
     pub(crate) fn scale(&self) -> f64 {
-        let k = self.cells();
+        let k = self.layout.cells;
         let sum_b = self.sum_y[2 * k];
         let sum_a0: f64 = self.sum_y.rows(0, k).sum();
         let sum_a1: f64 = self.sum_y.rows(k, k).sum();

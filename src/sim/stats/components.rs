@@ -39,13 +39,10 @@
 use serde::{Deserialize, Serialize};
 
 use super::bounded::bounded;
+use crate::sim::engines::layout::{Layout, MAX_PACKED};
 use crate::sim::engines::tally::{BLOCKS, IterationTally, PathStrategy};
 use crate::sim::math::exact_sum::ExactSum;
-use crate::sim::model::cells::MAX_CELLS;
 use crate::sim::model::config::{packed_index, packed_len};
-
-/// Longest packed matrix (as in `moments`).
-const MAX_PACKED: usize = (2 * MAX_CELLS + 1) * (2 * MAX_CELLS + 2) / 2;
 
 /// The three kinds of block pairs.
 pub const LIGHT: usize = 0;
@@ -66,7 +63,8 @@ pub struct ComponentSums {
     /// Σ_s U_0 = ½ (sym(y_00 y_11ᵀ) + sym(y_01 y_10ᵀ)) (sharing nothing).
     #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
     pub cross: Vec<ExactSum>,
-    /// Per path strategy (in [`PathStrategy::ALL`] order): Σ U_L, Σ U_C, Σ U_0 of its C_s.
+    /// Per path strategy the format keeps (a prefix of [`PathStrategy::ALL`]): Σ U_L, Σ U_C, Σ U_0
+    /// of its C_s.
     #[serde(deserialize_with = "bounded::<_, _, { PathStrategy::COUNT }>")]
     pub strategies: Vec<[ExactSum; 3]>,
 }
@@ -75,21 +73,22 @@ pub struct ComponentSums {
 const PAIRS: [[(usize, usize); 2]; 3] = [[(0, 1), (2, 3)], [(0, 2), (1, 3)], [(0, 3), (1, 2)]];
 
 impl ComponentSums {
-    /// Zero sums for moment vectors of dimension n.
-    pub fn empty(n: usize) -> Self {
-        let zeros = || vec![ExactSum::new(); packed_len(n)];
+    /// Zero sums for the moment vectors of `layout`.
+    pub fn empty(layout: Layout) -> Self {
+        let zeros = || vec![ExactSum::new(); packed_len(layout.dimension())];
         Self {
             light: zeros(),
             camera: zeros(),
             cross: zeros(),
-            strategies: vec![Default::default(); PathStrategy::COUNT],
+            strategies: vec![Default::default(); layout.strategies().len()],
         }
     }
 
-    /// Whether the lists have the lengths of dimension n.
-    pub fn has_shape(&self, n: usize) -> bool {
+    /// Whether the lists have the lengths of `layout`.
+    pub fn has_shape(&self, layout: Layout) -> bool {
+        let n = layout.dimension();
         [&self.light, &self.camera, &self.cross].iter().all(|m| m.len() == packed_len(n))
-            && self.strategies.len() == PathStrategy::COUNT
+            && self.strategies.len() == layout.strategies().len()
     }
 
     /// The packed sums of one kind.
@@ -98,11 +97,11 @@ impl ComponentSums {
     }
 
     /// Adds one iteration's block products (its block vectors are empty when nothing merged).
-    pub fn add_iteration(&mut self, cells: usize, tally: &IterationTally) {
-        let n = 2 * cells + 1;
+    pub fn add_iteration(&mut self, layout: Layout, tally: &IterationTally) {
+        let n = layout.dimension();
         let mut y: [Vec<(usize, f64)>; BLOCKS] = Default::default();
         for (b, v) in y.iter_mut().enumerate() {
-            tally.block_moment_vector(b, cells, v);
+            tally.block_moment_vector(b, layout, v);
         }
         for (kind, pairs) in PAIRS.iter().enumerate() {
             let sums = [&mut self.light, &mut self.camera, &mut self.cross][kind].as_mut_slice();

@@ -2,14 +2,14 @@
 //! outside"): that the sums agree with their counts.
 
 use super::moments::{FoldMoments, packed_index};
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::layout::Layout;
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 
 impl FoldMoments {
     /// What a parser cannot check: that the sums agree with their counts. Fails with the first
     /// contradiction found.
-    pub(super) fn check_consistent(&self, cells: usize) -> Result<(), String> {
-        let n = 2 * cells + 1;
+    pub(super) fn check_consistent(&self, layout: Layout) -> Result<(), String> {
+        let (cells, n) = (layout.cells, layout.dimension());
         if let Some(bad) = self.sums().position(|s| !(s.is_finite() && s.value().abs() <= MAX_MAGNITUDE)) {
             return Err(format!("sum #{bad} is not finite or exceeds 2^1000"));
         }
@@ -53,7 +53,7 @@ impl FoldMoments {
             }
         }
         for (k, powers) in self.strategies.iter().enumerate() {
-            let name = PathStrategy::ALL[k].name();
+            let name = layout.strategies()[k].name();
             if !cauchy(&powers[0], &powers[1]) || !cauchy(&powers[1], &powers[3]) {
                 return Err(format!("the power sums of strategy {name} contradict each other"));
             }

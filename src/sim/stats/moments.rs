@@ -33,6 +33,7 @@ use super::bounded::bounded;
 
 use super::components::ComponentSums;
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
+use crate::sim::engines::layout::{Layout, MAX_DIMENSION, MAX_PACKED};
 use crate::sim::engines::tally::{IterationTally, PathStrategy};
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use crate::sim::model::cells::MAX_CELLS;
@@ -42,10 +43,6 @@ use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, Si
 /// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
 pub const MAX_TALLY_VALUE: f64 = 1e70;
 
-/// Longest moment vector: n = 2K + 1 for the largest grid.
-const MAX_DIMENSION: usize = 2 * MAX_CELLS + 1;
-/// Longest packed ΣYYᵀ.
-const MAX_PACKED: usize = MAX_DIMENSION * (MAX_DIMENSION + 1) / 2;
 /// Longest per-slot list (three planes per cell).
 const MAX_SLOTS: usize = 3 * MAX_CELLS;
 
@@ -62,7 +59,8 @@ pub struct FoldMoments {
     /// ΣYYᵀ, upper triangle packed row by row: (0,0), (0,1), …, (0,n−1), (1,1), …
     #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
     pub sum_yy: Vec<ExactSum>,
-    /// Per path strategy (in [`PathStrategy::ALL`] order): Σ C_s, Σ C_s², Σ C_s³, Σ C_s⁴.
+    /// Per path strategy the format keeps (a prefix of [`PathStrategy::ALL`], `engines::layout`):
+    /// Σ C_s, Σ C_s², Σ C_s³, Σ C_s⁴.
     #[serde(deserialize_with = "bounded::<_, _, { PathStrategy::COUNT }>")]
     pub strategies: Vec<[ExactSum; 4]>,
     /// Merge events per plane, summed over iterations.
@@ -78,22 +76,22 @@ pub struct FoldMoments {
 }
 
 impl FoldMoments {
-    fn empty(cells: usize, components: bool) -> Self {
-        let n = 2 * cells + 1;
+    fn empty(layout: Layout, components: bool) -> Self {
+        let n = layout.dimension();
         Self {
             iterations: 0,
             sum_y: vec![ExactSum::new(); n],
             sum_yy: vec![ExactSum::new(); packed_len(n)],
-            strategies: vec![Default::default(); PathStrategy::COUNT],
+            strategies: vec![Default::default(); layout.strategies().len()],
             merges: [0; 3],
             merges_sq: [0; 3],
-            cell_counts: vec![0; 3 * cells],
-            components: components.then(|| ComponentSums::empty(n)),
+            cell_counts: vec![0; 3 * layout.cells],
+            components: components.then(|| ComponentSums::empty(layout)),
         }
     }
 
-    fn add_iteration(&mut self, cells: usize, tally: &IterationTally) -> Result<(), MergeError> {
-        let n = 2 * cells + 1;
+    fn add_iteration(&mut self, layout: Layout, tally: &IterationTally) -> Result<(), MergeError> {
+        let n = layout.dimension();
         // Products of up to four values enter the sums (ΣYYᵀ, Σ C⁴): beyond 10⁷⁰ they would leave
         // the doubles. No valid scene comes near (its values are below 10⁴⁰), so this only stops a
         // configuration the validation did not foresee, as an error instead of a poisoned sum.
@@ -116,7 +114,7 @@ impl FoldMoments {
         if self.cell_counts.iter().zip(&tally.cell_counts).any(|(a, b)| a.checked_add(*b).is_none()) {
             return Err(overflow("cell event count"));
         }
-        let y = tally.moment_vector(cells);
+        let y = tally.moment_vector(layout);
         for (a, &(i, yi)) in y.iter().enumerate() {
             self.sum_y[i].add(yi);
             for &(j, yj) in &y[a..] {
@@ -136,7 +134,7 @@ impl FoldMoments {
             *acc += c;
         }
         if let Some(components) = &mut self.components {
-            components.add_iteration(cells, tally);
+            components.add_iteration(layout, tally);
         }
         self.iterations += 1;
         Ok(())
@@ -195,13 +193,13 @@ impl FoldMoments {
         }
     }
 
-    fn has_shape(&self, cells: usize) -> bool {
-        let n = 2 * cells + 1;
+    fn has_shape(&self, layout: Layout) -> bool {
+        let n = layout.dimension();
         self.sum_y.len() == n
             && self.sum_yy.len() == packed_len(n)
-            && self.components.as_ref().is_none_or(|c| c.has_shape(n))
-            && self.strategies.len() == PathStrategy::COUNT
-            && self.cell_counts.len() == 3 * cells
+            && self.components.as_ref().is_none_or(|c| c.has_shape(layout))
+            && self.strategies.len() == layout.strategies().len()
+            && self.cell_counts.len() == 3 * layout.cells
     }
 }
 
@@ -223,7 +221,8 @@ fn overflow(what: &str) -> MergeError {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Moments {
-    /// Layout version ([`MOMENTS_FORMAT_VERSION`]).
+    /// Layout version: [`MOMENTS_FORMAT_VERSION`] for moments this build makes, 2 for those an
+    /// earlier build made (`engines::layout`).
     pub format_version: u32,
     /// Fingerprint of the configuration the iterations were drawn under.
     pub fingerprint: String,
@@ -240,9 +239,14 @@ pub struct Moments {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum MergeError {
     #[error(
-        "moments format {found} is not supported (this build reads format {expected}; format 1, written before K-fold cross-fitting, holds two folds of even and odd iterations that cannot be split into K folds: run the iterations again with this build)"
+        "moments format {found} is not supported (this build reads formats 2 and {expected}; format 1, written before K-fold cross-fitting, holds two folds of even and odd iterations that cannot be split into K folds: run the iterations again with this build)"
     )]
     Format { found: u32, expected: u32 },
+    /// Moments of two formats: the older lacks sums the newer keeps, so they cannot be added.
+    #[error(
+        "moments of format {found} cannot be merged with moments of format {expected}: format 2 (written before optimis kept the w0 = 0 heuristics and the stacked optimum's columns) lacks sums that format 3 keeps; merge format-2 documents with each other, or run the iterations again with this build"
+    )]
+    FormatMix { found: u32, expected: u32 },
     #[error(
         "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
     )]
@@ -269,8 +273,26 @@ impl Moments {
             fingerprint: config.fingerprint().to_string(),
             cells: k,
             coverage: Coverage::new(),
-            folds: vec![FoldMoments::empty(k, config.noise_components); config.folds],
+            folds: vec![FoldMoments::empty(Layout::of(config), config.noise_components); config.folds],
         }
+    }
+
+    /// No iterations, in the same format and configuration as `self` (a job an earlier build
+    /// started resumes in its checkpoint's format).
+    pub fn empty_like(&self) -> Self {
+        let components = self.has_components();
+        Self {
+            format_version: self.format_version,
+            fingerprint: self.fingerprint.clone(),
+            cells: self.cells,
+            coverage: Coverage::new(),
+            folds: vec![FoldMoments::empty(self.layout(), components); self.folds.len()],
+        }
+    }
+
+    /// What these moments' format holds (checked supported by [`Moments::check_well_formed`]).
+    pub fn layout(&self) -> Layout {
+        Layout { cells: self.cells, format: self.format_version }
     }
 
     /// Total iterations M.
@@ -295,7 +317,8 @@ impl Moments {
             return Err(MergeError::Overlap(vec![Overlap { seed, range: [s, s + 1] }]));
         }
         let k = self.folds.len() as u64;
-        self.folds[(s % k) as usize].add_iteration(self.cells, tally)?;
+        let layout = self.layout();
+        self.folds[(s % k) as usize].add_iteration(layout, tally)?;
         self.coverage.insert(seed, s, s + 1);
         Ok(())
     }
@@ -356,6 +379,9 @@ impl Moments {
     /// What every merge needs: the same configuration, and no iteration of `other` counted here
     /// already.
     fn check_same_configuration_and_new(&self, other: &Moments) -> Result<(), MergeError> {
+        if other.format_version != self.format_version {
+            return Err(MergeError::FormatMix { found: other.format_version, expected: self.format_version });
+        }
         if other.fingerprint != self.fingerprint || other.cells != self.cells || other.folds.len() != self.folds.len() {
             return Err(MergeError::Fingerprint {
                 found: other.fingerprint.clone(),
@@ -372,7 +398,7 @@ impl Moments {
     /// The cheap structural checks a merge needs: format, shapes, coverage, and coverage counts
     /// that match the folds.
     fn check_shape(&self) -> Result<(), MergeError> {
-        if self.format_version != MOMENTS_FORMAT_VERSION {
+        if !Layout::supports(self.format_version) {
             return Err(MergeError::Format { found: self.format_version, expected: MOMENTS_FORMAT_VERSION });
         }
         if self.cells == 0 || self.cells > MAX_CELLS {
@@ -384,7 +410,7 @@ impl Moments {
                 self.folds.len()
             )));
         }
-        if !self.folds.iter().all(|f| f.has_shape(self.cells)) {
+        if !self.folds.iter().all(|f| f.has_shape(self.layout())) {
             return Err(MergeError::Malformed(format!("array lengths do not match {} cells", self.cells)));
         }
         if !self.folds.iter().all(|f| f.components.is_some() == self.folds[0].components.is_some()) {
@@ -416,7 +442,7 @@ impl Moments {
     pub fn check_well_formed(&self) -> Result<(), MergeError> {
         self.check_shape()?;
         for (f, fold) in self.folds.iter().enumerate() {
-            fold.check_consistent(self.cells).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
+            fold.check_consistent(self.layout()).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
         }
         Ok(())
     }
@@ -440,7 +466,7 @@ impl Moments {
 
     /// All folds but `left_out` added together: the training data of a cross-fit.
     pub fn pooled_except(&self, left_out: Option<usize>) -> FoldMoments {
-        let mut all = FoldMoments::empty(self.cells, self.has_components());
+        let mut all = FoldMoments::empty(self.layout(), self.has_components());
         for (f, fold) in self.folds.iter().enumerate() {
             if Some(f) != left_out {
                 all.add(fold);

@@ -55,7 +55,7 @@ pub fn figures_of_report(report: &RunReport, budget: Budget, partial: bool) -> P
         iterations: report.iterations,
         partial,
         noise_table: report.noise_table.iter().filter(|r| !r.in_sample).cloned().collect(),
-        recommended: report.recommended,
+        recommended: report.recommended.clone(),
         weights: report.weights.clone(),
         error: report.solve_error.clone(),
     }
@@ -69,7 +69,7 @@ pub fn figures_of_prediction(p: &Prediction, partial: bool) -> PointFigures {
         iterations: p.iterations,
         partial,
         noise_table: p.noise_table.iter().filter(|r| !r.in_sample).cloned().collect(),
-        recommended: p.recommended,
+        recommended: p.recommended.clone(),
         weights: p.weights.clone(),
         error: p.solve_error.clone(),
     }
@@ -204,7 +204,7 @@ impl SweepTable {
         for (point, f) in each {
             let Some(f) = f else { continue };
             let values: Map<String, Value> = fields.iter().cloned().zip(point.values.iter().cloned()).collect();
-            let chosen = f.recommended.map(|r| r.strategy);
+            let chosen = f.recommended.as_ref().map(|r| r.strategy);
             for r in &f.noise_table {
                 rows.push(SweepRow {
                     point: point.index,

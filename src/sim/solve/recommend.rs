@@ -1,0 +1,214 @@
+//! Which row of the noise table to recommend, and how much it gains.
+//!
+//! **The guard.** The recommendation is what a researcher takes into a renderer, so it must be the
+//! best thing the run knows and never worse than it says:
+//!
+//! * candidates are the honest rows that keep the solver's fixed weights — every per-path strategy
+//!   that keeps them, and every cross-fitted row whose fit is stable (the in-sample `optimal` row and
+//!   unstable fits never are; each fitted row chose its λ by the one-standard-error rule,
+//!   [`super::crossfit::select_lambda`]);
+//! * the best fitted row (lowest cross-fitted RMS) is recommended only if it beats the best
+//!   per-path row *beyond one standard error*: the paired variance ratio Var(per-path)/Var(fitted),
+//!   both on the same iterations, must exceed 1 by more than its jackknife SE over the folds;
+//!   otherwise the per-path row is recommended — its figures involve no fit at all.
+//!
+//! **The gain** compares the recommended row with the best per-path strategy other than itself that
+//! keeps the fixed weights (the paper's reference is the switch, case 4), as a variance ratio with
+//! the paired jackknife SE: each replicate leaves one fold out of both variances, so a fold of
+//! unusual iterations moves numerator and denominator together. The same ratio against the best
+//! per-path strategy that does *not* keep the fixed weights measures what the constraint costs.
+
+use serde::{Deserialize, Serialize};
+
+use super::crossfit::{Scored, jackknife_se};
+use super::fitted::Fitted;
+use super::row::{NoiseRow, WeightErrors, sample_variance};
+use super::solver::Fit;
+use super::strategy::Strategy;
+use crate::sim::engines::tally::PathStrategy;
+
+/// The recommended row.
+#[derive(Debug, Clone)]
+pub struct Recommended {
+    pub strategy: Strategy,
+    /// The fitted row's fit at its λ (None when a per-path strategy is recommended).
+    pub fitted: Option<Scored>,
+    /// Why this row, in a sentence.
+    pub reason: String,
+}
+
+impl Recommended {
+    /// λ of a fitted recommendation.
+    pub fn lambda(&self) -> Option<f64> {
+        self.fitted.as_ref().map(|s| s.cross_fit.lambda)
+    }
+
+    /// The weights to take into a renderer: the fit on all iterations at the row's λ.
+    pub fn fit(&self) -> Option<&Fit> {
+        self.fitted.as_ref().map(|s| &s.all)
+    }
+
+    /// Jackknife standard errors of each cell's weights over the fold fits.
+    pub fn weight_stderr(&self) -> Option<WeightErrors> {
+        self.fitted.as_ref().and_then(|s| s.cross_fit.weight_stderr())
+    }
+}
+
+/// Var(versus) / Var(strategy): how many times fewer iterations `strategy` needs than `versus` for
+/// the same noise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct Gain {
+    pub value: f64,
+    /// Paired jackknife over the folds (module docs); null with fewer than two folds holding
+    /// iterations.
+    pub stderr: Option<f64>,
+    /// The per-path strategy compared against.
+    pub versus: Strategy,
+    /// The recommended strategy.
+    pub strategy: Strategy,
+}
+
+/// The recommendation and its gains.
+#[derive(Debug, Clone)]
+pub struct Choice {
+    pub recommended: Result<Recommended, String>,
+    /// Against the best other per-path strategy that keeps the fixed weights.
+    pub gain: Option<Gain>,
+    /// Against the best per-path strategy that does not.
+    pub unconstrained: Option<Gain>,
+}
+
+/// Per used fold f: (f, [M_f, Σ C, Σ C²]) of a row's scored values.
+pub type FoldSums = Vec<(usize, [f64; 3])>;
+
+/// Chooses the recommended row among `rows` (module docs); `fitted` holds the fits behind the
+/// cross-fitted rows, `path_sums` gives a per-path strategy's sums per fold (measured, or
+/// predicted at another budget).
+pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathStrategy) -> FoldSums) -> Choice {
+    let usable = |r: &&NoiseRow| r.error.is_none() && r.rms_percent.is_some_and(|x| x.is_finite() && x > 0.0);
+    let lowest = |it: &mut dyn Iterator<Item = &NoiseRow>| {
+        it.min_by(|a, b| a.rms_percent.unwrap_or(f64::INFINITY).total_cmp(&b.rms_percent.unwrap_or(f64::INFINITY)))
+            .map(|r| r.strategy)
+    };
+    let is_path = |r: &&NoiseRow| r.strategy.path().is_some();
+    let best_path = lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed));
+    let best_fitted = lowest(
+        &mut rows
+            .iter()
+            .filter(usable)
+            .filter(|r| r.strategy.is_fitted() && !r.in_sample && !r.unstable)
+            .filter(|r| fitted.iter().any(|f| f.strategy == r.strategy)),
+    );
+    let sums = |s: Strategy| fold_sums(path_sums, fitted, s);
+    let rms = |s: Strategy| rows.iter().find(|r| r.strategy == s).and_then(|r| r.rms_percent).unwrap_or(f64::NAN);
+    let recommended = match (best_fitted, best_path) {
+        (Some(f), Some(p)) => {
+            let ratio = paired_ratio(&sums(p), &sums(f));
+            match ratio {
+                Some((g, Some(se))) if g - 1.0 > se => Ok((
+                    f,
+                    format!(
+                        "the lowest honest RMS ({:.1}%); it beats {p} ({:.1}%) by a variance ratio of {g:.3} ± {se:.3}, more than one standard error",
+                        rms(f),
+                        rms(p)
+                    ),
+                )),
+                _ => {
+                    let by = ratio.map_or_else(String::new, |(g, se)| {
+                        format!(" (variance ratio {g:.3} ± {})", se.map_or("?".to_string(), |s| format!("{s:.3}")))
+                    });
+                    Ok((
+                        p,
+                        format!(
+                            "no fitted row beats it beyond one standard error: the best, {f} ({:.1}%), is within noise of {p} ({:.1}%){by}",
+                            rms(f),
+                            rms(p)
+                        ),
+                    ))
+                }
+            }
+        }
+        (Some(f), None) => {
+            Ok((f, format!("the lowest honest RMS ({:.1}%); no per-path strategy keeps the fixed weights", rms(f))))
+        }
+        (None, Some(p)) => Ok((
+            p,
+            format!("the lowest honest RMS ({:.1}%) of the per-path strategies; no fitted row is stable", rms(p)),
+        )),
+        (None, None) => Err("no honest row keeping the solver's fixed weights has a finite RMS".to_string()),
+    };
+    let recommended = recommended.map(|(strategy, reason)| Recommended {
+        strategy,
+        fitted: fitted.iter().find(|f| f.strategy == strategy).map(|f| f.scored.clone()),
+        reason,
+    });
+    let against = |inside: bool| -> Option<Gain> {
+        let r = recommended.as_ref().ok()?;
+        let versus = lowest(
+            &mut rows
+                .iter()
+                .filter(usable)
+                .filter(is_path)
+                .filter(|x| x.respects_fixed == inside && x.strategy != r.strategy),
+        )?;
+        let (value, stderr) = paired_ratio(&sums(versus), &sums(r.strategy))?;
+        Some(Gain { value, stderr, versus, strategy: r.strategy })
+    };
+    let (gain, unconstrained) = (against(true), against(false));
+    Choice { recommended, gain, unconstrained }
+}
+
+/// The scored sums per fold of row `s`: a per-path strategy's power sums, or a fitted row's
+/// cross-fitted sums.
+fn fold_sums(path_sums: &dyn Fn(PathStrategy) -> FoldSums, fitted: &[Fitted], s: Strategy) -> FoldSums {
+    match s.path() {
+        Some(p) => path_sums(p),
+        None => fitted
+            .iter()
+            .find(|f| f.strategy == s)
+            .map(|f| f.scored.cross_fit.folds.iter().map(|(fold, _, sums)| (*fold, *sums)).collect())
+            .unwrap_or_default(),
+    }
+}
+
+/// Var(numerator)/Var(denominator) on the folds both hold, with the paired delete-a-fold jackknife
+/// SE (None with fewer than two such folds).
+pub(crate) fn paired_ratio(numerator: &FoldSums, denominator: &FoldSums) -> Option<(f64, Option<f64>)> {
+    let folds: Vec<usize> =
+        numerator.iter().map(|(f, _)| *f).filter(|f| denominator.iter().any(|(g, _)| g == f)).collect();
+    let total = |sums: &FoldSums, left_out: Option<usize>| {
+        sums.iter()
+            .filter(|(f, _)| folds.contains(f) && Some(*f) != left_out)
+            .fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]])
+    };
+    let variance = |[m, s1, s2]: [f64; 3]| (m >= 2.0).then(|| sample_variance(m, s1, s2));
+    let ratio = |left_out: Option<usize>| {
+        let den = variance(total(denominator, left_out))?;
+        let num = variance(total(numerator, left_out))?;
+        (den > 0.0).then(|| num / den)
+    };
+    let value = ratio(None)?;
+    let replicates: Option<Vec<f64>> = folds.iter().map(|&f| ratio(Some(f))).collect();
+    let stderr = replicates.filter(|r| r.len() >= 2).map(|r| jackknife_se(r.into_iter()));
+    Some((value, stderr))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two strategies on the same folds: the ratio of their pooled variances, and a jackknife SE
+    /// that vanishes when they differ by a constant factor in every fold.
+    #[test]
+    fn the_paired_ratio_is_exact_for_proportional_strategies() {
+        let folds: FoldSums = (0..5).map(|f| (f, [10.0, 10.0 + f as f64, 20.0 + 3.0 * f as f64])).collect();
+        // The same values scaled by 2: Σ C doubles, Σ C² quadruples — variance × 4 in every fold.
+        let scaled: FoldSums = folds.iter().map(|&(f, [m, s1, s2])| (f, [m, 2.0 * s1, 4.0 * s2])).collect();
+        let (value, se) = paired_ratio(&scaled, &folds).unwrap();
+        assert!((value - 4.0).abs() < 1e-12, "{value}");
+        assert!(se.unwrap() < 1e-9, "{se:?}");
+        let one_fold: FoldSums = folds[..1].to_vec();
+        assert_eq!(paired_ratio(&one_fold, &folds).unwrap().1, None, "one common fold: no SE");
+    }
+}

@@ -1,0 +1,228 @@
+//! One row of the noise table: a strategy's L and RMS with their standard errors, from its sums;
+//! and the rows of the per-path strategies, from their power sums (see [`super::noise`] for the
+//! table).
+//!
+//! For a strategy with per-iteration values C_s: L = mean C_s, its standard error std/√M, and
+//! RMS% = 100·std(C_s)/|mean(C_s)| with the sample standard deviation (M − 1). The standard error
+//! of a per-path strategy's RMS% is the delta method on (mean, variance): with central moments m2,
+//! m3, m4, Var(R̂) ≈ R²/M · [m2/μ² − m3/(μ·m2) + (m4 − m2²)/(4·m2²)], from Σ C_s³ and Σ C_s⁴,
+//! which the moments carry for every per-path strategy.
+
+use serde::{Deserialize, Serialize};
+
+use super::options::FixedWeights;
+use super::strategy::Strategy;
+use crate::sim::engines::tally::PathStrategy;
+use crate::sim::stats::moments::{FoldMoments, Moments};
+
+/// A stacked heuristic's coefficient in a fitted row: per-path weights are the table's plus
+/// β·(the heuristic's weights).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct HeuristicWeight {
+    /// The per-path heuristic.
+    pub strategy: Strategy,
+    /// β, fitted on all iterations.
+    pub beta: f64,
+    /// Jackknife standard error of β over the fold fits.
+    pub beta_stderr: Option<f64>,
+}
+
+/// One λ of a cross-validation: the cross-fitted RMS% of the fit at λ, its jackknife SE, and
+/// whether the fit was stable.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct LambdaScore {
+    pub lambda: f64,
+    pub rms_percent: f64,
+    pub rms_percent_stderr: Option<f64>,
+    pub stable: bool,
+}
+
+/// One row of the noise table. Keys are stable (dashboards depend on them); a value that cannot be
+/// computed is null, with the reason in `error`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct NoiseRow {
+    pub strategy: Strategy,
+    pub luminance: Option<f64>,
+    pub luminance_stderr: Option<f64>,
+    pub rms_percent: Option<f64>,
+    /// Per-path rows: the delta method on the power sums; fitted rows: the jackknife over the
+    /// cross-fitting folds (null for the in-sample `optimal`, whose RMS is optimistic).
+    pub rms_percent_stderr: Option<f64>,
+    /// λ of a fitted strategy (`optimal_cv`, `optimal_stacked`: the λ chosen).
+    pub lambda: Option<f64>,
+    /// Whether the figures are scored on the iterations the weights were fitted to (`optimal`, the
+    /// paper's procedure): then they are optimistic — L biased, its standard error and the RMS too
+    /// small — and the row is never recommended.
+    #[serde(default)]
+    pub in_sample: bool,
+    /// Fitted rows chosen by cross-validation: L of their weights fitted and scored on all
+    /// iterations (in-sample, optimistic); `luminance` is the cross-fitted figure.
+    #[serde(default)]
+    pub in_sample_luminance: Option<f64>,
+    /// The in-sample standard error of L (too small).
+    #[serde(default)]
+    pub in_sample_luminance_stderr: Option<f64>,
+    /// The in-sample RMS% (too small).
+    #[serde(default)]
+    pub in_sample_rms_percent: Option<f64>,
+    /// Whether the row's weights keep the solver's fixed weights (`solver.fixed`). A per-path
+    /// strategy that does not — e.g. `balance`, which merges at the pixel while the paper fixes
+    /// w0 = 0 — is shown for comparison but is neither recommended nor the gain's reference: it
+    /// answers another question than the one the fixed weights ask (a `fixed_weights_cost` warning
+    /// says when it is less noisy). Fitted rows keep them by construction.
+    #[serde(default = "keeps")]
+    pub respects_fixed: bool,
+    /// Fitted rows with heuristics stacked on the table: each heuristic's β.
+    #[serde(default)]
+    pub heuristics: Vec<HeuristicWeight>,
+    /// Rows whose λ was chosen by cross-validation: every λ of the grid with its cross-fitted RMS,
+    /// the jackknife SE and whether its fit was stable (the curve the one-SE rule read).
+    #[serde(default)]
+    pub cv_path: Vec<LambdaScore>,
+    /// A fitted row whose data-fitted weights (or β) change from fold to fold by more than 0.25
+    /// (jackknife SE): never recommended.
+    #[serde(default)]
+    pub unstable: bool,
+    /// The row's expected luminance at the job's merge radius R by quadrature (docs/model.md §11);
+    /// null for fitted rows (their expectation depends on weights fitted to these data) and where
+    /// the quadrature could not resolve it (`expected_error`).
+    #[serde(default)]
+    pub expected_luminance: Option<f64>,
+    /// (luminance − expected_luminance)/luminance_stderr.
+    #[serde(default)]
+    pub z: Option<f64>,
+    /// Why the row has no expected luminance.
+    #[serde(default)]
+    pub expected_error: Option<String>,
+    pub error: Option<String>,
+}
+
+fn keeps() -> bool {
+    true
+}
+
+/// Whether `strategy` gives every join path the weights `fixed` fixes.
+pub fn respects_fixed(strategy: PathStrategy, fixed: &FixedWeights) -> bool {
+    let constant = strategy.constant_weights();
+    [fixed.w0, fixed.w1, fixed.w2].iter().zip(constant).all(|(want, has)| want.is_none() || *want == has)
+}
+
+impl NoiseRow {
+    pub(crate) fn failed(strategy: Strategy, error: String) -> Self {
+        Self { error: Some(error), ..Self::from_sums(strategy, 0.0, 0.0, 0.0, None) }
+    }
+
+    /// A row from M, Σ C and Σ C² (and, if known, the central moments for the RMS error).
+    pub fn from_sums(strategy: Strategy, m: f64, s1: f64, s2: f64, higher: Option<(f64, f64)>) -> Self {
+        let empty = Self {
+            strategy,
+            luminance: None,
+            luminance_stderr: None,
+            rms_percent: None,
+            rms_percent_stderr: None,
+            lambda: None,
+            in_sample: strategy.is_in_sample(),
+            in_sample_luminance: None,
+            in_sample_luminance_stderr: None,
+            in_sample_rms_percent: None,
+            respects_fixed: true,
+            heuristics: Vec::new(),
+            cv_path: Vec::new(),
+            unstable: false,
+            expected_luminance: None,
+            z: None,
+            expected_error: None,
+            error: None,
+        };
+        if m < 2.0 {
+            return Self { error: Some(format!("at least 2 iterations are needed, got {m}")), ..empty };
+        }
+        let mean = s1 / m;
+        let var = sample_variance(m, s1, s2);
+        let m2 = var * (m - 1.0) / m;
+        let std = var.sqrt();
+        // Relative to |mean|: a wildly overfitted hold-out estimate can have a negative mean, and
+        // its noise is still a size, not a sign.
+        let rms = (mean != 0.0).then(|| 100.0 * std / mean.abs());
+        let rms_se = match (rms, higher) {
+            (Some(r), Some((m3, m4))) if m2 > 0.0 => {
+                let r = r / 100.0;
+                let bracket = m2 / (mean * mean) - m3 / (mean * m2) + (m4 - m2 * m2) / (4.0 * m2 * m2);
+                Some(100.0 * r.abs() * (bracket.max(0.0) / m).sqrt())
+            }
+            _ => None,
+        };
+        Self {
+            luminance: Some(mean),
+            luminance_stderr: Some(std / m.sqrt()),
+            rms_percent: rms,
+            rms_percent_stderr: rms_se,
+            error: (mean == 0.0).then(|| "the mean is zero: no merge events for this strategy".to_string()),
+            ..empty
+        }
+    }
+}
+
+/// The sample variance (M − 1 normalisation) from M, Σ C and Σ C², never negative.
+pub(crate) fn sample_variance(m: f64, s1: f64, s2: f64) -> f64 {
+    let mean = s1 / m;
+    (s2 / m - mean * mean).max(0.0) * m / (m - 1.0)
+}
+
+/// Central moments m3, m4 from power sums (population normalisation).
+pub(crate) fn central_3_4(m: f64, s: [f64; 4]) -> (f64, f64) {
+    let mu = s[0] / m;
+    let (e2, e3, e4) = (s[1] / m, s[2] / m, s[3] / m);
+    let m3 = e3 - 3.0 * mu * e2 + 2.0 * mu.powi(3);
+    let m4 = e4 - 4.0 * mu * e3 + 6.0 * mu * mu * e2 - 3.0 * mu.powi(4);
+    (m3, m4)
+}
+
+/// Power sums Σ C^k, k = 1…4, of a per-path strategy in `fold`; `None` if the fold's format does
+/// not keep that strategy (format 2 lacks the planes-2–3 heuristics).
+pub(crate) fn power_sums(fold: &FoldMoments, strategy: PathStrategy) -> Option<[f64; 4]> {
+    fold.strategies.get(strategy.index()).map(|s| s.clone().map(|x| x.value()))
+}
+
+/// (fold, [M_f, Σ C, Σ C²]) of per-path strategy `s` in every fold that holds iterations: what the
+/// paired jackknife of a variance ratio needs.
+pub(crate) fn path_fold_sums(moments: &Moments, s: PathStrategy) -> Vec<(usize, [f64; 3])> {
+    moments
+        .folds
+        .iter()
+        .enumerate()
+        .filter(|(_, fold)| fold.iterations > 0)
+        .filter_map(|(f, fold)| power_sums(fold, s).map(|p| (f, [fold.iterations as f64, p[0], p[1]])))
+        .collect()
+}
+
+/// The row of a per-path strategy from its power sums.
+pub(crate) fn path_row(fold: &FoldMoments, strategy: PathStrategy, fixed: &FixedWeights) -> NoiseRow {
+    let name = Strategy::of_path(strategy);
+    let Some(s) = power_sums(fold, strategy) else {
+        return NoiseRow {
+            respects_fixed: respects_fixed(strategy, fixed),
+            ..NoiseRow::failed(
+                name,
+                "not in these moments: format 2 (written by an earlier optimis) does not keep this strategy".into(),
+            )
+        };
+    };
+    let m = fold.iterations as f64;
+    NoiseRow {
+        respects_fixed: respects_fixed(strategy, fixed),
+        ..NoiseRow::from_sums(name, m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
+    }
+}
+
+/// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
+pub fn path_rows(moments: &Moments, fixed: &FixedWeights) -> Vec<NoiseRow> {
+    let pooled = moments.pooled();
+    PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s, fixed)).collect()
+}
+
+/// Jackknife standard errors of each cell's (w0, w1, w2).
+pub type WeightErrors = Vec<[f64; 3]>;
