@@ -12,7 +12,7 @@ use super::documents::{read_document, solver_options};
 use super::{CliError, thread_pool};
 use crate::sim::model::config::Engine;
 use crate::sim::model::params::check;
-use crate::sim::solve::budget::{Costs, PAPER_BUDGET, log_grid, plan};
+use crate::sim::solve::budget::{Costs, plan};
 use crate::sim::solve::predict::Budget;
 use crate::sim::spec::{JobSpec, SpecError};
 
@@ -83,13 +83,7 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     }
     let costs = Costs { light_path: t_f, camera_path: t_b, iteration: t_0, pixels: args.pixels };
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
-    // Within a decade of the measured budget on each axis: the range over which predictions were
-    // checked against direct runs (docs/results.md §7); beyond it the components' estimation noise
-    // is amplified (a slightly negative estimate of a component can make a far budget look free).
-    let (f, b) = (measured.light_paths, measured.camera_paths);
-    let light = log_grid((f / 10).max(1), f.saturating_mul(10), 2);
-    let camera = log_grid((b / 10).max(1), b.saturating_mul(10).min(1_000_000), 2);
-    let p = plan(&doc.moments, &job.config.cells, &solver, measured, costs, args.target_rms, &light, &camera)
+    let p = plan(&doc.moments, &job.config.cells, &solver, measured, costs, args.target_rms)
         .map_err(|e| SpecError::new("document", e.to_string()))?;
     let mut out = std::io::stdout().lock();
     if args.json {
@@ -102,46 +96,74 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         "time to {}% RMS with P = {} pixels, t_F = {:.3e} s per light path, t_B = {:.3e} s per camera path and pixel, t_0 = {:.3e} s per iteration",
         args.target_rms, args.pixels, t_f, t_b, t_0
     )?;
+    let s = &p.search;
     writeln!(
         out,
-        "(predicted from {} iterations at N_F = {}, N_B = {}; grid N_F {}–{}, N_B {}–{}, half-decade steps; * = at the grid's edge, the optimum may lie beyond)\n",
+        "(predicted from {} iterations at N_F = {}, N_B = {}; searched N_F {}–{}, N_B {}–{} in half-decade steps{}; * = at the edge of that range, the optimum may lie beyond)\n",
         doc.moments.iterations(),
         measured.light_paths,
         measured.camera_paths,
-        light[0],
-        light[light.len() - 1],
-        camera[0],
-        camera[camera.len() - 1]
+        s.light_paths[0],
+        s.light_paths[1],
+        s.camera_paths[0],
+        s.camera_paths[1],
+        if s.at_limit { ", widened to the limit of what this run can predict" } else { "" }
     )?;
-    writeln!(
-        out,
-        "{:<18} {:>12} {:>8} {:>12} {:>12} {:>14}",
-        "strategy", "N_F", "N_B", "RMS % / it", "s / it", "s to target"
-    )?;
-    for b in p.best.iter().chain(&p.paper) {
-        let edge = |v: u64, axis: &[u64]| v == axis[0] || v == axis[axis.len() - 1];
-        let label = if p.paper.as_ref() == Some(b) && b.budget == PAPER_BUDGET {
-            format!("{} (paper)", b.strategy)
-        } else if edge(b.budget.light_paths, &light) || edge(b.budget.camera_paths, &camera) {
-            format!("{}*", b.strategy)
-        } else {
-            b.strategy.to_string()
+    if let Some(h) = p.headline.and_then(|h| p.best.iter().find(|b| b.point.strategy == h)) {
+        let speed = match (h.speedup, h.speedup_stderr) {
+            (Some(x), Some(se)) => format!("{x:.1} ± {se:.1}× sooner than the paper's switch at (10⁷, 100)"),
+            (Some(x), None) => format!("{x:.1}× sooner than the paper's switch at (10⁷, 100)"),
+            _ => String::new(),
         };
+        let edge = if h.at_edge { " (at the edge of what this run can predict: larger budgets may be faster still)" } else { "" };
         writeln!(
             out,
-            "{label:<18} {:>12} {:>8} {:>12.1} {:>12.4} {:>14.1}",
-            b.budget.light_paths, b.budget.camera_paths, b.rms_percent, b.seconds_per_iteration, b.seconds_to_target
+            "{} (recommended) at (N_F, N_B) = ({}, {}) reaches {}% {speed}{edge}",
+            h.point.strategy, h.point.budget.light_paths, h.point.budget.camera_paths, args.target_rms
         )?;
     }
-    if let (Some(first), Some(paper)) = (p.best.first(), &p.paper) {
+    if let Some(note) = &p.headline_note {
+        writeln!(out, "note: {note}")?;
+    }
+    writeln!(out)?;
+    writeln!(
+        out,
+        "{:<28} {:>12} {:>8} {:>14} {:>12} {:>14} {:>14}",
+        "strategy", "N_F", "N_B", "RMS % / it", "s / it", "s to target", "speed-up"
+    )?;
+    for b in &p.best {
+        let pt = &b.point;
+        let mut label = pt.strategy.to_string();
+        if b.at_edge {
+            label.push('*');
+        }
+        let se = pt.rms_percent_stderr.map_or_else(String::new, |s| format!(" ± {s:.1}"));
+        let speed = match (b.speedup, b.speedup_stderr) {
+            (Some(x), Some(e)) => format!("{x:.2} ± {e:.2}"),
+            (Some(x), None) => format!("{x:.2}"),
+            _ => "—".to_string(),
+        };
+        let outside = if pt.respects_fixed { "" } else { "  outside the fixed weights (not ranked)" };
         writeln!(
             out,
-            "\n{} at (N_F, N_B) = ({}, {}) reaches {}% {:.1}× sooner than the paper's switch at (10⁷, 100)",
-            first.strategy,
-            first.budget.light_paths,
-            first.budget.camera_paths,
-            args.target_rms,
-            paper.seconds_to_target / first.seconds_to_target
+            "{label:<28} {:>12} {:>8} {:>14} {:>12.4} {:>14.1} {speed:>14}{outside}",
+            pt.budget.light_paths,
+            pt.budget.camera_paths,
+            format!("{:.1}{se}", pt.rms_percent),
+            pt.seconds_per_iteration,
+            pt.seconds_to_target
+        )?;
+    }
+    if let Some(paper) = &p.paper {
+        writeln!(
+            out,
+            "{:<28} {:>12} {:>8} {:>14.1} {:>12.4} {:>14.1}",
+            "switch (paper)",
+            paper.budget.light_paths,
+            paper.budget.camera_paths,
+            paper.rms_percent,
+            paper.seconds_per_iteration,
+            paper.seconds_to_target
         )?;
     }
     if let Some(f) = &p.fixed_time {
@@ -150,11 +172,11 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             "\nRMS % after T = {:.3e} s (the paper's switch at (10⁷, 100) to {}%), per ratio N_F/N_B at its best budget on the grid (‡ = not one iteration fits in T: extrapolated)\n",
             f.seconds, args.target_rms
         )?;
-        writeln!(out, "{:<18} {:>9} {:>20} {:>12}", "strategy", "N_F/N_B", "best (N_F, N_B)", "RMS % at T")?;
+        writeln!(out, "{:<28} {:>9} {:>20} {:>12}", "strategy", "N_F/N_B", "best (N_F, N_B)", "RMS % at T")?;
         for c in &f.curve {
             let at = format!("({}, {})", c.budget.light_paths, c.budget.camera_paths);
             let flag = if c.iterations < 1.0 { "‡" } else { "" };
-            writeln!(out, "{:<18} {:>9.1e} {at:>20} {:>12.2}{flag}", c.strategy, c.ratio, c.rms_percent)?;
+            writeln!(out, "{:<28} {:>9.1e} {at:>20} {:>12.2}{flag}", c.strategy, c.ratio, c.rms_percent)?;
         }
     }
     Ok(())

@@ -9,12 +9,13 @@ use serde_json::Value;
 use super::run::{write_atomically, write_csv};
 use super::{CliError, table};
 use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::{MomentsDocument, merge_documents_at};
 use crate::sim::model::params::check;
 use crate::sim::solve::crossfit::{CrossFitting, nested_selection};
 use crate::sim::solve::noise::NoiseRow;
 use crate::sim::solve::options::SolverOptions;
-use crate::sim::solve::report::build_report;
+use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::SpecError;
 
@@ -42,6 +43,10 @@ pub struct ReportArgs {
     /// procedure) instead of the recommended weights.
     #[arg(long, value_name = "LAMBDA")]
     pub weights_lambda: Option<f64>,
+    /// With --weights-lambda: the fitted row whose weights to show (`optimal`, the table alone, by
+    /// default; `optimal_stacked` or a `…_corrected` row for a table with heuristics stacked on it).
+    #[arg(long, value_name = "STRATEGY", requires = "weights_lambda", value_parser = parse_strategy)]
+    pub weights_of: Option<Strategy>,
     /// Also measure how optimistic the cross-validated choice of λ is, by nested cross-validation
     /// (K λ searches: slower than the report itself).
     #[arg(long)]
@@ -52,6 +57,11 @@ pub struct ReportArgs {
     /// Write the weights table as CSV (one row per cell).
     #[arg(long, value_name = "FILE")]
     pub weights_csv: Option<PathBuf>,
+}
+
+/// A strategy by its result name (`optimal_stacked`).
+fn parse_strategy(name: &str) -> Result<Strategy, String> {
+    serde_json::from_value(Value::String(name.to_string())).map_err(|_| format!("no strategy named {name:?}"))
 }
 
 /// Reads and verifies a moments document.
@@ -92,7 +102,11 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
             format!("must be in [0, 1e12], got {l}")
         })?;
     }
-    let report = build_report(&doc.moments, &job.config.cells, &solver, reference, args.weights_lambda);
+    let expected = expected_luminances(&job.config);
+    let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
+    let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
+    let inputs = ReportInputs { reference, expected: Some(&expected), weights };
+    let report = build_report(&doc.moments, &job.config.cells, &solver, &inputs);
     write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.nested_cv {

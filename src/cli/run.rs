@@ -13,11 +13,12 @@ use super::progress::{Progress, ProgressArgs};
 use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
 use crate::sim::model::params::{merge_patch, path_patch};
 use crate::sim::runner::run_iterations;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
-use crate::sim::solve::report::{RunReport, build_report};
+use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
 use crate::sim::spec::{Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
 
@@ -179,7 +180,9 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     if let Some(path) = &args.out {
         write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
     }
-    let report = build_report(&moments, &config.cells, &job.spec.solver, reference_luminance(&config.scene).ok(), None);
+    let expected = expected_luminances(config);
+    let inputs = ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
+    let report = build_report(&moments, &config.cells, &job.spec.solver, &inputs);
     write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {

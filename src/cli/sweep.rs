@@ -19,8 +19,9 @@ use super::run::{read_json, run_moments, write_atomically};
 use super::shard::task_index;
 use super::{CliError, table, thread_pool};
 use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
-use crate::sim::solve::report::build_report;
+use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::SpecError;
 use crate::sim::stats::moments::Moments;
 use crate::sim::sweep::{PointFigures, PointResults, SweepPlan, SweepTable, plan, point_figures};
@@ -152,7 +153,9 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
 fn run_figures(plan: &SweepPlan, r: usize, moments: &Moments) -> Result<Vec<(usize, PointFigures)>, CliError> {
     let job = plan.runs[r].spec.validate()?;
     let reference = reference_luminance(&job.config.scene).ok();
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference, None);
+    let expected = expected_luminances(&job.config);
+    let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
+    let report = build_report(moments, &job.config.cells, &job.spec.solver, &inputs);
     Ok(point_figures(plan, r, moments, &job.config.cells, &report, false))
 }
 

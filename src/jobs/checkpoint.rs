@@ -6,7 +6,8 @@ use super::documents::StrategyPoint;
 use super::error::JobError;
 use super::resource::best_strategy;
 use crate::sim::math::digest::sha256_hex;
-use crate::sim::solve::report::build_report;
+use super::references::expected_luminances;
+use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
@@ -60,7 +61,9 @@ pub(crate) fn decode_checkpoint(
 /// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
 /// them with the job's solver options.
 pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, reference, None);
+    let expected = expected_luminances(&job.config);
+    let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
+    let report = build_report(moments, &job.config.cells, &job.spec.solver, &inputs);
     let best = best_strategy(&report.noise_table);
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
     let history: Vec<StrategyPoint> = report

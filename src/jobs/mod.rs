@@ -11,6 +11,7 @@
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
 //! * [`state`] — the jobs in memory (`ActiveJob`, `StopReason`) and the transitions of their state;
+//! * [`references`] — each configuration's expected luminances, computed once;
 //! * [`checkpoint`] — the stored forms: spec JSON, checkpoint encoding and verified decoding;
 //! * [`policy`] — what this server accepts: budgets, the work of an iteration, extension targets;
 //! * [`peers`] — moments documents pulled from allowed peer servers, for merges;
@@ -25,6 +26,7 @@ pub mod manager;
 pub mod peers;
 pub mod policy;
 pub mod prediction;
+pub mod references;
 pub mod resource;
 pub mod scheduler;
 pub mod solves;

@@ -20,11 +20,13 @@ use super::manager::JobManager;
 use super::peers::CONCURRENT_PULLS;
 use super::policy::check_budget;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
+use super::references::expected_luminances;
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::model::params::check;
-use crate::sim::solve::report::{RunReport, build_report};
+use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
+use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
@@ -247,7 +249,10 @@ impl JobManager {
         let report = self
             .compute(move || -> Result<RunReport, JobError> {
                 let job = spec.validate()?;
-                Ok(build_report(&moments, &job.config.cells, &solver, reference, weights_lambda))
+                let weights = weights_lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
+                let expected = expected_luminances(&job.config);
+                let inputs = ReportInputs { reference, expected: Some(&expected), weights };
+                Ok(build_report(&moments, &job.config.cells, &solver, &inputs))
             })
             .await??;
         let partial = !(state == JobState::Succeeded && done >= total);

@@ -5,8 +5,12 @@
 //! *this* pixel, so an iteration of a renderer with P pixels costs t = t_F·N_F + t_B·N_B·P + t_0.
 //! A strategy whose per-iteration relative noise at (N_F, N_B) is R (the predicted RMS%) needs
 //! max(1, (R/target)²) iterations for a target RMS, so the time to the target is T = (R/target)²·t. Each
-//! strategy's T is evaluated on a grid of budgets — the optimum *re-fitted* at every point — and the
-//! best point reported, beside the paper's configuration (10⁷, 100, switch).
+//! strategy's T is evaluated on a grid of budgets — the fitted rows *re-fitted* at every point — and
+//! the best point reported with its speed-up over the paper's configuration (10⁷, 100, switch) and
+//! that speed-up's standard error. Only strategies that keep the solver's fixed weights are ranked;
+//! the plan headlines the strategy the run recommends (or, if its weights depend on the budget, the
+//! best predictable one), and widens its grid while that strategy's best lies on the edge — up to
+//! what the run can predict, where it says so.
 //!
 //! The same points also give the other view of the trade-off (`FixedTime`): the RMS each budget
 //! reaches in a fixed wall time — the time the paper's configuration takes to the target — as a
@@ -43,9 +47,39 @@ pub struct BudgetPoint {
     pub budget: Budget,
     /// Predicted RMS% of one iteration.
     pub rms_percent: f64,
+    /// Its jackknife standard error over the folds.
+    pub rms_percent_stderr: Option<f64>,
+    /// Whether the strategy keeps the solver's fixed weights (only those are ranked).
+    pub respects_fixed: bool,
     pub seconds_per_iteration: f64,
     /// Seconds to the target RMS: max(1, (rms/target)²) iterations.
     pub seconds_to_target: f64,
+}
+
+/// A strategy's fastest budget in the searched range.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BestBudget {
+    #[serde(flatten)]
+    pub point: BudgetPoint,
+    /// How many times sooner than the paper's switch at (10⁷, 100) it reaches the target.
+    pub speedup: Option<f64>,
+    /// The speed-up's standard error: the delta method on both RMS standard errors
+    /// (speed-up ∝ (R_paper/R)², treated as independent — conservative, as both are predicted from
+    /// the same iterations and err together).
+    pub speedup_stderr: Option<f64>,
+    /// Whether the budget lies on the edge of the searched range: the optimum may lie beyond what
+    /// this run can predict.
+    pub at_edge: bool,
+}
+
+/// The budgets searched: a grid in half-decade steps, widened from a decade around the measured
+/// budget while the headline's best lies on its edge, up to [`MAX_DECADES`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SearchRange {
+    pub light_paths: [u64; 2],
+    pub camera_paths: [u64; 2],
+    /// Whether the range reached the limit of what the run can predict.
+    pub at_limit: bool,
 }
 
 /// The best budget of every strategy, the paper's configuration, and every point evaluated.
@@ -53,8 +87,17 @@ pub struct BudgetPoint {
 pub struct BudgetPlan {
     pub target_rms_percent: f64,
     pub costs: Costs,
-    /// Per strategy (that could be predicted), its fastest point on the grid.
-    pub best: Vec<BudgetPoint>,
+    /// What the run recommends at its own budget.
+    pub recommended: Option<Strategy>,
+    /// The strategy headlined: the recommended one, or — when its weights depend on the budget
+    /// and cannot be predicted — the best predictable strategy that keeps the fixed weights.
+    pub headline: Option<Strategy>,
+    /// Why the headline is not the recommended strategy, if so.
+    pub headline_note: Option<String>,
+    pub search: SearchRange,
+    /// Per strategy (that could be predicted), its fastest point: those that keep the fixed
+    /// weights first (ranked by time), then the others (shown, not ranked).
+    pub best: Vec<BestBudget>,
     /// `switch` at (10⁷, 100): the paper's configuration.
     pub paper: Option<BudgetPoint>,
     /// Every (strategy, budget) evaluated.
@@ -146,8 +189,17 @@ pub fn log_grid(lo: u64, hi: u64, steps_per_decade: u32) -> Vec<u64> {
     out
 }
 
-/// Evaluates every strategy on the grid `light × camera` (and the paper's budget) for `target`.
-#[allow(clippy::too_many_arguments)]
+/// Decades around the measured budget beyond which the plan does not predict: the components'
+/// estimation noise is amplified with the distance (a slightly negative estimate of a component
+/// can make a far budget look free; docs/results.md §7 checked predictions within a decade).
+pub const MAX_DECADES: f64 = 2.0;
+
+/// Largest N_B a plan considers (the spec's limit).
+const MAX_CAMERA_PATHS: u64 = 1_000_000;
+
+/// Evaluates every strategy on a half-decade grid around `measured` (and at the paper's budget)
+/// for `target`: a decade each way first, widened by half-decade steps while the headline
+/// strategy's fastest budget lies on the grid's edge, up to [`MAX_DECADES`].
 pub fn plan(
     moments: &Moments,
     grid: &CellGrid,
@@ -155,15 +207,12 @@ pub fn plan(
     measured: Budget,
     costs: Costs,
     target: f64,
-    light: &[u64],
-    camera: &[u64],
 ) -> Result<BudgetPlan, PredictError> {
     let predictor = Predictor::new(moments, measured)?;
-    let mut points = Vec::new();
     let evaluate = |b: Budget, points: &mut Vec<BudgetPoint>| {
         let p = predictor.at(grid, solver, b);
         let seconds = costs.iteration_seconds(b);
-        for row in &p.noise_table {
+        for row in p.noise_table.iter().filter(|r| !r.in_sample) {
             if let Some(r) = row.rms_percent.filter(|r| r.is_finite() && *r > 0.0) {
                 // At least one iteration: a budget whose single iteration beats the target still
                 // costs that iteration.
@@ -172,32 +221,156 @@ pub fn plan(
                     strategy: row.strategy,
                     budget: b,
                     rms_percent: r,
+                    rms_percent_stderr: row.rms_percent_stderr,
+                    respects_fixed: row.respects_fixed,
                     seconds_per_iteration: seconds,
                     seconds_to_target: iterations * seconds,
                 });
             }
         }
+        p
     };
-    for &l in light {
-        for &c in camera {
-            evaluate(Budget { light_paths: l, camera_paths: c }, &mut points);
+    let own = evaluate(measured, &mut Vec::new());
+    let recommended = own.recommended.as_ref().map(|r| r.strategy);
+    let predictable = |s: Strategy| s.path().is_none_or(|p| !p.depends_on_budget());
+    let (headline, headline_note) = match recommended {
+        Some(s) if predictable(s) => (Some(s), None),
+        Some(s) => {
+            let fallback = [Strategy::OptimalStacked, Strategy::OptimalCv].into_iter().find(|f| {
+                own.noise_table.iter().any(|r| r.strategy == *f && r.error.is_none())
+            });
+            let note = format!(
+                "the run recommends {s}, whose weights depend on N_F and N_B, so its noise at other budgets cannot be predicted from this run; headlined instead: {}",
+                fallback.map_or("none".to_string(), |f| f.to_string())
+            );
+            (fallback, Some(note))
         }
-    }
+        None => (None, None),
+    };
+    let (f, b) = (measured.light_paths as f64, measured.camera_paths as f64);
+    let limit = 10f64.powf(MAX_DECADES);
+    let light_limit = [(f / limit).max(1.0), (f * limit).min(1e12)];
+    let camera_limit = [(b / limit).max(1.0), (b * limit).min(MAX_CAMERA_PATHS as f64)];
+    // Exponents in half decades around the measured budget: [lo, hi] per axis.
+    let mut range = [[-2i32, 2], [-2i32, 2]];
+    let value = |axis: usize, e: i32| {
+        let (base, [lo, hi]) = if axis == 0 { (f, light_limit) } else { (b, camera_limit) };
+        (base * 10f64.powf(f64::from(e) / 2.0)).clamp(lo, hi).round() as u64
+    };
+    let axis_values = |axis: usize, r: [i32; 2]| {
+        let mut v: Vec<u64> = (r[0]..=r[1]).map(|e| value(axis, e)).collect();
+        v.dedup();
+        v
+    };
+    let mut points = Vec::new();
+    let mut done: Vec<Budget> = Vec::new();
+    let at_limit = loop {
+        for &l in &axis_values(0, range[0]) {
+            for &c in &axis_values(1, range[1]) {
+                let budget = Budget { light_paths: l, camera_paths: c };
+                if !done.contains(&budget) {
+                    evaluate(budget, &mut points);
+                    done.push(budget);
+                }
+            }
+        }
+        let Some(best) = headline.and_then(|h| fastest(&points, h)) else { break false };
+        // Widen every side the headline's fastest budget touches, while that side can grow.
+        let mut widened = false;
+        for (axis, v) in [(0, best.budget.light_paths), (1, best.budget.camera_paths)] {
+            let values = axis_values(axis, range[axis]);
+            let max_steps = (2.0 * MAX_DECADES) as i32;
+            if v == values[0] && value(axis, range[axis][0] - 1) < values[0] && range[axis][0] > -max_steps {
+                range[axis][0] -= 1;
+                widened = true;
+            }
+            if v == values[values.len() - 1]
+                && value(axis, range[axis][1] + 1) > v
+                && range[axis][1] < max_steps
+            {
+                range[axis][1] += 1;
+                widened = true;
+            }
+        }
+        if !widened {
+            let light = axis_values(0, range[0]);
+            let camera = axis_values(1, range[1]);
+            let edge = |v: u64, axis: &[u64]| v == axis[0] || v == axis[axis.len() - 1];
+            break edge(best.budget.light_paths, &light) || edge(best.budget.camera_paths, &camera);
+        }
+    };
+    let (light, camera) = (axis_values(0, range[0]), axis_values(1, range[1]));
+    let search = SearchRange {
+        light_paths: [light[0], light[light.len() - 1]],
+        camera_paths: [camera[0], camera[camera.len() - 1]],
+        at_limit,
+    };
     let mut at_paper = Vec::new();
     evaluate(PAPER_BUDGET, &mut at_paper);
     let paper = at_paper.iter().find(|p| p.strategy == Strategy::Switch).copied();
-    let mut best: Vec<BudgetPoint> = Vec::new();
+    let mut strategies: Vec<Strategy> = Vec::new();
     for p in &points {
-        match best.iter_mut().find(|b| b.strategy == p.strategy) {
-            Some(b) if p.seconds_to_target < b.seconds_to_target => *b = *p,
-            Some(_) => {}
-            None => best.push(*p),
+        if !strategies.contains(&p.strategy) {
+            strategies.push(p.strategy);
         }
     }
-    best.sort_by(|a, b| a.seconds_to_target.total_cmp(&b.seconds_to_target));
-    let order: Vec<Strategy> = best.iter().map(|b| b.strategy).collect();
+    let edge = |p: &BudgetPoint| {
+        p.budget.light_paths == light[0]
+            || p.budget.light_paths == light[light.len() - 1]
+            || p.budget.camera_paths == camera[0]
+            || p.budget.camera_paths == camera[camera.len() - 1]
+    };
+    let mut best: Vec<BestBudget> = strategies
+        .iter()
+        .filter_map(|&s| fastest(&points, s))
+        .map(|point| {
+            let (speedup, speedup_stderr) = speedup(&point, paper.as_ref());
+            BestBudget { point, speedup, speedup_stderr, at_edge: edge(&point) }
+        })
+        .collect();
+    best.sort_by(|a, b| {
+        (!a.point.respects_fixed, a.point.seconds_to_target).partial_cmp(&(!b.point.respects_fixed, b.point.seconds_to_target)).unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let order: Vec<Strategy> = best.iter().map(|b| b.point.strategy).collect();
     let fixed_time = paper.map(|p| fixed_time(&points, p.seconds_to_target, &order));
-    Ok(BudgetPlan { target_rms_percent: target, costs, best, paper, points, fixed_time })
+    Ok(BudgetPlan {
+        target_rms_percent: target,
+        costs,
+        recommended,
+        headline,
+        headline_note,
+        search,
+        best,
+        paper,
+        points,
+        fixed_time,
+    })
+}
+
+/// The point of `strategy` that reaches the target soonest.
+fn fastest(points: &[BudgetPoint], strategy: Strategy) -> Option<BudgetPoint> {
+    points
+        .iter()
+        .filter(|p| p.strategy == strategy)
+        .min_by(|a, b| a.seconds_to_target.total_cmp(&b.seconds_to_target))
+        .copied()
+}
+
+/// The speed-up of `point` over the paper's configuration, with its delta-method SE: time to the
+/// target ∝ R²·t while at least one iteration is needed, so the relative SE of the ratio is
+/// 2·√((SE_R/R)² + (SE_R′/R′)²) (a point that needs a single iteration has no R-dependence).
+fn speedup(point: &BudgetPoint, paper: Option<&BudgetPoint>) -> (Option<f64>, Option<f64>) {
+    let Some(paper) = paper else { return (None, None) };
+    let value = paper.seconds_to_target / point.seconds_to_target;
+    let relative = |p: &BudgetPoint| {
+        let one_iteration = p.seconds_to_target <= p.seconds_per_iteration;
+        if one_iteration { Some(0.0) } else { p.rms_percent_stderr.map(|se| se / p.rms_percent) }
+    };
+    let se = match (relative(point), relative(paper)) {
+        (Some(a), Some(b)) => Some(value * 2.0 * (a * a + b * b).sqrt()),
+        _ => None,
+    };
+    (Some(value), se)
 }
 
 #[cfg(test)]
@@ -222,6 +395,8 @@ mod tests {
             strategy,
             budget: Budget { light_paths, camera_paths },
             rms_percent,
+            rms_percent_stderr: None,
+            respects_fixed: true,
             seconds_per_iteration: seconds,
             seconds_to_target: rms_percent.powi(2) * seconds,
         }

@@ -117,16 +117,17 @@ pub(crate) fn in_sample_row(name: Strategy, f: &Fit, cf: &CrossFitting) -> Noise
     NoiseRow { lambda: Some(f.lambda), ..NoiseRow::from_sums(name, stats.m, s1, s2, None) }
 }
 
-/// The in-sample table fit of all iterations at λ with jackknife standard errors (the weights
-/// table a `?lambda=` query asks for).
+/// The in-sample fit of all iterations at λ with the heuristics `family` stacked on the table, with
+/// jackknife standard errors (the weights table a `?lambda=` query asks for: the table alone).
 pub fn weights_at(
     cf: &CrossFitting,
     grid: &CellGrid,
     solver: &SolverOptions,
     lambda: f64,
+    family: &[PathStrategy],
 ) -> Result<(Fit, Option<WeightErrors>), SolveError> {
-    let all = fit(&cf.all, grid, &solver.fixed, lambda, &[])?;
-    let stderr = cross_fit(cf, grid, &solver.fixed, lambda, &[]).ok().and_then(|c| c.weight_stderr());
+    let all = fit(&cf.all, grid, &solver.fixed, lambda, family)?;
+    let stderr = cross_fit(cf, grid, &solver.fixed, lambda, family).ok().and_then(|c| c.weight_stderr());
     Ok((all, stderr))
 }
 

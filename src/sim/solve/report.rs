@@ -13,6 +13,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
+use super::solver::stackable;
+use crate::sim::engines::tally::PathStrategy;
 use super::recommend::Gain;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
@@ -87,8 +89,9 @@ pub struct RunReport {
     pub iterations: u64,
     /// The cross-fitting folds K of the moments.
     pub folds: usize,
-    /// The quadrature value of L (R → 0); null when the quadrature did not converge within its
-    /// evaluation budget (extreme geometry).
+    /// The quadrature value of L in the limit R → 0, the same for every strategy; null when the
+    /// quadrature did not converge within its evaluation budget (extreme geometry). Each per-path
+    /// row's `expected_luminance` is its expectation at the job's R, which its `z` compares with.
     pub reference_luminance: Option<f64>,
     pub noise_table: Vec<NoiseRow>,
     /// The recommended row (the honest row with the lowest RMS that keeps the fixed weights, a
@@ -139,17 +142,46 @@ pub(crate) fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]
         .collect()
 }
 
+/// A per-path strategy's expected luminance at the configuration's merge radius R, by quadrature
+/// (docs/model.md §11; computed by `checks::expected`), or why there is none.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct ExpectedLuminance {
+    pub strategy: Strategy,
+    pub luminance: Option<f64>,
+    pub error: Option<String>,
+}
+
+/// Which fitted weights a report's table shows instead of the recommended ones: a fitted row's
+/// family (`optimal` — the table alone —, `optimal_stacked`, or a `…_corrected` row) fitted in
+/// sample on all iterations at `lambda`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeightsQuery {
+    pub lambda: f64,
+    pub strategy: Strategy,
+}
+
+/// What a report is computed against besides the moments.
+#[derive(Debug, Clone, Default)]
+pub struct ReportInputs<'a> {
+    /// The R → 0 quadrature value of L (`reference_luminance`).
+    pub reference: Option<f64>,
+    /// Each per-path strategy's expected luminance at the job's R; rows get their `z` from it.
+    pub expected: Option<&'a [ExpectedLuminance]>,
+    /// Show these weights instead of the recommended ones.
+    pub weights: Option<WeightsQuery>,
+}
+
 /// Builds the report of `moments` with the given solver options. The weights table holds the
-/// recommended weights, or with `weights_lambda` the in-sample fit of all iterations at that λ.
-pub fn build_report(
-    moments: &Moments,
-    grid: &CellGrid,
-    solver: &SolverOptions,
-    reference_luminance: Option<f64>,
-    weights_lambda: Option<f64>,
-) -> RunReport {
-    let table = noise_table(moments, grid, solver);
+/// recommended weights, or with `inputs.weights` the in-sample fit of all iterations asked for.
+pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, inputs: &ReportInputs) -> RunReport {
+    let mut table = noise_table(moments, grid, solver);
     let warnings = warnings(moments, &table);
+    if let Some(expected) = inputs.expected {
+        for row in &mut table.rows {
+            apply_expectation(row, expected);
+        }
+    }
     let recommended = table.recommended.as_ref().ok().map(|r| RecommendedWeights {
         strategy: r.strategy,
         lambda: r.lambda(),
@@ -161,15 +193,26 @@ pub fn build_report(
             .unwrap_or_default(),
         reason: r.reason.clone(),
     });
-    let (weights, weights_fit, solve_error) = match (weights_lambda, &table.recommended) {
-        (Some(lambda), _) => match weights_at(&table.cross_fitting, grid, solver, lambda) {
-            Ok((fit, se)) => (
-                weight_rows(grid, &fit, se.as_deref()),
-                Some(WeightsFit { strategy: Strategy::Optimal, lambda, fitted_on_all_iterations: true }),
-                None,
-            ),
-            Err(e) => (Vec::new(), None, Some(e.to_string())),
-        },
+    let (weights, weights_fit, solve_error) = match (inputs.weights, &table.recommended) {
+        (Some(q), _) => {
+            let family = match q.strategy {
+                Strategy::Optimal => Ok(Vec::new()),
+                Strategy::OptimalStacked => Ok(stackable(moments.layout(), &solver.fixed)),
+                s => PathStrategy::STACKABLE
+                    .into_iter()
+                    .find(|&h| Strategy::corrected(h) == Some(s))
+                    .map(|h| vec![h])
+                    .ok_or_else(|| format!("{s} is not a fitted row with weights to show (optimal, optimal_stacked, …_corrected)")),
+            };
+            match family.and_then(|f| weights_at(&table.cross_fitting, grid, solver, q.lambda, &f).map_err(|e| e.to_string())) {
+                Ok((fit, se)) => (
+                    weight_rows(grid, &fit, se.as_deref()),
+                    Some(WeightsFit { strategy: q.strategy, lambda: q.lambda, fitted_on_all_iterations: true }),
+                    None,
+                ),
+                Err(e) => (Vec::new(), None, Some(e)),
+            }
+        }
         (None, Ok(r)) => match (r.fit(), r.lambda()) {
             (Some(fit), Some(lambda)) => (
                 weight_rows(grid, fit, r.weight_stderr().as_deref()),
@@ -184,7 +227,7 @@ pub fn build_report(
     RunReport {
         iterations: moments.iterations(),
         folds: moments.fold_count(),
-        reference_luminance,
+        reference_luminance: inputs.reference,
         noise_table: table.rows,
         recommended,
         weights,
@@ -195,5 +238,26 @@ pub fn build_report(
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },
         fingerprint: moments.fingerprint.clone(),
         coverage: moments.coverage.clone(),
+    }
+}
+
+/// A row's expected luminance at R and its z; fitted rows have none (their weights follow these
+/// data), which the row says.
+fn apply_expectation(row: &mut NoiseRow, expected: &[ExpectedLuminance]) {
+    if row.strategy.path().is_none() {
+        row.expected_error =
+            Some("fitted to these iterations: its expectation depends on the fitted weights (compare its L with the per-path rows')".into());
+        return;
+    }
+    match expected.iter().find(|e| e.strategy == row.strategy) {
+        Some(e) => {
+            row.expected_luminance = e.luminance;
+            row.expected_error = e.error.clone();
+            row.z = match (row.luminance, row.luminance_stderr, e.luminance) {
+                (Some(l), Some(se), Some(x)) if se > 0.0 => Some((l - x) / se),
+                _ => None,
+            };
+        }
+        None => row.expected_error = Some("no expectation was computed for this strategy".into()),
     }
 }
