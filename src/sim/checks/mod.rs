@@ -2,11 +2,14 @@
 //! result.
 //!
 //! * [`quadrature`] — the analytic reference luminance (within an evaluation budget);
+//! * [`expected`] — each per-path strategy's expected luminance at the configuration's merge
+//!   radius (the reference is its R → 0 limit);
 //! * [`expectation`] — exact expected merge counts given the camera paths;
 //! * [`equivalence`] — block-wise comparison of two engines' figures;
 //! * [`references`] — each strategy's expected luminance at the job's R, as reports take it.
 
 pub mod equivalence;
 pub mod expectation;
+pub mod expected;
 pub mod quadrature;
 pub mod references;

@@ -51,29 +51,48 @@ pub enum ReferenceError {
     NotConverged,
     #[error("the reference quadrature gave a non-finite value")]
     NotFinite,
+    /// `expected`: the merge disc is too wide beside the lobe's footprint on plane 1 or 2 for the
+    /// disc rules that average the kernel (their error would exceed 10⁻⁸).
+    #[error(
+        "the merge radius is too wide for the expected-luminance quadrature: R > {max}·β·min(L2, L3), beyond its disc rules",
+        max = super::expected::MAX_KERNEL_RATIO
+    )]
+    KernelTooWide,
+    /// `expected`: the strategy's weights depend on more than the expected-luminance quadrature
+    /// resolves — at plane 3 on where in its ring the light path starts (not only on the ring's
+    /// level), or on the scene's orientation (a rotation or reflection about the axis).
+    #[error(
+        "the strategy's weights depend on where in its ring the light path starts, or on the scene's orientation, which the expected-luminance quadrature does not resolve"
+    )]
+    UnsupportedWeights,
 }
 
 /// Counts evaluations against [`EVALUATION_BUDGET`]; once spent, every rule returns 0 at once and
-/// the caller reports [`ReferenceError::NotConverged`].
-struct Budget {
+/// the caller reports [`ReferenceError::NotConverged`]. Shared with [`super::expected`].
+pub(super) struct Budget {
     used: Cell<u64>,
     limit: u64,
 }
 
 impl Budget {
-    fn new(limit: u64) -> Self {
+    pub(super) fn new(limit: u64) -> Self {
         Self { used: Cell::new(0), limit }
     }
 
     /// Charges `n` evaluations; false once the budget is spent.
-    fn charge(&self, n: u64) -> bool {
+    pub(super) fn charge(&self, n: u64) -> bool {
         let used = self.used.get().saturating_add(n);
         self.used.set(used);
         used <= self.limit
     }
 
-    fn spent(&self) -> bool {
+    pub(super) fn spent(&self) -> bool {
         self.used.get() > self.limit
+    }
+
+    /// Evaluations charged so far.
+    pub(super) fn used(&self) -> u64 {
+        self.used.get()
     }
 }
 
@@ -172,7 +191,7 @@ fn kernel_within(scene: &Scene, r3: f64, budget: &Budget) -> f64 {
 
 /// The s > 0 with f(s) = target for f increasing from f(0) = 0, starting from a guess. Each step
 /// is charged to `budget`; at most ~1,100 doublings (to overflow) and 200 bisections.
-fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, budget: &Budget) -> f64 {
+pub(super) fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, budget: &Budget) -> f64 {
     let (mut lo, mut hi) = (0.0, guess);
     while budget.charge(1) && f(hi) < target {
         lo = hi;
@@ -195,7 +214,7 @@ fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, budget: &Budg
 }
 
 /// Nodes and weights of 20-point Gauss–Legendre on [−1, 1] (Newton's method on P₂₀).
-fn legendre_20() -> &'static [(f64, f64)] {
+pub(super) fn legendre_20() -> &'static [(f64, f64)] {
     static RULE: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
     RULE.get_or_init(|| {
         let n = 20;
@@ -230,7 +249,7 @@ fn gauss_legendre(f: &dyn Fn(f64) -> f64, a: f64, b: f64) -> f64 {
 }
 
 /// Gauss–Kronrod 7/15 nodes (positive half, descending, 0 last) and weights (QUADPACK qk15).
-const XGK: [f64; 8] = [
+pub(super) const XGK: [f64; 8] = [
     0.991_455_371_120_812_6,
     0.949_107_912_342_758_5,
     0.864_864_423_359_769_1,
@@ -240,7 +259,7 @@ const XGK: [f64; 8] = [
     0.207_784_955_007_898_5,
     0.0,
 ];
-const WGK: [f64; 8] = [
+pub(super) const WGK: [f64; 8] = [
     0.022_935_322_010_529_22,
     0.063_092_092_629_978_55,
     0.104_790_010_322_250_18,
@@ -251,7 +270,7 @@ const WGK: [f64; 8] = [
     0.209_482_141_084_727_83,
 ];
 /// Gauss 7-point weights for XGK[1], XGK[3], XGK[5], XGK[7].
-const WG: [f64; 4] =
+pub(super) const WG: [f64; 4] =
     [0.129_484_966_168_869_7, 0.279_705_391_489_276_7, 0.381_830_050_505_118_9, 0.417_959_183_673_469_4];
 
 /// (Kronrod estimate, |Kronrod − Gauss|) on [a, b].
