@@ -115,7 +115,11 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             (Some(x), None) => format!("{x:.1}× sooner than the paper's switch at (10⁷, 100)"),
             _ => String::new(),
         };
-        let edge = if h.at_edge { " (at the edge of what this run can predict: larger budgets may be faster still)" } else { "" };
+        let edge = if h.at_edge {
+            " (at the edge of what this run can predict: larger budgets may be faster still)"
+        } else {
+            ""
+        };
         writeln!(
             out,
             "{} (recommended) at (N_F, N_B) = ({}, {}) reaches {}% {speed}{edge}",

@@ -181,7 +181,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
         write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
     }
     let expected = expected_luminances(config);
-    let inputs = ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
+    let inputs =
+        ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
     let report = build_report(&moments, &config.cells, &job.spec.solver, &inputs);
     write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();

@@ -42,7 +42,11 @@ pub fn write_report(
         .collect();
     writeln!(out, "iterations covered: {}", covered.join("; "))?;
     match report.reference_luminance {
-        Some(l) => writeln!(out, "reference (quadrature) L·10⁵ = {:.4}", l * 1e5)?,
+        Some(l) => writeln!(
+            out,
+            "reference (quadrature) L·10⁵ = {:.4} as R → 0; E[L] is each per-path row's expectation at this R (quadrature), z = (L − E[L])/SE",
+            l * 1e5
+        )?,
         None => writeln!(out, "reference (quadrature): did not converge for this geometry")?,
     }
     writeln!(out)?;
@@ -127,7 +131,11 @@ pub fn write_noise_rows(
     folds: usize,
     recommended: Option<&RecommendedWeights>,
 ) -> io::Result<()> {
-    writeln!(out, "{:<28} {:>10} {:>9} {:>9} {:>8}  note", "strategy", "L·10⁵", "± SE", "RMS %", "± SE")?;
+    writeln!(
+        out,
+        "{:<36} {:>10} {:>9} {:>9} {:>8} {:>10} {:>6}  note",
+        "strategy", "L·10⁵", "± SE", "RMS %", "± SE", "E[L]·10⁵", "z"
+    )?;
     for row in rows {
         let mut notes = Vec::new();
         if let Some(l) = row.lambda {
@@ -156,12 +164,14 @@ pub fn write_noise_rows(
         let note = notes.join(", ");
         writeln!(
             out,
-            "{:<28} {} {} {} {}  {}",
+            "{:<36} {} {} {} {} {} {}  {}",
             row.strategy,
             num(row.luminance, 1e5, 10, 4),
             num(row.luminance_stderr, 1e5, 9, 4),
             num(row.rms_percent, 1.0, 9, 1),
             num(row.rms_percent_stderr, 1.0, 8, 1),
+            num(row.expected_luminance, 1e5, 10, 4),
+            num(row.z, 1.0, 6, 1),
             note
         )?;
     }

@@ -4,9 +4,9 @@
 
 use super::documents::StrategyPoint;
 use super::error::JobError;
+use super::references::expected_luminances;
 use super::resource::best_strategy;
 use crate::sim::math::digest::sha256_hex;
-use super::references::expected_luminances;
 use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;

@@ -236,9 +236,9 @@ pub fn plan(
     let (headline, headline_note) = match recommended {
         Some(s) if predictable(s) => (Some(s), None),
         Some(s) => {
-            let fallback = [Strategy::OptimalStacked, Strategy::OptimalCv].into_iter().find(|f| {
-                own.noise_table.iter().any(|r| r.strategy == *f && r.error.is_none())
-            });
+            let fallback = [Strategy::OptimalStacked, Strategy::OptimalCv]
+                .into_iter()
+                .find(|f| own.noise_table.iter().any(|r| r.strategy == *f && r.error.is_none()));
             let note = format!(
                 "the run recommends {s}, whose weights depend on N_F and N_B, so its noise at other budgets cannot be predicted from this run; headlined instead: {}",
                 fallback.map_or("none".to_string(), |f| f.to_string())
@@ -284,10 +284,7 @@ pub fn plan(
                 range[axis][0] -= 1;
                 widened = true;
             }
-            if v == values[values.len() - 1]
-                && value(axis, range[axis][1] + 1) > v
-                && range[axis][1] < max_steps
-            {
+            if v == values[values.len() - 1] && value(axis, range[axis][1] + 1) > v && range[axis][1] < max_steps {
                 range[axis][1] += 1;
                 widened = true;
             }
@@ -329,7 +326,9 @@ pub fn plan(
         })
         .collect();
     best.sort_by(|a, b| {
-        (!a.point.respects_fixed, a.point.seconds_to_target).partial_cmp(&(!b.point.respects_fixed, b.point.seconds_to_target)).unwrap_or(std::cmp::Ordering::Equal)
+        (!a.point.respects_fixed, a.point.seconds_to_target)
+            .partial_cmp(&(!b.point.respects_fixed, b.point.seconds_to_target))
+            .unwrap_or(std::cmp::Ordering::Equal)
     });
     let order: Vec<Strategy> = best.iter().map(|b| b.point.strategy).collect();
     let fixed_time = paper.map(|p| fixed_time(&points, p.seconds_to_target, &order));

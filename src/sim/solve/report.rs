@@ -13,12 +13,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
-use super::solver::stackable;
-use crate::sim::engines::tally::PathStrategy;
 use super::recommend::Gain;
+use super::solver::stackable;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
 use super::warnings::{Warning, warnings};
+use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::stats::coverage::Coverage;
@@ -202,9 +202,13 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
                     .into_iter()
                     .find(|&h| Strategy::corrected(h) == Some(s))
                     .map(|h| vec![h])
-                    .ok_or_else(|| format!("{s} is not a fitted row with weights to show (optimal, optimal_stacked, …_corrected)")),
+                    .ok_or_else(|| {
+                        format!("{s} is not a fitted row with weights to show (optimal, optimal_stacked, …_corrected)")
+                    }),
             };
-            match family.and_then(|f| weights_at(&table.cross_fitting, grid, solver, q.lambda, &f).map_err(|e| e.to_string())) {
+            match family
+                .and_then(|f| weights_at(&table.cross_fitting, grid, solver, q.lambda, &f).map_err(|e| e.to_string()))
+            {
                 Ok((fit, se)) => (
                     weight_rows(grid, &fit, se.as_deref()),
                     Some(WeightsFit { strategy: q.strategy, lambda: q.lambda, fitted_on_all_iterations: true }),
