@@ -45,11 +45,25 @@ async fn submit_poll_and_read_the_result() {
             "optimal_cv",
             "balance",
             "power",
-            "correlation_aware"
+            "correlation_aware",
+            "balance_planes23",
+            "power_planes23",
+            "correlation_aware_planes23",
+            "optimal_stacked",
+            "switch_corrected",
+            "balance_planes23_corrected",
+            "power_planes23_corrected",
+            "correlation_aware_planes23_corrected"
         ]
     );
     for row in result["noise_table"].as_array().unwrap() {
         for key in [
+            "heuristics",
+            "cv_path",
+            "unstable",
+            "expected_luminance",
+            "z",
+            "expected_error",
             "luminance",
             "luminance_stderr",
             "rms_percent",
@@ -65,13 +79,23 @@ async fn submit_poll_and_read_the_result() {
         }
         assert_eq!(row["in_sample"], row["strategy"] == "optimal", "only the paper's procedure is in-sample");
     }
-    // The recommendation names the cross-validated optimum, and the weights table shows it.
-    assert_eq!(result["recommended"]["strategy"], "optimal_cv");
-    assert_eq!(result["weights_fit"]["strategy"], "optimal_cv");
-    assert_eq!(result["weights_fit"]["lambda"], result["recommended"]["lambda"]);
+    // Per-path rows carry their expectation at R and z; fitted rows say why they have none.
+    let row = |name: &str| result["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == name).unwrap();
+    assert!(
+        row("switch")["expected_luminance"].as_f64().unwrap() > row("plane1")["expected_luminance"].as_f64().unwrap()
+    );
+    assert!(row("optimal_cv")["expected_luminance"].is_null() && row("optimal_cv")["expected_error"].is_string());
+    // Twelve iterations support no fit: the guard recommends a per-path strategy that keeps the
+    // fixed weights, says why, and there is no table.
+    let recommended = &result["recommended"];
+    assert!(row(recommended["strategy"].as_str().unwrap())["respects_fixed"].as_bool().unwrap());
+    assert!(recommended["reason"].as_str().unwrap().len() > 20, "{recommended}");
+    if recommended["lambda"].is_null() {
+        assert!(result["weights"].as_array().unwrap().is_empty() && result["weights_fit"].is_null());
+    } else {
+        assert_eq!(result["weights_fit"]["strategy"], recommended["strategy"]);
+    }
     assert_eq!(result["folds"], 10);
-    assert!(result["warnings"].as_array().unwrap().iter().any(|w| w["code"] == "too_few_iterations"), "12 iterations");
-    assert!(result["weights"][0].get("w1_stderr").is_some());
     // The paper's λ = 0 in-sample table on request, and a bad λ named.
     let in_sample = server.get_json(&format!("/v1/jobs/{id}/result?lambda=0")).await;
     assert_eq!(
@@ -87,7 +111,9 @@ async fn submit_poll_and_read_the_result() {
     assert!(unknown["detail"].as_str().unwrap().contains("lamda"), "{unknown}");
     let job = server.job(id).await;
     assert_eq!(job["warnings"], result["warnings"], "the job resource carries the latest checkpoint's warnings");
-    let weights = result["weights"].as_array().unwrap();
+    assert_eq!(job["progress"]["best"]["strategy"], recommended["strategy"], "best follows the recommendation");
+    let weights = in_sample["weights"].as_array().unwrap();
+    assert!(weights[0].get("w1_stderr").is_some());
     assert_eq!(weights.len(), 52);
     assert_eq!(weights[25]["r3"], json!([0.05, null]), "the tail cell's upper bound is null");
     for w in weights {
@@ -433,9 +459,35 @@ async fn predict_answers_another_budget_from_the_noise_components() {
     assert_eq!(p["measured"], json!({ "light_paths": 20_000, "camera_paths": 200 }));
     let names: Vec<&str> =
         p["noise_table"].as_array().unwrap().iter().map(|r| r["strategy"].as_str().unwrap()).collect();
-    assert_eq!(names, ["plane1", "plane2", "plane3", "switch", "balance", "power", "correlation_aware", "optimal_cv"]);
+    assert_eq!(
+        names,
+        [
+            "plane1",
+            "plane2",
+            "plane3",
+            "switch",
+            "balance",
+            "power",
+            "correlation_aware",
+            "balance_planes23",
+            "power_planes23",
+            "correlation_aware_planes23",
+            "optimal_cv",
+            "optimal_stacked"
+        ]
+    );
     assert!(p["noise_table"][0]["rms_percent"].as_f64().unwrap() > 0.0);
     assert!(p["noise_table"][6]["error"].as_str().unwrap().contains("N_F and N_B"));
+    assert!(p["noise_table"][9]["error"].as_str().unwrap().contains("N_F and N_B"));
+    let stacked = &p["noise_table"][11];
+    let heuristics: Vec<&str> =
+        stacked["heuristics"].as_array().unwrap().iter().map(|h| h["strategy"].as_str().unwrap()).collect();
+    assert_eq!(
+        heuristics,
+        ["switch", "balance_planes23", "power_planes23"],
+        "no budget-dependent heuristic at another budget"
+    );
+    assert!(p["recommended"]["reason"].is_string());
 
     let plain = server.submit_and_wait(&small_job(4, 6)).await;
     let refused = assert_problem(
@@ -451,4 +503,51 @@ async fn predict_answers_another_budget_from_the_noise_components() {
     let unknown =
         assert_problem(server.post(&format!("/v1/jobs/{id}/predict"), &json!({ "camera_paths": 2 })).await, 422);
     assert_eq!(unknown["field"], "light_paths", "{unknown}");
+}
+
+/// Another run's result scored on a job's statistics: the recommended strategy's figures on these
+/// iterations beside the job's per-path strategies; a table of another grid, a heuristic without a
+/// column or cells that do not sum to 1 − Σβ are named.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn evaluate_scores_another_runs_weights_on_a_job() {
+    let server = TestServer::start().await;
+    let first = server.submit_and_wait(&small_job(40, 7)).await;
+    let second = server.submit_and_wait(&small_job(40, 8)).await;
+    let result = server.result(first).await;
+    let reply = server.post(&format!("/v1/jobs/{second}/evaluate"), &result).await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    let e = reply.json();
+    assert_eq!(e["job_id"], second);
+    assert_eq!(e["iterations"], 40);
+    assert_eq!(e["source"], result["recommended"]["strategy"]);
+    assert_eq!(e["evaluated"]["in_sample"], false, "another seed's iterations");
+    assert!(e["evaluated"]["rms_percent"].as_f64().unwrap() > 0.0);
+    assert!(e["evaluated"]["rms_percent_stderr"].as_f64().unwrap() > 0.0);
+    assert!(e["versus"].as_array().unwrap().len() >= 7, "the per-path strategies beside");
+    // Scored on its own job, the weights are in sample and say so.
+    let own = server.post(&format!("/v1/jobs/{first}/evaluate"), &result).await.json();
+    assert_eq!(own["evaluated"]["in_sample"], true);
+
+    // A hand-made table: the in-sample λ = 0 table of the first job, its 52 cells.
+    let table = server.get_json(&format!("/v1/jobs/{first}/result?lambda=0")).await;
+    let given = json!({ "weights": table["weights"] });
+    let scored = server.post(&format!("/v1/jobs/{second}/evaluate"), &given).await;
+    assert_eq!(scored.status, 200, "{}", scored.text());
+    let mut short = given.clone();
+    short["weights"].as_array_mut().unwrap().pop();
+    let refused = assert_problem(server.post(&format!("/v1/jobs/{second}/evaluate"), &short).await, 422);
+    assert_eq!(refused["field"], "weights", "{refused}");
+    let mut skewed = given.clone();
+    skewed["weights"][3]["w1"] = json!(5.0);
+    let refused = assert_problem(server.post(&format!("/v1/jobs/{second}/evaluate"), &skewed).await, 422);
+    assert_eq!(refused["field"], "weights[3]", "{refused}");
+    let mut foreign = given.clone();
+    foreign["heuristics"] = json!([{ "strategy": "optimal_cv", "beta": 0.5 }]);
+    let refused = assert_problem(server.post(&format!("/v1/jobs/{second}/evaluate"), &foreign).await, 422);
+    assert_eq!(refused["field"], "heuristics[0]", "{refused}");
+    let garbled =
+        assert_problem(server.post(&format!("/v1/jobs/{second}/evaluate"), &json!({ "weights": 3 })).await, 422);
+    assert_eq!(garbled["field"], "weights", "{garbled}");
+    assert_problem(server.post("/v1/jobs/999/evaluate", &given).await, 404);
+    server.stop().await;
 }

@@ -64,7 +64,7 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option
     let expected = expected_luminances(&job.config);
     let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
     let report = build_report(moments, &job.config.cells, &job.spec.solver, &inputs);
-    let best = best_strategy(&report.noise_table);
+    let best = best_strategy(&report.noise_table, report.recommended.as_ref().map(|r| r.strategy));
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
     let history: Vec<StrategyPoint> = report
         .noise_table

@@ -194,7 +194,7 @@ fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, s
     let elapsed = started.elapsed().as_secs_f64();
     let per_second = (next - start) as f64 / elapsed.max(1e-9);
     let total = job.total.load(Ordering::SeqCst);
-    let best = best_strategy(&path_rows(moments, &job.job.spec.solver.fixed));
+    let best = best_strategy(&path_rows(moments, &job.job.spec.solver.fixed), None);
     job.view.send_modify(|r| {
         r.progress.iterations_done = next;
         r.progress.iterations_total = total;

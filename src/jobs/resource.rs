@@ -109,13 +109,14 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
     })
 }
 
-/// The strategy with the lowest RMS among `rows` whose figures are honest and whose weights keep the
-/// solver's fixed weights: the in-sample `optimal` row is scored on the data it was fitted to, so it
-/// is left out, and so is a heuristic that uses merges the fixed weights exclude (it answers another
-/// question; a `fixed_weights_cost` warning reports it when it is less noisy); every other row
-/// competes on its honest figure (`optimal_holdout` and `optimal_cv` on their cross-fitted RMS).
-pub(crate) fn best_strategy(rows: &[NoiseRow]) -> Option<BestStrategy> {
+/// The recommended row's figures when the report names one (`recommended`, chosen with its guard:
+/// docs/model.md §10); otherwise — between checkpoints, where only the per-path rows are computed
+/// — the row with the lowest RMS among `rows` whose figures are honest and whose weights keep the
+/// solver's fixed weights (the in-sample `optimal` row and heuristics that use merges the fixed
+/// weights exclude are left out).
+pub(crate) fn best_strategy(rows: &[NoiseRow], recommended: Option<Strategy>) -> Option<BestStrategy> {
     rows.iter()
+        .filter(|r| recommended.is_none_or(|s| r.strategy == s))
         .filter(|r| !r.in_sample && r.respects_fixed)
         .filter_map(|r| match (r.luminance, r.rms_percent) {
             (Some(l), Some(rms)) if rms > 0.0 => {
@@ -131,7 +132,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn best_leaves_out_in_sample_rows_and_rows_outside_the_fixed_weights() {
+    fn best_follows_the_recommendation_or_leaves_out_in_sample_and_outside_rows() {
         use crate::sim::solve::strategy::Strategy;
         let row = |strategy, rms, in_sample, respects_fixed| NoiseRow {
             in_sample,
@@ -145,7 +146,12 @@ mod tests {
             row(Strategy::CorrelationAware, 0.5, false, false),
         ];
         assert!(rows[3].rms_percent < rows[2].rms_percent && rows[1].rms_percent < rows[2].rms_percent);
-        assert_eq!(best_strategy(&rows).unwrap().strategy, Strategy::OptimalCv);
+        assert_eq!(best_strategy(&rows, None).unwrap().strategy, Strategy::OptimalCv);
+        assert_eq!(
+            best_strategy(&rows, Some(Strategy::Switch)).unwrap().strategy,
+            Strategy::Switch,
+            "the recommendation"
+        );
     }
 
     #[test]

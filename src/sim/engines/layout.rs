@@ -9,7 +9,7 @@
 //! the first seven strategies and no H columns, and everything that needs what they lack says so.
 //! Strategies are only ever appended to [`PathStrategy::ALL`], so a format keeps a prefix of it.
 
-use super::tally::PathStrategy;
+use super::strategies::PathStrategy;
 use crate::sim::model::cells::MAX_CELLS;
 use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 

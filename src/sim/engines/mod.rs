@@ -3,6 +3,7 @@
 //! restricted engine — merged and tallied the same way.
 //!
 //! * [`camera`], [`grid`] — the N_B camera paths and the hash grids of their vertices;
+//! * [`strategies`] — the per-path strategies (their weights on a join path) and the techniques;
 //! * [`merge`], [`tally`] — what a light path contributes, and the per-chunk/per-iteration tallies;
 //! * [`layout`] — what each moments format keeps of a tally (strategies, moment-vector columns);
 //! * [`pixel`] — the exact pixel tests and the last step of a lobe draw, shared by both engines;
@@ -18,4 +19,5 @@ pub mod layout;
 pub mod merge;
 pub mod pixel;
 pub mod restricted;
+pub mod strategies;
 pub mod tally;

@@ -13,26 +13,27 @@
 //! The K fits W₋f are also a delete-a-group jackknife (Efron & Stein; Shao & Tu 1995, §2.3) of the
 //! all-data fit: Var̂(W) = (K − 1)/K · Σ_f (W₋f − W̄)², over the folds that hold iterations. It is
 //! the standard error optimis gives for every recommended weight (and β), and for the gain
-//! ([`super::noise`]): K = 10 gives 9 degrees of freedom. The cross-fitted RMS itself gets the
-//! same jackknife over its folds' scored sums: replicate f is the RMS of all scored folds but f,
-//! so the replicates carry the scoring noise of every fold (heavy tails included, which a
-//! delta method on second moments would miss).
+//! ([`super::noise`]): K = 10 gives 9 degrees of freedom. The cross-fitted RMS gets its standard
+//! error from [`super::rms_error`]: a per-path row's delta method for the noise they share, the
+//! paired jackknife over the folds for the difference.
 //!
 //! **Choosing λ** ([`select_lambda`]) follows the one-standard-error rule (Hastie, Tibshirani &
 //! Friedman 2009, §7.10): among the λ whose cross-fitted RMS is within one jackknife SE of the
 //! lowest, the largest — the smoothest weights the data cannot tell from the best — and never a
-//! fit whose weights change from fold to fold by more than [`UNSTABLE_STDERR`] (an *unstable* fit:
+//! fit whose table weights change from fold to fold by more than [`UNSTABLE_STDERR`] (an *unstable* fit:
 //! one seed in thirty once chose λ = 10⁻⁵ with weights from −0.9 to 2.1 that delivered more noise
 //! than the switch).
 
 use super::options::FixedWeights;
+use super::rms_error::{FoldSums, RmsReference, references, rms_stderr};
+pub use super::rms_error::{jackknife_se, rms_percent};
 use super::solver::{Fit, SolveError, fit};
 use super::ystats::YStats;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
-/// Jackknife standard error of a weight (or β) above which a fit is *unstable* from fold to fold
+/// Jackknife standard error of a table weight above which a fit is *unstable* from fold to fold
 /// (the weights of a cell sum to one, so an error of 0.25 is a quarter of the whole range of
 /// sensible weights). Only cells fitted to their own samples count: a smoothed cell's spread is
 /// its neighbours'.
@@ -46,6 +47,9 @@ pub struct CrossFitting {
     pub test: Vec<YStats>,
     /// All folds but f (the training set of fit f).
     pub train: Vec<YStats>,
+    /// The per-path rows a fitted row's RMS error is taken through ([`super::rms_error`]); empty
+    /// for predicted sums.
+    pub references: Vec<RmsReference>,
 }
 
 impl CrossFitting {
@@ -57,13 +61,13 @@ impl CrossFitting {
         // The complements in floating point: each is ≥ (K − 1)/K of the total, so the subtraction
         // loses nothing the covariance's own cancellation does not.
         let train = test.iter().map(|t| all.without(t)).collect();
-        Self { all, test, train }
+        Self { all, test, train, references: references(moments) }
     }
 
     /// The cross-fitting of `all` split into the folds `test` (a subset of one run's folds).
     fn from_parts(all: YStats, test: Vec<YStats>) -> Self {
         let train = test.iter().map(|t| all.without(t)).collect();
-        Self { all, test, train }
+        Self { all, test, train, references: Vec::new() }
     }
 
     /// The folds that hold iterations (an empty fold neither tests nor jackknifes anything).
@@ -132,42 +136,32 @@ impl CrossFit {
         rms_percent(self.totals())
     }
 
-    /// Jackknife standard error of the cross-fitted RMS% over the scored folds (module docs);
-    /// `None` with fewer than two folds or a replicate without a mean.
-    pub fn rms_stderr(&self) -> Option<f64> {
-        if self.folds.len() < 2 {
-            return None;
-        }
-        let replicates: Option<Vec<f64>> =
-            self.folds.iter().map(|(f, _, _)| rms_percent(self.totals_except(Some(*f)))).collect();
-        replicates.map(|r| jackknife_se(r.into_iter()))
+    /// The scored sums per fold.
+    pub fn fold_sums(&self) -> FoldSums {
+        self.folds.iter().map(|(f, _, s)| (*f, *s)).collect()
     }
 
-    /// Whether some weight fitted to its cell's own samples (status `fitted` in `all`, the
-    /// all-data fit at this λ), or some β, has a jackknife SE above [`UNSTABLE_STDERR`]; with the
-    /// cells concerned.
-    pub fn instability(&self, all: &Fit) -> (Vec<usize>, bool) {
-        let cells = self.weight_stderr().map_or_else(Vec::new, |se| {
+    /// Standard error of the cross-fitted RMS% ([`super::rms_error`]: through the best-determined
+    /// per-path reference of `references`, else the jackknife over the scored folds); `None` with
+    /// fewer than two folds or a replicate without a mean.
+    pub fn rms_stderr(&self, references: &[RmsReference]) -> Option<f64> {
+        rms_stderr(&self.fold_sums(), references)
+    }
+
+    /// The cells whose weights, fitted to their own samples (status `fitted` in `all`, the
+    /// all-data fit at this λ), have a jackknife SE above [`UNSTABLE_STDERR`]. Only table cells can
+    /// make a fit unstable: a cell's few events can hide from every test fold, so wild weights there
+    /// pass the cross-validation and strike on new data; β multiplies a heuristic on every path,
+    /// so a β that does not carry over shows in every fold's score (and near-collinear heuristics
+    /// may trade β from fold to fold without changing the weights they make).
+    pub fn instability(&self, all: &Fit) -> Vec<usize> {
+        self.weight_stderr().map_or_else(Vec::new, |se| {
             (0..se.len())
                 .filter(|&a| all.cells[a].status.from_data())
                 .filter(|&a| se[a].iter().any(|&s| s > UNSTABLE_STDERR || s.is_nan()))
                 .collect()
-        });
-        let beta = self.beta_stderr().is_some_and(|se| se.iter().any(|&s| s > UNSTABLE_STDERR || s.is_nan()));
-        (cells, beta)
+        })
     }
-}
-
-/// RMS% of pooled sums (M, Σ C, Σ C²), if there is a mean.
-pub fn rms_percent([m, s1, s2]: [f64; 3]) -> Option<f64> {
-    relative_noise([m, s1, s2]).map(|r| 100.0 * (r * m / (m - 1.0)).sqrt())
-}
-
-/// The jackknife standard error of leave-one-group-out replicates: √((K − 1)/K · Σ (θ₋f − θ̄)²).
-pub fn jackknife_se(replicates: impl Iterator<Item = f64> + Clone) -> f64 {
-    let k = replicates.clone().count() as f64;
-    let mean = replicates.clone().sum::<f64>() / k;
-    ((k - 1.0) / k * replicates.map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt()
 }
 
 /// Cross-fits the optimal weights with `fixed`, penalty `lambda` and the heuristics `family`
@@ -201,13 +195,11 @@ pub struct Scored {
     pub rms_stderr: Option<f64>,
     /// Cells whose data-fitted weights change from fold to fold by more than [`UNSTABLE_STDERR`].
     pub unstable_cells: Vec<usize>,
-    /// Whether some β does.
-    pub unstable_beta: bool,
 }
 
 impl Scored {
     pub fn is_stable(&self) -> bool {
-        self.unstable_cells.is_empty() && !self.unstable_beta
+        self.unstable_cells.is_empty()
     }
 }
 
@@ -224,9 +216,9 @@ pub fn score(
         fit(&cf.all, grid, fixed, lambda, family).map_err(|e| format!("the fit on all iterations failed: {e}"))?;
     let rms_percent =
         cross_fit.rms_percent().filter(|r| r.is_finite()).ok_or("the cross-fitted mean is zero".to_string())?;
-    let (unstable_cells, unstable_beta) = cross_fit.instability(&all);
-    let rms_stderr = cross_fit.rms_stderr();
-    Ok(Scored { cross_fit, all, rms_percent, rms_stderr, unstable_cells, unstable_beta })
+    let unstable_cells = cross_fit.instability(&all);
+    let rms_stderr = cross_fit.rms_stderr(&cf.references);
+    Ok(Scored { cross_fit, all, rms_percent, rms_stderr, unstable_cells })
 }
 
 /// The λ a selection chose, and every λ it scored (in grid order).
@@ -268,12 +260,6 @@ pub fn select_lambda(
         .expect("the best λ is within its own threshold")
         .clone();
     Ok(Selection { chosen, scored })
-}
-
-/// Var/mean² of pooled sums (M, Σ C, Σ C²): the squared relative RMS, for ranking.
-fn relative_noise([m, s1, s2]: [f64; 3]) -> Option<f64> {
-    let mean = s1 / m;
-    (m >= 2.0 && mean != 0.0).then(|| (s2 / m - mean * mean).max(0.0) / (mean * mean))
 }
 
 /// Nested cross-validation of the whole `optimal_cv` procedure, λ selection included: for each

@@ -4,7 +4,8 @@
 //!
 //! The weights define a coefficient vector v on the moment vector (C_s = ⟨Y_s|v⟩, see
 //! [`super::solver`]), so the run's exact sums give Σ C_s and Σ C_s² per fold: L with its standard
-//! error std/√M, the RMS% with the jackknife SE over the folds, and — paired on the same iterations
+//! error std/√M, the RMS% with the standard error of a fitted row ([`super::rms_error`]), and —
+//! paired on the same iterations
 //! — the variance ratio of every per-path strategy of the run against the weights, with its
 //! jackknife SE. When the weights were fitted on iterations this run also holds (the coverages
 //! overlap), the figures are in-sample and say so.
@@ -12,9 +13,9 @@
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-use super::crossfit::{jackknife_se, rms_percent};
 use super::options::FixedWeights;
 use super::recommend::paired_ratio;
+use super::rms_error::{references, rms_stderr};
 use super::row::{NoiseRow, path_fold_sums, path_rows};
 use super::strategy::Strategy;
 use crate::sim::engines::tally::PathStrategy;
@@ -123,6 +124,9 @@ pub struct Versus {
 /// Scores `given` on `moments` (drawn on `grid`).
 pub fn evaluate(moments: &Moments, grid: &CellGrid, given: &GivenWeights) -> Result<Evaluation, EvaluateError> {
     let layout = moments.layout();
+    if let Some(c) = &given.coverage {
+        c.check().map_err(|e| invalid("coverage", e.to_string()))?;
+    }
     let (source, heuristics, named) = match &given.recommended {
         Some(r) => (Some(r.strategy), &r.heuristics, "recommended.heuristics"),
         None => (None, &given.heuristics, "heuristics"),
@@ -155,22 +159,16 @@ pub fn evaluate(moments: &Moments, grid: &CellGrid, given: &GivenWeights) -> Res
     };
     let total = folds_sums.iter().fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]]);
     let name = source.unwrap_or(Strategy::Optimal);
-    let replicates: Option<Vec<f64>> = folds_sums
-        .iter()
-        .map(|(f, _)| {
-            let rest = folds_sums
-                .iter()
-                .filter(|(g, _)| g != f)
-                .fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]]);
-            rms_percent(rest)
-        })
-        .collect();
     let in_sample = given.coverage.as_ref().is_some_and(|c| !c.overlaps(&moments.coverage).is_empty());
-    let evaluated = NoiseRow {
-        rms_percent_stderr: replicates.filter(|r| r.len() >= 2).map(|r| jackknife_se(r.into_iter())),
-        in_sample,
-        ..NoiseRow::from_sums(name, total[0], total[1], total[2], None)
+    // A per-path strategy is its own reference (its delta-method SE); a table gets the fitted rows'
+    // SE through the per-path row it is best determined against (`rms_error`).
+    let own = NoiseRow::from_sums(name, total[0], total[1], total[2], None);
+    let reference_rows = references(moments);
+    let stderr = match source.and_then(Strategy::path).filter(|_| given.weights.is_empty()) {
+        Some(p) => reference_rows.iter().find(|r| r.strategy == Strategy::of_path(p)).map(|r| r.rms_percent_stderr),
+        None => rms_stderr(&folds_sums, &reference_rows),
     };
+    let evaluated = NoiseRow { rms_percent_stderr: stderr, in_sample, ..own };
     let versus = path_rows(moments, &FixedWeights::default())
         .into_iter()
         .zip(PathStrategy::ALL)

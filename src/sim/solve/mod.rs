@@ -7,6 +7,7 @@
 //! * [`row`] — one row of the noise table (L, RMS and their standard errors) and the per-path rows;
 //! * [`fitted`] — the fitted rows: the table, the stacked optimum, each heuristic corrected;
 //! * [`recommend`] — which row to recommend, with its guard, and the gain;
+//! * [`rms_error`] — the standard error of a fitted row's RMS;
 //! * [`noise`] — the noise table: every row, the recommendation and the gain;
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
@@ -27,6 +28,7 @@ pub mod options;
 pub mod predict;
 pub mod recommend;
 pub mod report;
+pub mod rms_error;
 pub mod row;
 pub mod solver;
 pub mod strategy;

@@ -44,6 +44,8 @@ pub struct NoiseTable {
     pub gain: Option<Gain>,
     /// Against the best per-path strategy that does not (what the fixed weights cost).
     pub unconstrained: Option<Gain>,
+    /// The guard's test: the best per-path row against the best stable fitted row.
+    pub guard: Option<Gain>,
     /// When that strategy is measurably better: the stacked optimum with the fixed weights freed
     /// (which contains it), cross-fitted at the stacked optimum's λ.
     pub free_stacked: Option<Scored>,
@@ -87,6 +89,7 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
         recommended: choice.recommended,
         gain: choice.gain,
         unconstrained: choice.unconstrained,
+        guard: choice.guard,
         free_stacked,
         pooled,
         cross_fitting: cf,

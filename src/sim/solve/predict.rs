@@ -219,6 +219,7 @@ impl Predictor {
                 all: predicted(all)?,
                 test: self.test.iter().map(predicted).collect::<Option<_>>()?,
                 train: self.train.iter().map(predicted).collect::<Option<_>>()?,
+                references: Vec::new(),
             })
         })();
         let mut fitted: Vec<Fitted> = Vec::new();

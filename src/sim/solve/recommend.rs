@@ -77,10 +77,12 @@ pub struct Choice {
     pub gain: Option<Gain>,
     /// Against the best per-path strategy that does not.
     pub unconstrained: Option<Gain>,
+    /// The guard's test: Var(best per-path row keeping the fixed weights)/Var(best stable fitted
+    /// row), paired (`strategy` the fitted row, `versus` the per-path one).
+    pub guard: Option<Gain>,
 }
 
-/// Per used fold f: (f, [M_f, Σ C, Σ C²]) of a row's scored values.
-pub type FoldSums = Vec<(usize, [f64; 3])>;
+pub use super::rms_error::FoldSums;
 
 /// Chooses the recommended row among `rows` (module docs); `fitted` holds the fits behind the
 /// cross-fitted rows, `path_sums` gives a per-path strategy's sums per fold (measured, or
@@ -102,9 +104,15 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
     );
     let sums = |s: Strategy| fold_sums(path_sums, fitted, s);
     let rms = |s: Strategy| rows.iter().find(|r| r.strategy == s).and_then(|r| r.rms_percent).unwrap_or(f64::NAN);
+    let guard = match (best_fitted, best_path) {
+        (Some(f), Some(p)) => {
+            paired_ratio(&sums(p), &sums(f)).map(|(value, stderr)| Gain { value, stderr, versus: p, strategy: f })
+        }
+        _ => None,
+    };
     let recommended = match (best_fitted, best_path) {
         (Some(f), Some(p)) => {
-            let ratio = paired_ratio(&sums(p), &sums(f));
+            let ratio = guard.map(|g| (g.value, g.stderr));
             match ratio {
                 Some((g, Some(se))) if g - 1.0 > se => Ok((
                     f,
@@ -156,7 +164,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
         Some(Gain { value, stderr, versus, strategy: r.strategy })
     };
     let (gain, unconstrained) = (against(true), against(false));
-    Choice { recommended, gain, unconstrained }
+    Choice { recommended, gain, unconstrained, guard }
 }
 
 /// The scored sums per fold of row `s`: a per-path strategy's power sums, or a fitted row's

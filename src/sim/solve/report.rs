@@ -6,8 +6,8 @@
 //! a per-path strategy is recommended), `weights_fit`, `gain`, `warnings`, `solve_error`,
 //! `merges_per_iteration`, `fingerprint`, `coverage`.
 //!
-//! A recommended fitted row's per-path weights are w_m(path) = the cell's table weight
-//! + Σ_h β_h·w_h,m(path) over `recommended.heuristics` (docs/model.md §7): each cell's table
+//! A recommended fitted row's per-path weights are the cell's table weight plus
+//! Σ_h β_h·w_h,m(path) over `recommended.heuristics` (docs/model.md §7): each cell's table
 //! weights sum to 1 − Σβ.
 
 use serde::{Deserialize, Serialize};
@@ -106,6 +106,12 @@ pub struct RunReport {
     /// Var(best other per-path strategy keeping the fixed weights) / Var(recommended row), with the
     /// paired jackknife SE.
     pub gain: Option<Gain>,
+    /// The recommendation's guard: Var(best per-path row keeping the fixed weights)/Var(best stable
+    /// fitted row) on the same iterations, with the paired jackknife SE; the fitted row
+    /// (`strategy`) is recommended only if the ratio exceeds 1 by more than its SE, else the
+    /// per-path row (`versus`).
+    #[serde(default)]
+    pub guard: Option<Gain>,
     /// What the data cannot support (empty when nothing is wrong).
     pub warnings: Vec<Warning>,
     pub solve_error: Option<String>,
@@ -115,7 +121,7 @@ pub struct RunReport {
 }
 
 /// The rows of a weights table.
-pub(crate) fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> Vec<WeightRow> {
+pub fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> Vec<WeightRow> {
     fit.cells
         .iter()
         .enumerate()
@@ -237,6 +243,7 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         weights,
         weights_fit,
         gain: table.gain,
+        guard: table.guard,
         warnings,
         solve_error,
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },

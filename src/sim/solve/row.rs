@@ -82,7 +82,7 @@ pub struct NoiseRow {
     /// the jackknife SE and whether its fit was stable (the curve the one-SE rule read).
     #[serde(default)]
     pub cv_path: Vec<LambdaScore>,
-    /// A fitted row whose data-fitted weights (or β) change from fold to fold by more than 0.25
+    /// A fitted row whose data-fitted table weights change from fold to fold by more than 0.25
     /// (jackknife SE): never recommended.
     #[serde(default)]
     pub unstable: bool,

@@ -34,9 +34,10 @@
 //! **Cells.** Failures are values: too few iterations, no signal, singular systems (with the cells
 //! that span the undetermined directions). With λ = 0, cells without samples do not enter the
 //! variance at all; they are left out of the fit, reported as `empty`, and take the weights of
-//! their nearest fitted cell. With λ > 0 a cell whose own samples carry less than
-//! [`SMOOTHED_DATA_SHARE`] of its weights' curvature is `smoothed`: the penalty, i.e. its
-//! neighbours, sets its weights, and their spread from fold to fold is not a data standard error.
+//! their nearest fitted cell. With λ > 0 a cell with fewer than [`MIN_CELL_EVENTS`] merge events is
+//! `smoothed`: the penalty, i.e. its neighbours, sets its weights, and their spread from fold to
+//! fold is not a data standard error (the folds that happen to hold its few events are all the
+//! jackknife sees; another run's events move it by more).
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
@@ -62,8 +63,8 @@ pub enum CellStatus {
     /// Samples whose contributions are negligible (they move the variance by < 10⁻¹⁴ of the most
     /// informative weight), λ = 0: treated like an empty cell.
     Uninformative,
-    /// λ > 0 and the cell's own samples (none, or few) carry less than half of its weights'
-    /// curvature: the gradient penalty — its neighbours — sets them. No data standard error.
+    /// λ > 0 and fewer than [`MIN_CELL_EVENTS`] merge events: the gradient penalty — its
+    /// neighbours — sets the weights. No data standard error.
     Smoothed,
 }
 
@@ -169,10 +170,11 @@ const PIVOT_TOLERANCE: f64 = 1e-11;
 /// far below anything that moves the variance (it shrinks a determined β by ~10⁻⁷ of itself).
 pub const BETA_RIDGE: f64 = 1e-7;
 
-/// A cell is `smoothed` when its own samples carry less than this share of its free weights'
-/// curvature (data/(data + penalty), the smallest over its free weights): below one half the
-/// neighbours determine the weights more than the cell's merges do.
-pub const SMOOTHED_DATA_SHARE: f64 = 0.5;
+/// Merge events below which a cell's weights rest on too few samples: with n events the relative
+/// error of a cell's second moments is of order 1/√n, above 18% for n < 30; and K = 10 folds then
+/// hold three or fewer each, too few for their spread to measure the cell's noise. Under a penalty
+/// such a cell is `smoothed` (no data standard error); the `sparse_cells` warning counts them.
+pub const MIN_CELL_EVENTS: u64 = 30;
 
 /// Fits the optimal weights to `stats` with fixed weights `fixed`, penalty `lambda` and the
 /// heuristics `family` stacked on the table (empty: the paper's table alone).
@@ -230,7 +232,6 @@ pub fn fit(
             sys = system(&cols);
         }
     }
-    let share = sys.data_share(&cols);
     let z = if cols.entries.is_empty() { DVector::zeros(0) } else { solve_spd(sys.h, sys.g, &cols.cells)? };
     let mut v = v0.clone();
     for (zi, entries) in z.iter().zip(&cols.entries) {
@@ -248,7 +249,7 @@ pub fn fit(
                 CellStatus::Fixed
             } else if uninformative[a] {
                 CellStatus::Uninformative
-            } else if lambda > 0.0 && share[a] < SMOOTHED_DATA_SHARE {
+            } else if lambda > 0.0 && stats.cell_samples[a] < MIN_CELL_EVENTS {
                 CellStatus::Smoothed
             } else if stats.cell_samples[a] > 0 {
                 CellStatus::Fitted
@@ -270,17 +271,14 @@ struct Columns {
     /// The cell of each table column (`usize::MAX` for a β column), for reports of singular systems.
     cells: Vec<usize>,
     table_columns: usize,
-    /// Per cell, its table columns' indices.
-    of_cell: Vec<Vec<usize>>,
 }
 
 impl Columns {
     fn new(layout: Layout, base: [f64; 2], coefs: &[[f64; 2]], active: &[usize], family: &[PathStrategy]) -> Self {
         let k = layout.cells;
-        let (mut entries, mut cells, mut of_cell) = (Vec::new(), Vec::new(), vec![Vec::new(); k]);
+        let (mut entries, mut cells) = (Vec::new(), Vec::new());
         for &a in active {
             for c in coefs {
-                of_cell[a].push(entries.len());
                 entries.push([(a, c[0]), (k + a, c[1])].into_iter().filter(|&(_, x)| x != 0.0).collect());
                 cells.push(a);
             }
@@ -294,17 +292,15 @@ impl Columns {
             entries.push(column);
             cells.push(usize::MAX);
         }
-        Self { entries, cells, table_columns, of_cell }
+        Self { entries, cells, table_columns }
     }
 }
 
-/// The normal equations H x = g of the free weights, and the data and penalty parts of H's
-/// diagonal.
+/// The normal equations H x = g of the free weights, and the data part of H's diagonal.
 struct NormalSystem {
     h: DMatrix<f64>,
     g: DVector<f64>,
     data_diag: Vec<f64>,
-    penalty_diag: Vec<f64>,
 }
 
 impl NormalSystem {
@@ -317,7 +313,7 @@ impl NormalSystem {
         let l_v0 = laplacian.as_ref().map(|l| l * v0.rows(0, k2));
         let c = cols.entries.len();
         let mut h = DMatrix::zeros(c, c);
-        let (mut data_diag, mut penalty_diag) = (vec![0.0; c], vec![0.0; c]);
+        let mut data_diag = vec![0.0; c];
         let form = |m: &dyn Fn(usize, usize) -> f64, x: &[(usize, f64)], y: &[(usize, f64)]| {
             x.iter().map(|&(a, p)| y.iter().map(|&(b, q)| p * q * m(a, b)).sum::<f64>()).sum::<f64>()
         };
@@ -333,7 +329,6 @@ impl NormalSystem {
                 h[(j, i)] = data + penalty;
                 if i == j {
                     data_diag[i] = data;
-                    penalty_diag[i] = penalty;
                 }
             }
         }
@@ -348,24 +343,7 @@ impl NormalSystem {
                 .map_or(0.0, |lv| lambda * x.iter().filter(|&&(a, _)| a < k2).map(|&(a, p)| p * lv[a]).sum::<f64>());
             -(data + penalty)
         });
-        Self { h, g, data_diag, penalty_diag }
-    }
-
-    /// Per cell, the smallest share data/(data + penalty) of its table columns' curvature (1 for
-    /// a cell without free weights or penalty).
-    fn data_share(&self, cols: &Columns) -> Vec<f64> {
-        cols.of_cell
-            .iter()
-            .map(|columns| {
-                columns
-                    .iter()
-                    .map(|&i| {
-                        let total = self.data_diag[i] + self.penalty_diag[i];
-                        if total > 0.0 { self.data_diag[i] / total } else { 0.0 }
-                    })
-                    .fold(1.0, f64::min)
-            })
-            .collect()
+        Self { h, g, data_diag }
     }
 }
 

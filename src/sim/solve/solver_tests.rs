@@ -193,7 +193,7 @@ fn the_stacked_family_finds_a_heuristic_that_beats_every_table() {
     assert!(stackable(Layout::new(k, 2), &FixedWeights::default()).is_empty());
 }
 
-/// Under a penalty, a cell with few samples is set by its neighbours and says so.
+/// Under a penalty, a cell with fewer than 30 merge events is set by its neighbours and says so.
 #[test]
 fn penalty_dominated_cells_are_smoothed() {
     let grid = CellGrid::new(vec![0.0], vec![0.0, 1.0, 2.0], 1);
@@ -210,7 +210,7 @@ fn penalty_dominated_cells_are_smoothed() {
             y
         })
         .collect();
-    let stats = stats_from(&ys, vec![500, 500, 3]);
+    let stats = stats_from(&ys, vec![500, 30, 29]);
     let f = fit(&stats, &grid, &FixedWeights { w0: Some(0.0), ..Default::default() }, 1e-3, &[]).unwrap();
     let status: Vec<CellStatus> = f.cells.iter().map(|c| c.status).collect();
     assert_eq!(status, [CellStatus::Fitted, CellStatus::Fitted, CellStatus::Smoothed]);

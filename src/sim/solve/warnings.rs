@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::crossfit::UNSTABLE_STDERR;
 use super::noise::{NoiseRow, NoiseTable, central_3_4, power_sums};
-use super::solver::{CellStatus, Fit};
+use super::solver::{CellStatus, Fit, MIN_CELL_EVENTS};
 use super::strategy::Strategy;
 use super::ystats::YStats;
 use crate::sim::engines::tally::PathStrategy;
@@ -57,11 +57,8 @@ pub struct Warning {
 /// parameters to M samples has its in-sample variance low by a factor ≈ (1 − p/M), so with M < 10p
 /// the in-sample figure is optimistic by more than 10% and the weights' errors are large.
 pub const ITERATIONS_PER_FREE_WEIGHT: f64 = 10.0;
-/// Merge events below which a cell's weights rest on too few samples: with n events the relative
-/// error of a cell's second moments is of order 1/√n, above 18% for n < 30.
-pub const MIN_CELL_EVENTS: u64 = 30;
-/// The sparse cells of the recommended fit (not fitted to their own samples, or with fewer than
-/// [`MIN_CELL_EVENTS`] merge events) matter to its figure when they hold more than this share of
+/// The sparse cells of the recommended fit (fewer than [`MIN_CELL_EVENTS`] merge events) matter to
+/// its figure when they hold more than this share of
 /// the merge events, or when moving their free weights by a whole unit would change the pixel
 /// variance by more than this share (Σ of their Var(A) over Var(C)): below 1% their weights, however
 /// uncertain, cannot move the RMS by more than half a percent.
@@ -171,8 +168,7 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
 fn sparse_cells(all: &YStats, fit: &Fit, m: f64, strategy: Strategy) -> Option<Warning> {
     let k = fit.cells.len();
     let sparse: Vec<usize> = (0..k)
-        .filter(|&a| fit.cells[a].status != CellStatus::Fixed)
-        .filter(|&a| !fit.cells[a].status.from_data() || fit.cells[a].samples < MIN_CELL_EVENTS)
+        .filter(|&a| fit.cells[a].status != CellStatus::Fixed && fit.cells[a].samples < MIN_CELL_EVENTS)
         .collect();
     let events: u64 = fit.cells.iter().map(|c| c.samples).sum();
     let sparse_events: u64 = sparse.iter().map(|&a| fit.cells[a].samples).sum();
@@ -181,7 +177,9 @@ fn sparse_cells(all: &YStats, fit: &Fit, m: f64, strategy: Strategy) -> Option<W
     let v = fit.coefficients(all.layout);
     let variance = v.dot(&(&cov * &v));
     let sensitivity: f64 = sparse.iter().map(|&a| cov[(a, a)] + cov[(k + a, k + a)]).sum::<f64>() / variance;
-    if sparse.is_empty() || (merge_share <= SPARSE_SHARE && !(sensitivity > SPARSE_SHARE)) {
+    // A NaN sensitivity (no variance) does not make the cells matter.
+    let matters = merge_share > SPARSE_SHARE || sensitivity.is_finite() && sensitivity > SPARSE_SHARE;
+    if sparse.is_empty() || !matters {
         return None;
     }
     let factor = sparse
@@ -202,7 +200,7 @@ fn sparse_cells(all: &YStats, fit: &Fit, m: f64, strategy: Strategy) -> Option<W
     Some(Warning {
         code: WarningCode::SparseCells,
         message: format!(
-            "{} cells are not estimated from their own samples (smoothed, or fewer than {MIN_CELL_EVENTS} merge events) and they matter: {:.1}% of the merge events, and a unit change of their weights would move the variance by {:.1}%{more}{none}",
+            "{} cells hold fewer than {MIN_CELL_EVENTS} merge events, too few for their own samples to estimate their weights, and they matter: {:.1}% of the merge events, and a unit change of their weights would move the variance by {:.1}%{more}{none}",
             sparse.len(),
             100.0 * merge_share,
             100.0 * sensitivity

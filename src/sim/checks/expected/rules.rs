@@ -18,7 +18,7 @@ pub(super) struct DiscRule {
 
 /// Gauss–Radau rules in t = ρ²/R² on [0, 1] with a node at t = 0 (weight 1/n²): the other nodes
 /// and weights, for n = 1…5, and the largest κ each serves (module doc).
-const RADAU: [(f64, &[(f64, f64)]); 5] = [
+pub(super) const RADAU: [(f64, &[(f64, f64)]); 5] = [
     (1e-5, &[]),
     (0.13, &[(0.666_666_666_666_666_6, 0.75)]),
     (0.55, &[(0.355_051_025_721_682_2, 0.512_485_826_188_421_6), (0.844_948_974_278_317_8, 0.376_403_062_700_467_3)]),

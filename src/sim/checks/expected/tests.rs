@@ -1,4 +1,4 @@
-use super::rules::{DiscRule, disc_fraction_inside};
+use super::rules::{DiscRule, RADAU, disc_fraction_inside};
 use super::*;
 use crate::sim::checks::quadrature::{legendre_20, reference_luminance};
 use crate::sim::spec::parse_job_spec;
