@@ -169,6 +169,7 @@ async fn every_dashboard_file_is_served() {
         "chartkit.js",
         "compare.js",
         "csv.js",
+        "fig2.js",
         "form.js",
         "format.js",
         "job.js",

@@ -24,6 +24,7 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
     ("chartkit.js", JS, include_bytes!("dashboard/chartkit.js")),
     ("chartfiles.js", JS, include_bytes!("dashboard/chartfiles.js")),
     ("plots.js", JS, include_bytes!("dashboard/plots.js")),
+    ("fig2.js", JS, include_bytes!("dashboard/fig2.js")),
     ("noisetable.js", JS, include_bytes!("dashboard/noisetable.js")),
     ("results.js", JS, include_bytes!("dashboard/results.js")),
     ("solves.js", JS, include_bytes!("dashboard/solves.js")),

@@ -27,7 +27,9 @@ import {
   checkDirectLoad, checkInvalidSubmission, checkJobInList, checkListPage, checkNoiseTable, checkPagination, followProgress,
   submitJob,
 } from './jobs.mjs';
-import { checkCompare, checkDownloads, checkPaperJob, checkSolves, submitPaperPair } from './research.mjs';
+import {
+  checkCompare, checkDownloads, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
+} from './research.mjs';
 import { checkCsv, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
 
 const OVERALL_TIMEOUT_MS = 240_000;
@@ -54,8 +56,8 @@ async function run(browser) {
   await checkInvalidSubmission(page);
   const id = await submitJob(page);
   await followProgress(page);
-  await checkNoiseTable(page);
-  await checkPlot(page, 'weights-plot', 'weights', ['w₁, r₂ ∈ [0, 0.5)', 'w₁, r₂ ∈ [0.5, ∞)']);
+  const result = await checkNoiseTable(page, id);
+  await checkFigure2(page, id, result);
   await checkPlot(page, 'luminance-plot', 'luminance', STRATEGIES);
   await checkPlot(page, 'history-plot', 'RMS history', STRATEGIES);
   await screenshot(page, 'job-finished.png');
@@ -64,10 +66,12 @@ async function run(browser) {
   await checkPagination(page);
   await screenshot(page, 'list.png');
   const pair = await submitPaperPair();
-  const spotResult = await checkPaperJob(page, pair.spot);
-  await checkDownloads(page, pair.spot, spotResult);
+  const tableJobs = await submitTableJobs();
+  const spot = await checkPaperJob(page, pair.spot);
+  await checkDownloads(page, pair.spot, spot);
   await checkSolves(page, pair.spot);
-  await checkCompare(page, pair, [spotResult, (await callApi(`/v1/jobs/${pair.uniform}/result`)).json]);
+  await checkTableJobs(page, tableJobs);
+  await checkCompare(page, pair, [spot.result, (await callApi(`/v1/jobs/${pair.uniform}/result`)).json]);
   const sweep = await openSweep(page);
   await checkSweepSummary(page, sweep);
   await checkSweepCharts(page, sweep);

@@ -5,7 +5,12 @@
 
 import path from 'node:path';
 
-export const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware'];
+// The rows of a noise table with the paper's fixed weight w0 = 0, in the server's order: the paper's
+// cases and fits, the heuristics, the heuristics over planes 2–3, the stacked optimum and each
+// stackable heuristic corrected by a table.
+export const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power',
+  'correlation_aware', 'balance_planes23', 'power_planes23', 'correlation_aware_planes23', 'optimal_stacked', 'switch_corrected',
+  'balance_planes23_corrected', 'power_planes23_corrected', 'correlation_aware_planes23_corrected'];
 // Cells whose weights the server copied from a neighbour: gaps in the weight charts, without a bar.
 export const UNFITTED = new Set(['empty', 'uninformative']);
 
@@ -94,7 +99,7 @@ export function parseWithError(text) {
 /**
  * What a uPlot chart in `container` shows: its canvas size and drawn pixels, the labels of its
  * legend (the y series; the x series left out), and what the chart kit's plugins report drawing:
- * error bars, SE bands, guide lines (`x=0.02 y=26.3`).
+ * error bars, SE bands, markers (and how many of them open), guide lines (`x=0.02 y=26.3`).
  */
 export async function readPlot(container) {
   return container.evaluate((el) => {
@@ -107,6 +112,8 @@ export async function readPlot(container) {
       width: canvas.width, height: canvas.height, inked,
       labels: [...el.querySelectorAll('.u-legend .u-series .u-label')].slice(1).map((l) => l.textContent.trim()),
       errorBars: el.dataset.errorBars === undefined ? null : Number(el.dataset.errorBars),
+      markers: el.dataset.markers === undefined ? null : Number(el.dataset.markers),
+      openMarkers: el.dataset.openMarkers === undefined ? null : Number(el.dataset.openMarkers),
       bands: el.dataset.bands === undefined ? null : Number(el.dataset.bands),
       guides: el.dataset.guides ?? null,
     };
@@ -124,3 +131,30 @@ export async function checkPlot(page, ref, what, expectedLabels) {
   }
 }
 
+
+/**
+ * The weights table a job's Fig. 2 (and the compare overlay) should draw for its `result`: the
+ * recommended table, or — a per-path strategy recommended — the table optimum at optimal_cv's λ,
+ * fetched as the page does. `prefix` starts the series' legend labels.
+ */
+export async function expectedFigure(id, result) {
+  const rec = result.recommended;
+  if (result.weights.length > 0) {
+    return { kind: 'recommended', strategy: rec.strategy, weights: result.weights, prefix: rec.heuristics.length ? 'T₁ (table part)' : 'w₁' };
+  }
+  const { lambda } = result.noise_table.find((r) => r.strategy === 'optimal_cv');
+  const optimum = (await callApi(`/v1/jobs/${id}/result?lambda=${lambda}`)).json;
+  return { kind: 'table-optimum', lambda, weights: optimum.weights, prefix: 'w₁ (table optimum, not recommended)' };
+}
+
+/**
+ * The markers Fig. 2 draws for `weights` in the r₂ bins `r2s` (lower edges), first φ bin, tail and
+ * copied cells left out: `open` those without a data SE (smoothed), `filled` the others, `bars` the
+ * filled ones with an SE above 0.
+ */
+export function figureMarks(weights, r2s) {
+  const phi = Math.min(...weights.map((w) => w.phi[0]));
+  const drawn = weights.filter((w) => r2s.includes(w.r2[0]) && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status));
+  const open = drawn.filter((w) => w.status === 'smoothed' || w.w1_stderr === null);
+  return { open: open.length, filled: drawn.length - open.length, bars: drawn.filter((w) => !open.includes(w) && w.w1_stderr > 0).length };
+}

@@ -7,7 +7,8 @@ import {
 } from './harness.mjs';
 
 // Strategies with fixed per-path weights: they always have numbers (fits may fail on little data).
-const PER_PATH = new Set(['plane1', 'plane2', 'plane3', 'switch', 'balance', 'power', 'correlation_aware']);
+const PER_PATH = new Set(['plane1', 'plane2', 'plane3', 'switch', 'balance', 'power', 'correlation_aware', 'balance_planes23',
+  'power_planes23', 'correlation_aware_planes23']);
 // Weights fitted on one half and evaluated on the other: far off on little data (even negative).
 const NOISY = new Set(['optimal_holdout']);
 // Big enough to be seen running for a few seconds on two cores, small enough to finish quickly.
@@ -93,47 +94,102 @@ export async function followProgress(page) {
   check(shotRunning, 'the job page was captured while running');
 }
 
-export async function checkNoiseTable(page) {
-  await waitFor('the final results', async () =>
-    (await page.locator('[data-ref="result-status"]').textContent()).startsWith('final'));
-  const reference = parseWithError((await page.locator('[data-ref="reference"]').textContent()).split('=')[1]);
-  check(reference[0] > 5 && reference[0] < 100, `the quadrature reference L·10⁵ = ${reference[0]} is shown`);
-  const rows = await page.locator('table.noise-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
+/** The rows of the page's noise table: name, cells by data-col, marks, β line, the z cell's tooltip. */
+export async function readNoiseRows(page) {
+  return page.locator('table.noise-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
     strategy: tr.dataset.strategy,
+    recommendedRow: tr.classList.contains('recommended'),
     cells: Object.fromEntries([...tr.querySelectorAll('td[data-col]')].map((td) => [td.dataset.col, td.textContent.trim()])),
+    marks: [...tr.querySelectorAll('th span')].map((s) => s.textContent),
+    betas: tr.querySelector('.betas')?.textContent ?? null,
+    zTitle: tr.querySelector('td[data-col="z"]')?.title ?? null,
+    optimistic: tr.querySelector('td[data-col="z"]')?.classList.contains('optimistic') ?? false,
     error: tr.querySelector('.row-error')?.textContent,
   })));
-  check(JSON.stringify(rows.map((r) => r.strategy)) === JSON.stringify(STRATEGIES), `the noise table has the ${STRATEGIES.length} strategies in order`);
+}
+
+/** "−1.56 †" → -1.56 */
+export const parseZ = (text) => Number.parseFloat(text.replace('−', '-').replace('+', ''));
+
+/**
+ * The z column: each row's z against its expected luminance at R, as the API gives it, with the
+ * expectation as a tooltip; "—" with the API's reason where the row has none.
+ */
+export function checkZ(rows, result) {
+  const api = Object.fromEntries(result.noise_table.map((r) => [r.strategy, r]));
+  const shown = rows.filter((r) => !r.error);
+  const withZ = shown.filter((r) => api[r.strategy].z !== null);
+  check(withZ.length > 0 && withZ.every((r) => Math.abs(parseZ(r.cells.z) - api[r.strategy].z) < 0.006 && r.zTitle.startsWith('Expected at R: L·10⁵ =')),
+    `every row with an expectation at R shows the API's z against it (${withZ.map((r) => `${r.strategy} ${r.cells.z}`).join(', ')})`);
+  const without = shown.filter((r) => api[r.strategy].z === null);
+  check(without.every((r) => r.cells.z === '—' && r.zTitle === (api[r.strategy].expected_error ?? 'No expected luminance at R for this row')),
+    `the ${without.length} rows without one show — with the reason as a tooltip ("${without[0]?.zTitle.slice(0, 50)}…")`);
+  check(shown.every((r) => r.optimistic === (api[r.strategy].in_sample && api[r.strategy].z !== null)),
+    'a z is marked optimistic (†) only on an in-sample row that has one');
+}
+
+export async function checkNoiseTable(page, id) {
+  await waitFor('the final results', async () =>
+    (await page.locator('[data-ref="result-status"]').textContent()).startsWith('final'));
+  const result = (await callApi(`/v1/jobs/${id}/result`)).json;
+  const caption = await page.locator('[data-ref="reference"]').textContent();
+  const reference = Number.parseFloat(/R → 0 \(quadrature\): L·10⁵ = ([\d.]+)/.exec(caption)?.[1]);
+  check(reference > 5 && reference < 100 && Math.abs(reference - result.reference_luminance * 1e5) < 0.006,
+    `the z caption keeps the quadrature reference R → 0, L·10⁵ = ${reference}, as a second figure`);
+  check(caption.includes(`expected luminance at the job's R = ${JOB.merge_radius}`),
+    `the z caption says z is taken against the expectation at the job's R ("${caption.slice(0, 90)}…")`);
+  const rows = await readNoiseRows(page);
+  const order = result.noise_table.map((r) => r.strategy);
+  check(JSON.stringify(rows.map((r) => r.strategy)) === JSON.stringify(order) && JSON.stringify(order) === JSON.stringify(STRATEGIES),
+    `the noise table has the API's ${order.length} strategies in order, the planes-2–3 heuristics, the stacked and corrected rows among them`);
+  const api = Object.fromEntries(result.noise_table.map((r) => [r.strategy, r]));
   for (const row of rows) {
-    check(row.cells.weights.length > 0, `${row.strategy}: its weights are described ("${row.cells.weights}")`);
+    check(row.cells.weights.length > 0, `${row.strategy}: its weights are described ("${row.cells.weights.slice(0, 70)}")`);
     if (row.error) {
       check(!PER_PATH.has(row.strategy), `${row.strategy}: shows its fit error instead of numbers ("${row.error.slice(0, 60)}…")`);
       continue;
     }
     const [luminance, luminanceError] = parseWithError(row.cells.luminance);
     const [rms] = parseWithError(row.cells.rms);
-    const plausible = NOISY.has(row.strategy)
+    const plausible = NOISY.has(row.strategy) || api[row.strategy].unstable
       ? Number.isFinite(luminance) && Number.isFinite(rms)
       : luminance > 5 && luminance < 100 && luminanceError > 0 && rms > 0;
     check(plausible, `${row.strategy}: L·10⁵ = ${row.cells.luminance}, RMS % = ${row.cells.rms}`);
   }
-  const marks = await page.locator('table.noise-table tbody tr').evaluateAll((trs) => Object.fromEntries(
-    trs.map((tr) => [tr.dataset.strategy, [...tr.querySelectorAll('th span')].map((s) => s.textContent)])));
-  check(marks.optimal.includes('in-sample') && STRATEGIES.every((s) => s === 'optimal' || !marks[s].includes('in-sample')),
-    'only the paper\'s optimal row is marked in-sample');
-  check(marks.optimal_cv.includes('recommended'), 'the cross-validated optimum is marked recommended');
-  const outside = STRATEGIES.filter((s) => marks[s].includes('outside fixed weights'));
+  const numbers = rows.filter((r) => !r.error);
+  const withSe = numbers.filter((r) => parseWithError(r.cells.rms)[1] !== null).map((r) => r.strategy);
+  check(withSe.join() === numbers.filter((r) => api[r.strategy].rms_percent_stderr !== null).map((r) => r.strategy).join()
+    && withSe.includes('optimal_cv') && withSe.includes('optimal_stacked'),
+  `RMS carries ± its SE exactly where the API has one, fitted rows too (all but ${numbers.filter((r) => !withSe.includes(r.strategy)).map((r) => r.strategy).join(', ')})`);
+  const stacked = rows.filter((r) => api[r.strategy].heuristics.length > 0);
+  check(stacked.length > 0 && rows.every((r) => (r.betas !== null) === stacked.includes(r))
+    && stacked.every((r) => api[r.strategy].heuristics.every((b) => r.betas.includes(`${b.strategy} `))),
+  `the stacked and corrected rows, and only they, name β of each heuristic under their weights (${stacked[0]?.betas})`);
+  checkZ(rows, result);
+  const marked = (m) => rows.filter((r) => r.marks.includes(m)).map((r) => r.strategy);
+  check(marked('in-sample').join() === 'optimal', 'only the paper\'s optimal row is marked in-sample');
+  check(marked('unstable').join() === result.noise_table.filter((r) => r.unstable).map((r) => r.strategy).join(),
+    `the unstable rows are marked (${marked('unstable').join(', ') || 'none'})`);
+  const recommended = result.recommended.strategy;
+  check(marked('recommended').join() === recommended && rows.filter((r) => r.recommendedRow).map((r) => r.strategy).join() === recommended,
+    `the row the API recommends, ${recommended}, is marked and highlighted, and no other`);
+  const outside = marked('outside fixed weights');
   check(outside.join() === 'plane1,balance,power,correlation_aware',
     `the rows that merge at the pixel are marked outside the fixed weights w0 = 0 (${outside.join(', ')})`);
-  check(!outside.some((s) => marks[s].includes('best')), 'no row outside the fixed weights is marked best');
+  check(!outside.includes(recommended), 'no row outside the fixed weights is recommended');
+  const reason = await page.locator('[data-ref="recommended-note"]').textContent();
+  check(reason.startsWith(`Recommended: ${recommended}`) && reason.includes(result.recommended.reason),
+    `the reason is shown under the table ("${reason.slice(0, 110)}…")`);
   const gain = await page.locator('[data-ref="gain"]').textContent();
-  check(gain.includes('variance ratio'), `the gain is shown ("${gain.slice(0, 80)}…")`);
+  check(gain.includes('variance ratio') && gain.includes(result.gain.versus), `the gain is shown ("${gain.slice(0, 80)}…")`);
   const warnings = await page.locator('[data-ref="warnings"] li code').allTextContents();
   check(warnings.length > 0 && warnings.every((w) => /^[a-z_]+$/.test(w)),
     `the result's warnings are listed by code (${warnings.join(', ')})`);
   const describes = Object.fromEntries(rows.map((r) => [r.strategy, r.cells.weights]));
   check(describes.plane1 === 'w₀ = 1' && describes.switch.includes('r₃ ≤ a') && describes.optimal.includes('w₀ = 0')
-    && describes.optimal_cv.includes('cross-validation'), 'the weights column reads like the paper');
+    && describes.optimal_cv.includes('cross-validation') && describes.power_planes23.includes('planes 2–3')
+    && describes.optimal_stacked.includes('Σ β') && describes.switch_corrected.includes('corrected by a table'),
+  'the weights column reads like the paper, and says what the new rows are');
   const cases = Object.fromEntries(rows.map((r) => [r.strategy, r.cells.case]));
   check(['plane1', 'plane2', 'plane3', 'switch', 'optimal'].every((s, i) => cases[s] === String(i + 1)) && cases.optimal_cv === '',
     'the paper\'s case numbers 1–5 label plane1, plane2, plane3, switch, optimal');
@@ -141,6 +197,7 @@ export async function checkNoiseTable(page) {
   const paperCells = await page.locator('table.noise-table .paper-col:visible').count();
   check(note.startsWith('Paper values apply to the paper-table1 configuration only') && note.includes('light_paths') && paperCells === 0,
     `this job is not the paper's configuration: no paper column, and "${note}"`);
+  return result;
 }
 
 /** A job page opened directly (bookmark, reload) rather than from the list. */
@@ -149,7 +206,7 @@ export async function checkDirectLoad(page, id) {
   await waitFor('the reloaded job page', async () =>
     (await page.locator('h1', { hasText: `Job ${id}` }).isVisible())
     && (await page.locator('table.noise-table tbody tr').count()) === STRATEGIES.length);
-  check(true, `reloading #/jobs/${id} shows the job and its ${STRATEGIES.length} results again`);
+  check(true, `reloading #/jobs/${id} shows the job and its ${STRATEGIES.length} rows again`);
 }
 
 export async function checkJobInList(page, id) {
@@ -175,9 +232,11 @@ export async function checkPagination(page) {
     if (response.status !== 202) throw new Error(`submitting small job ${i + 1} answered ${response.status}`);
   }
   const rowCount = () => page.locator('table.jobs-table tbody tr').count();
-  await waitFor('a full first page', async () => (await rowCount()) === 25, 10_000);
-  check(true, 'the list shows 25 jobs on its first page');
   const newest = page.locator('table.jobs-table tbody tr').first();
+  // 25 rows can show before the list has caught up with the last submissions: wait for the newest.
+  await waitFor('a full first page with the newest job', async () => (await rowCount()) === 25
+    && (await newest.locator('td[data-col="seed"]').textContent()) === String(SMALL_JOBS), 10_000);
+  check(true, 'the list shows 25 jobs on its first page');
   const kind = await newest.locator('[data-kind]').allTextContents();
   const seed = await newest.locator('td[data-col="seed"]').textContent();
   const sizes = await newest.locator('td[data-col="light_paths"], td[data-col="camera_paths"]').allTextContents();

@@ -1,16 +1,21 @@
 // The research steps of the browser test: a job in the paper's configuration and one under uniform
 // light, submitted through the API (2000 iterations of the restricted engine: about a second each);
-// the spot job's page — Table 1 with the paper's column, case numbers and z against the reference,
-// Fig. 2 from the recommended weights with ± 1 SE bars and the r₃ = a marker, the luminance chart
-// with SE bands and the reference line —, its downloads (CSV, SVG, PNG, moments), and the compare
-// page of the two jobs, reached from the list's checkboxes.
+// the spot job's page — Table 1 with the paper's column, case numbers and z against each row's
+// expectation at R, Fig. 2 (checkFigure2: the recommended table, or when a per-path strategy is
+// recommended the table optimum labelled as not recommended; ± 1 SE bars, open markers without bars
+// for smoothed cells, the r₃ = a marker), the luminance chart with SE bands and the reference
+// line —, its downloads (CSV, SVG, PNG, moments), a kept solve, and the compare page of the two
+// jobs, reached from the list's checkboxes.
 //
 // With OPTIMIS_SCREENSHOT_DIR set, also writes the README's dashboard-job.png and dashboard-compare.png there.
 
 import { readFile } from 'node:fs/promises';
 import path from 'node:path';
 
-import { STRATEGIES, UNFITTED, callApi, check, parseWithError, readPlot, screenshot, sleep, waitFor } from './harness.mjs';
+import {
+  STRATEGIES, callApi, check, expectedFigure, figureMarks, parseWithError, readPlot, screenshot, sleep, waitFor,
+} from './harness.mjs';
+import { checkZ, readNoiseRows } from './jobs.mjs';
 
 const SPOT_JOB = { preset: 'paper-table1', iterations: 2000 };
 const UNIFORM_JOB = { preset: 'uniform-illumination', iterations: 2000 };
@@ -19,6 +24,15 @@ const PAPER = {
   plane1: ['1', '26.484', '208'], plane2: ['2', '26.352', '254'], plane3: ['3', '25.997', '146'],
   switch: ['4', '26.352', '61'], optimal: ['5', '25.961', '54'],
 };
+// Jobs whose recommendation is a weights table (the paper's scene at a larger merge radius, 10⁴
+// iterations: a few seconds each): at R = 0.01 the correlation-aware heuristic over planes 2–3
+// corrected by a table (Fig. 2 draws its table part, the caption its β), at R = 0.02 optimal_cv's
+// table (cells fitted to their own samples, with bars, beside smoothed ones). Seeded, so the
+// recommendations are reproducible; a solver change that turns them per-path fails checkTableJobs.
+const TABLE_JOBS = [
+  { preset: 'paper-table1', iterations: 10000, merge_radius: 0.01 },
+  { preset: 'paper-table1', iterations: 10000, merge_radius: 0.02 },
+];
 const PNG_SIGNATURE = Buffer.from([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a]);
 const DOC_SCREENSHOT_LIMIT = 400_000;
 
@@ -39,25 +53,98 @@ export async function submitPaperPair() {
   return { spot: ids[0], uniform: ids[1] };
 }
 
-/** "−1.56 †" → -1.56 */
-const parseZ = (text) => Number.parseFloat(text.replace('−', '-').replace('+', ''));
+/** Queues TABLE_JOBS through the API (they run while the paper pair is checked); their ids. */
+export async function submitTableJobs() {
+  const ids = [];
+  for (const body of TABLE_JOBS) {
+    const response = await callApi('/v1/jobs', { method: 'POST', body });
+    if (response.status !== 202) throw new Error(`submitting ${JSON.stringify(body)} answered ${response.status}`);
+    ids.push(response.json.id);
+  }
+  return ids;
+}
 
-/** The bars Fig. 2 draws for `weights` in r₂ bins `r2s` (lower edges): first φ bin, tail left out, fitted, SE > 0. */
-function expectedBars(weights, r2s) {
-  const phi = Math.min(...weights.map((w) => w.phi[0]));
-  return weights.filter((w) => r2s.includes(w.r2[0]) && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status) && w.w1_stderr > 0).length;
+/**
+ * The pages of TABLE_JOBS: each recommends a table, marked in the noise table; Fig. 2 draws it (a
+ * table with a heuristic stacked on it as its table part, β in the caption), filled markers with
+ * bars where a cell has a data SE and open ones without where it is smoothed.
+ */
+export async function checkTableJobs(page, ids) {
+  await waitFor('the table jobs to succeed', async () => {
+    const states = await Promise.all(ids.map(async (id) => (await callApi(`/v1/jobs/${id}`)).json.state));
+    if (states.some((s) => s === 'failed' || s === 'cancelled')) throw new Error(`a table job ended ${states}`);
+    return states.every((s) => s === 'succeeded');
+  }, 120_000);
+  const seen = [];
+  for (const id of ids) {
+    await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
+    await waitFor(`job ${id}'s final results`, async () =>
+      (await page.locator('[data-ref="result-status"]').textContent()).startsWith('final')
+      && (await page.locator('[data-ref="weights-plot"] canvas').count()) > 0);
+    const result = (await callApi(`/v1/jobs/${id}/result`)).json;
+    const { recommended } = result;
+    check(result.weights.length > 0 && recommended.lambda !== null,
+      `job ${id} (R = ${TABLE_JOBS[ids.indexOf(id)].merge_radius}) recommends a weights table: ${recommended.strategy}, λ = ${recommended.lambda}`);
+    const rows = await readNoiseRows(page);
+    check(rows.filter((r) => r.recommendedRow).map((r) => r.strategy).join() === recommended.strategy,
+      `its noise table marks ${recommended.strategy}, a fitted row, as recommended`);
+    const { marks } = await checkFigure2(page, id, result);
+    if (recommended.heuristics.length) {
+      const note = await page.locator('[data-ref="weights-note"]').textContent();
+      const row = rows.find((r) => r.strategy === recommended.strategy);
+      check(note.includes('Drawn: its table part T₁') && recommended.heuristics.every((b) => note.includes(`${b.strategy} `)) && row.betas.startsWith('β: '),
+        `a table with ${recommended.heuristics.map((b) => b.strategy).join(', ')} stacked on it: Fig. 2 draws its table part, its caption and row give β`);
+    }
+    seen.push({ part: recommended.heuristics.length > 0, mixed: marks.bars > 0 && marks.open > 0 });
+  }
+  check(seen.some((s) => s.part), 'a recommendation with a heuristic stacked on its table was drawn as its table part');
+  check(seen.some((s) => s.mixed), 'a recommended table was drawn with filled markers and bars beside open markers without');
+}
+
+/**
+ * Fig. 2 of job `id` (its page open): the table expectedFigure says — the recommended one, or the
+ * table optimum at optimal_cv's λ labelled "not recommended" —, one series per r₂ bin, a bar per
+ * cell with a data SE, an open marker and no bar per smoothed cell, the spot's r₃ = a. Returns the
+ * figure and its marks.
+ */
+export async function checkFigure2(page, id, result) {
+  const fig = await expectedFigure(id, result);
+  const marks = figureMarks(fig.weights, [0, 0.5]);
+  const slot = page.locator('[data-ref="weights-plot"]');
+  const plot = await waitFor('Fig. 2 with its markers', async () => {
+    const p = await readPlot(slot);
+    return p?.markers === marks.open + marks.filled && p;
+  }, 10_000);
+  check(JSON.stringify(plot.labels) === JSON.stringify([`${fig.prefix}, r₂ ∈ [0, 0.5)`, `${fig.prefix}, r₂ ∈ [0.5, ∞)`]),
+    `Fig. 2 has one series per r₂ bin, labelled as what it is (${plot.labels.join(' | ')})`);
+  const kind = await page.locator('[data-ref="weights-kind"]').textContent();
+  const note = await page.locator('[data-ref="weights-note"]').textContent();
+  if (fig.kind === 'table-optimum') {
+    check(kind.startsWith('table optimum (optimal_cv, λ = ') && kind.endsWith('), not recommended')
+      && note.includes(`the recommendation is ${result.recommended.strategy}, a per-path strategy`),
+    `a per-path strategy (${result.recommended.strategy}) is recommended: Fig. 2 is labelled "${kind}" and its caption says why`);
+  } else {
+    check(kind.startsWith(`recommended: ${fig.strategy}`) && note.startsWith(`Recommended: ${fig.strategy}`),
+      `Fig. 2 shows the recommended ${fig.strategy}'s table ("${kind}")`);
+  }
+  check(plot.errorBars === marks.bars && plot.openMarkers === marks.open && plot.markers === marks.open + marks.filled && marks.open + marks.filled > 20,
+    `Fig. 2 draws ${plot.markers} markers, ${plot.openMarkers} of them open (smoothed: no data SE) and ${plot.errorBars} error bars, none on an open one`);
+  check(marks.open === 0 || note.includes(`Open markers (${marks.open === plot.markers ? `all ${marks.open}` : marks.open}): cells without a data standard error`),
+    marks.open ? 'its caption explains the open markers' : 'no cell is smoothed here, so no open markers to explain');
+  check(plot.guides === 'x=0.02', `Fig. 2 marks r₃ = a = 0.02 (${plot.guides})`);
+  return { fig, marks };
 }
 
 /**
  * Saves a screenshot for the README when OPTIMIS_SCREENSHOT_DIR is set: the page from the top of
- * `from` (or of the page) to the bottom of the card holding `until`.
+ * `from` (or of the page) to the bottom of `until`.
  */
 async function docScreenshot(page, name, from, until) {
   const dir = process.env.OPTIMIS_SCREENSHOT_DIR;
   if (!dir) return;
   const [top, bottom] = await page.evaluate(([a, b]) => [
     a ? document.querySelector(a).getBoundingClientRect().top + window.scrollY - 12 : 0,
-    document.querySelector(b).closest('.card').getBoundingClientRect().bottom + window.scrollY + 12,
+    document.querySelector(b).getBoundingClientRect().bottom + window.scrollY + 12,
   ], [from, until]);
   const file = path.join(dir, name);
   await page.screenshot({ path: file, fullPage: true, clip: { x: 0, y: Math.max(0, Math.floor(top)), width: page.viewportSize().width, height: Math.ceil(bottom - top) } });
@@ -108,37 +195,25 @@ export async function checkPaperJob(page, id) {
     check(row.cells.case === kase && row.cells['paper-luminance'] === luminance && row.cells['paper-rms'] === rms,
       `${row.strategy}: paper case "${row.cells.case}", L·10⁵ "${row.cells['paper-luminance']}", RMS "${row.cells['paper-rms']}"`);
   }
-  const zs = rows.map((row) => {
-    const api = result.noise_table.find((r) => r.strategy === row.strategy);
-    const z = (api.luminance - result.reference_luminance) / api.luminance_stderr;
-    return { row, z, shown: parseZ(row.cells.z), api };
-  });
-  check(zs.every(({ z, shown }) => Math.abs(z - shown) < 0.006),
-    `every row's z = (L − L_ref)/SE(L) matches the API's numbers (${zs.map((r) => r.row.cells.z).join(', ')})`);
-  check(zs.every(({ row, api }) => row.optimistic === api.in_sample && row.cells.z.endsWith('†') === api.in_sample),
-    'only the in-sample row\'s z is marked optimistic (†)');
+  checkZ(await readNoiseRows(page), result);
   const note = await page.locator('[data-ref="paper-note"]').textContent();
   check(note.includes('Ershov et al. 2020, Table 1'), `the paper's column cites its source ("${note.slice(0, 50)}…")`);
-
-  const fig2 = await readPlot(page.locator('[data-ref="weights-plot"]'));
-  check(JSON.stringify(fig2.labels) === JSON.stringify(['w₁, r₂ ∈ [0, 0.5)', 'w₁, r₂ ∈ [0.5, ∞)']),
-    `Fig. 2 has one w₁ series per r₂ bin and nothing redundant (${fig2.labels.join(' | ')})`);
-  const bars = expectedBars(result.weights, [0, 0.5]);
-  check(fig2.errorBars === bars && bars > 20, `Fig. 2 draws ${fig2.errorBars} error bars: ± 1 SE of the recommended (${result.weights_fit.strategy}) w₁, tail cell left out`);
-  check(fig2.guides === 'x=0.02', `Fig. 2 marks r₃ = a = 0.02 (${fig2.guides})`);
+  const figure = await checkFigure2(page, id, result);
 
   const lum = await readPlot(page.locator('[data-ref="luminance-plot"]'));
   check(lum.inked > 1000 && STRATEGIES.every((s) => lum.labels.some((l) => l.startsWith(s))),
     `the luminance chart has a series per strategy (${lum.inked} pixels)`);
-  check(lum.bands === 5, `it shades ± 1 SE bands under the ${lum.bands} series shown at first`);
+  const shown = new Set(['plane1', 'plane2', 'plane3', 'switch', 'optimal_cv', result.recommended.strategy]).size;
+  check(lum.bands === shown, `it shades ± 1 SE bands under the ${lum.bands} series shown at first (cases 1–4, optimal_cv, the recommended row)`);
   check(lum.guides === `y=${result.reference_luminance * 1e5}`, `it draws the quadrature reference as a horizontal line (${lum.guides})`);
   await screenshot(page, 'paper-job.png');
-  await docScreenshot(page, 'dashboard-job.png', '[aria-labelledby="noise-heading"]', '[data-ref="weights-plot"]');
-  return result;
+  // The noise table with its captions (with Fig. 2 beside it the picture would exceed the limit).
+  await docScreenshot(page, 'dashboard-job.png', '[aria-labelledby="noise-heading"]', '[data-ref="honesty"]');
+  return { result, figure };
 }
 
-/** The spot job's downloads: the noise table and history as CSV, Fig. 2 as SVG, a chart as PNG, the moments. */
-export async function checkDownloads(page, id, result) {
+/** The spot job's downloads: the noise table, Fig. 2's weights and the history as CSV, Fig. 2 as SVG, a chart as PNG, the moments. */
+export async function checkDownloads(page, id, { result, figure }) {
   const quoting = await page.evaluate(async () => (await import('/assets/csv.js')).toCsv(['a', 'b'], [{ a: 'x,"y"', b: 'line\nbreak' }, { a: 1.5, b: null }]));
   check(quoting === 'a,b\r\n"x,""y""","line\nbreak"\r\n1.5,\r\n', 'the CSV writer quotes as RFC 4180 says');
 
@@ -146,11 +221,25 @@ export async function checkDownloads(page, id, result) {
   const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
   const col = (name) => header.indexOf(name);
   check(csv.name === `optimis-job-${id}-noise.csv` && header.includes('luminance_model_units') && header.includes('rms_percent')
-    && header.includes('z_vs_reference') && header.includes('paper_rms_percent') && rows.length === result.noise_table.length,
+    && header.includes('z_vs_expected') && header.includes('unstable') && header.includes('heuristics') && header.includes('paper_rms_percent')
+    && rows.length === result.noise_table.length,
     `"Noise table (CSV)" saves ${csv.name}: ${rows.length} rows under ${header.length} named columns`);
   check(rows.every((r, i) => Number(r[col('luminance_model_units')]) === result.noise_table[i].luminance
     && Number(r[col('rms_percent')]) === result.noise_table[i].rms_percent && r[col('strategy')] === result.noise_table[i].strategy),
   'its luminance (model units) and RMS (percent) are the API\'s numbers, in full');
+  check(rows.every((r, i) => (r[col('z_vs_expected')] === '' ? null : Number(r[col('z_vs_expected')])) === result.noise_table[i].z
+    && (r[col('recommended')] === 'true') === (result.noise_table[i].strategy === result.recommended.strategy)),
+  'its z is the API\'s z against the expectation at R, and it marks the recommended row');
+  const stacked = rows.find((r) => r[col('strategy')] === 'optimal_stacked');
+  check(JSON.stringify(JSON.parse(stacked[col('heuristics')] || '[]')) === JSON.stringify(result.noise_table.find((r) => r.strategy === 'optimal_stacked').heuristics),
+    'it carries the stacked row\'s β as JSON');
+
+  const weightsCsv = await downloadFrom(page, page.getByRole('button', { name: 'Weights (CSV)' }));
+  const [weightsHeader, ...weightRows] = parseCsv(weightsCsv.bytes.toString('utf8'));
+  const table = new Set(weightRows.map((r) => r[weightsHeader.indexOf('table')]));
+  const expectedTable = figure.fig.kind === 'table-optimum' ? 'table_optimum_not_recommended' : 'recommended';
+  check(weightRows.length === figure.fig.weights.length && table.size === 1 && table.has(expectedTable),
+    `"Weights (CSV)" saves the ${weightRows.length} cells Fig. 2 draws from, as "${expectedTable}"`);
   const plane1 = rows.find((r) => r[col('strategy')] === 'plane1');
   check(plane1[col('paper_case')] === '1' && Number(plane1[col('paper_luminance_model_units')]) === 26.484e-5 && plane1[col('paper_rms_percent')] === '208',
     'it carries the paper\'s case and values');
@@ -167,10 +256,13 @@ export async function checkDownloads(page, id, result) {
   const count = (needle) => text.split(needle).length - 1;
   check(svg.name === `optimis-job-${id}-fig2-w1.svg` && text.startsWith('<svg xmlns="http://www.w3.org/2000/svg"'),
     `Fig. 2's "SVG" saves ${svg.name}, an SVG document`);
-  const bars = expectedBars(result.weights, [0, 0.5]);
-  check(count('class="series"') === 2 && count('class="error-bar"') === bars && count('class="guide" data-axis="x" data-value="0.02"') === 1
-    && text.includes('w₁, r₂ ∈ [0.5, ∞)') && text.includes('<title>Job'),
-  `the SVG draws the 2 series as paths, their ${bars} error bars, the r₃ = a marker and a legend`);
+  const { marks, fig } = figure;
+  check(count('class="series"') === 2 && count('class="error-bar"') === marks.bars && count('class="guide" data-axis="x" data-value="0.02"') === 1
+    && count('class="marker-open"') === marks.open && count('class="marker"') === marks.filled
+    && text.includes(`${fig.prefix}, r₂ ∈ [0.5, ∞)`) && text.includes('<title>Job'),
+  `the SVG draws the 2 series as paths, ${marks.filled} filled and ${marks.open} open markers, ${marks.bars} error bars, the r₃ = a marker and a legend`);
+  check((fig.kind !== 'table-optimum' || /<title>[^<]*not recommended[^<]*<\/title>/.test(text)) && (marks.open === 0 || text.includes('open: no data SE')),
+    'its title says when it is the table optimum, not the recommendation, and its legend explains the open markers');
   const wellFormed = await page.evaluate((doc) => {
     const parsed = new DOMParser().parseFromString(doc, 'image/svg+xml');
     return parsed.documentElement.nodeName === 'svg' && parsed.getElementsByTagName('parsererror').length === 0;
@@ -214,33 +306,47 @@ export async function checkCompare(page, { spot, uniform }, results) {
   const table = await page.locator('.compare-table tbody:not(.params) tr').evaluateAll((trs) => trs.map((tr) => ({
     strategy: tr.dataset.strategy, cells: [...tr.querySelectorAll('td')].map((td) => td.textContent),
   })));
-  check(table.map((r) => r.strategy).join() === STRATEGIES.join(), 'it has a row per strategy');
+  check(table.map((r) => r.strategy).join() === STRATEGIES.join(), `it has a row per strategy (${table.length})`);
+  const marked = await page.locator('.compare-table td.recommended-cell').evaluateAll((tds) => Object.fromEntries(
+    tds.map((td) => [td.dataset.job, td.closest('tr').dataset.strategy])));
+  check(Object.keys(marked).length === 2 && [spot, uniform].every((id, k) => marked[id] === results[k].recommended.strategy),
+    `each job's recommended row is marked (${Object.entries(marked).map(([id, s]) => `#${id} ${s}`).join(', ')})`);
   const agree = table.every(({ strategy, cells: [a, b] }) => [a, b].every((text, k) => {
     const row = results[k].noise_table.find((r) => r.strategy === strategy);
-    return Math.abs(parseWithError(text)[0] - row.rms_percent) < 0.06;
+    return row.error ? text === 'no fit' : Math.abs(parseWithError(text)[0] - row.rms_percent) < 0.06;
   }));
-  check(agree, 'each cell is its job\'s RMS %');
+  check(agree, 'each cell is its job\'s RMS %, or "no fit" where its fit failed');
 
+  // Each job's table: its recommended one, or its table optimum (a per-path strategy recommended).
+  const figures = await Promise.all([spot, uniform].map((id, k) => expectedFigure(id, results[k])));
   const plot = await readPlot(page.locator('[data-ref="w1-plot"]'));
-  check(plot.labels.join(' | ') === `#${spot} paper-table1 (spot a = 0.02) | #${uniform} uniform-illumination (uniform)`,
-    `the w₁(r₃) overlay has one series per job (${plot.labels.join(' | ')})`);
-  const first = results.reduce((n, r) => n + expectedBars(r.weights, [0]), 0);
-  check(plot.errorBars === first && plot.guides === 'x=0.02', `it draws ${plot.errorBars} error bars in the first r₂ bin and the spot's r₃ = a`);
+  const named = [`#${spot} paper-table1 (spot a = 0.02): `, `#${uniform} uniform-illumination (uniform): `];
+  check(plot.labels.length === 2 && plot.labels.every((l, k) => l.startsWith(named[k])
+    && l.endsWith(figures[k].kind === 'table-optimum' ? 'not recommended' : `recommended ${figures[k].strategy}`)),
+  `the w₁(r₃) overlay has one series per job, saying which table it is (${plot.labels.join(' | ')})`);
+  const marksIn = (r2) => figures.map((f) => figureMarks(f.weights, [r2])).reduce((a, m) => ({ bars: a.bars + m.bars, open: a.open + m.open }), { bars: 0, open: 0 });
+  const first = marksIn(0);
+  check(plot.errorBars === first.bars && plot.openMarkers === first.open && plot.guides === 'x=0.02',
+    `it draws ${plot.errorBars} error bars and ${plot.openMarkers} open markers in the first r₂ bin, and the spot's r₃ = a`);
   await page.locator('select[data-ref="r2"]').selectOption({ index: 1 });
-  const second = results.reduce((n, r) => n + expectedBars(r.weights, [0.5]), 0);
-  await waitFor('the second r₂ bin', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === second, 5_000);
-  check(true, `the r₂ selector redraws it for r₂ ∈ [0.5, ∞) (${second} bars)`);
+  const second = marksIn(0.5);
+  await waitFor('the second r₂ bin', async () => {
+    const p = await readPlot(page.locator('[data-ref="w1-plot"]'));
+    return p.errorBars === second.bars && p.openMarkers === second.open;
+  }, 5_000);
+  check(true, `the r₂ selector redraws it for r₂ ∈ [0.5, ∞) (${second.bars} bars, ${second.open} open markers)`);
   await page.locator('select[data-ref="r2"]').selectOption({ index: 0 });
-  await waitFor('the first r₂ bin again', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === first, 5_000);
+  await waitFor('the first r₂ bin again', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === first.bars, 5_000);
 
   const csv = await downloadFrom(page, page.getByRole('button', { name: 'Compare table (CSV)' }));
   const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
   const ids = new Set(rows.map((r) => r[header.indexOf('job_id')]));
-  check(header.slice(0, 3).join() === 'job_id,preset,illumination' && rows.length === 20 && ids.size === 2 && ids.has(String(spot)),
+  check(header.slice(0, 3).join() === 'job_id,preset,illumination' && rows.length === results.reduce((n, r) => n + r.noise_table.length, 0)
+    && ids.size === 2 && ids.has(String(spot)),
     `"Compare table (CSV)" saves ${csv.name}: ${rows.length} rows, one per job and strategy`);
   await sleep(300); // the chart's first draw settles
   await screenshot(page, 'compare.png');
-  await docScreenshot(page, 'dashboard-compare.png', null, '[data-ref="w1-plot"]');
+  await docScreenshot(page, 'dashboard-compare.png', null, '[aria-labelledby="compare-w1-heading"]');
 
   await page.goto(`${page.url().split('#')[0]}#/compare?ids=${spot}`);
   const error = await waitFor('the refusal', async () => {
@@ -265,15 +371,26 @@ export async function checkSolves(page, id) {
   await page.locator('.solve-form button[type="submit"]').click();
   await waitFor('the kept solve shown', async () => (await select.inputValue()) === 'free-w0'
     && (await rmsCell.textContent()).trim() !== ownText);
-  const kept = (await callApi(`/v1/jobs/${id}/solves/free-w0`)).json.noise_table.find((r) => r.strategy === 'optimal_cv');
+  const keptResult = (await callApi(`/v1/jobs/${id}/solves/free-w0`)).json;
+  const kept = keptResult.noise_table.find((r) => r.strategy === 'optimal_cv');
   check(kept.rms_percent < own.rms_percent,
     `freeing w₀ lowers the cross-fitted optimum's RMS (${kept.rms_percent.toFixed(2)} < ${own.rms_percent.toFixed(2)} %)`);
   const keptText = (await rmsCell.textContent()).trim();
   check(keptText.startsWith(kept.rms_percent.toFixed(1)), `the page shows the kept solve's optimal_cv RMS (${keptText})`);
+  const recommended = page.locator('table.noise-table tbody tr.recommended');
+  await waitFor('the kept solve\'s recommendation marked', async () => (await recommended.getAttribute('data-strategy')) === keptResult.recommended.strategy);
+  check(true, `the kept solve's recommended row, ${keptResult.recommended.strategy}, is marked`);
+  if (keptResult.weights.length === 0) {
+    // The table optimum (?lambda=) exists for the job's own options only.
+    const message = await waitFor('Fig. 2\'s message', () => page.locator('[data-ref="weights-plot"] .empty').textContent().catch(() => null));
+    check(message.includes(`${keptResult.recommended.strategy}, is per-path`) && message.includes('job\'s own solver options only'),
+      `with a per-path recommendation under kept options Fig. 2 says why it draws no table ("${message.slice(0, 80)}…")`);
+  }
   const listed = (await callApi(`/v1/jobs/${id}/solves`)).json.solves;
   check(listed.length === 2 && listed[0].default && listed[1].name === 'free-w0' && listed[1].solver.fixed.w0 === undefined,
     'the server keeps it after the default, with w₀ freed');
   await select.selectOption('default');
-  await waitFor('the job\'s own options shown again', async () => (await rmsCell.textContent()).trim() === ownText);
-  check(true, `choosing default shows the job's own table again (${ownText})`);
+  await waitFor('the job\'s own options shown again', async () => (await rmsCell.textContent()).trim() === ownText
+    && (await page.locator('[data-ref="weights-plot"] canvas').count()) > 0);
+  check(true, `choosing default shows the job's own table and Fig. 2 again (${ownText})`);
 }

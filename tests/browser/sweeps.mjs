@@ -23,13 +23,16 @@ function expectedRmsBars(sweep, field, fixed) {
   return points.flatMap((p) => p.figures.noise_table).filter((r) => r.rms_percent > 0 && r.rms_percent_stderr > 0).length;
 }
 
-/** The error bars of the w₁(r₃) chart: per point, the fitted cells of the first r₂ and φ bins, tail left out, with a positive SE. */
+/**
+ * The error bars of the w₁(r₃) chart: per point that recommends a table, the cells of the first r₂
+ * and φ bins, tail and copied cells left out, with a data SE above 0 (a smoothed cell has none).
+ */
 function expectedW1Bars(sweep) {
-  return sweep.points.map(({ figures: { weights } }) => {
+  return sweep.points.filter((p) => p.figures.weights.length > 0).map(({ figures: { weights } }) => {
     const r2 = Math.min(...weights.map((w) => w.r2[0]));
     const phi = Math.min(...weights.map((w) => w.phi[0]));
     return weights.filter((w) => w.r2[0] === r2 && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status)
-      && w.w1_stderr > 0).length;
+      && w.status !== 'smoothed' && w.w1_stderr > 0).length;
   }).reduce((a, b) => a + b, 0);
 }
 
@@ -74,7 +77,8 @@ export async function checkSweepSummary(page, sweep) {
     const shown = Number.parseFloat(rms.replace(/,/g, ''));
     check(index === String(p.index) && radius === String(p.values.merge_radius) && l3 === String(p.values['scene.l3'])
       && job === `#${p.job_id}` && rows[i].job === `#/jobs/${p.job_id}` && state === 'succeeded'
-      && Math.abs(shown - chosen.rms_percent) < 0.06 && rms.includes(chosen.strategy),
+      && Math.abs(shown - chosen.rms_percent) < 0.06 && rms.includes(chosen.strategy)
+      && rms.includes(p.figures.recommended.lambda === null ? ', per path)' : ', λ = '),
       `point ${p.index}: ${radius}, ${l3}, job ${job}, recommended RMS ${rms}`);
   });
 }
@@ -120,12 +124,27 @@ export async function checkSweepCharts(page, sweep) {
     }, 5_000);
     check(after.labels.length === strategies.length, `with ${other.field} = ${other.values[1]} it redraws ${moved} bars, same series`);
   }
+  // Only points that recommend a weights table are drawn; the others recommend a per-path strategy.
+  const tabled = sweep.points.filter((p) => p.figures.weights.length > 0);
+  const perPath = sweep.points.filter((p) => p.figures.weights.length === 0);
+  check(perPath.every((p) => p.figures.recommended.lambda === null),
+    `the API's points without weights recommend a per-path strategy (λ null): ${perPath.map((p) => p.figures.recommended.strategy).join(', ') || 'none'}`);
+  const note = await page.locator('[data-ref="w1-note"]').textContent();
+  check(perPath.length === 0 || (note.startsWith(`${perPath.length} of ${sweep.points.length} points recommend a per-path strategy`)
+    && perPath.every((p) => note.includes(`${describePoint(sweep, p)}: ${p.figures.recommended.strategy}`))),
+  `the w₁(r₃) chart's note names the points that recommend a per-path strategy, which has no table ("${note.slice(0, 80)}…")`);
+  if (tabled.length === 0) {
+    const message = await page.locator('[data-ref="w1-plot"] .empty').textContent();
+    check(message === 'No point recommends a weights table.', `with none recommending a table the chart says so ("${message}")`);
+    return;
+  }
   const w1 = await readPlot(page.locator('[data-ref="w1-plot"]'));
   check(w1 !== null && w1.inked > 1000, `the w₁(r₃) chart is drawn (${w1?.inked} pixels)`);
-  const labels = sweep.points.map((p) => describePoint(sweep, p));
-  check(JSON.stringify(w1.labels) === JSON.stringify(labels), `it has one series per point, labelled ${labels.join(' | ')}`);
+  const labels = tabled.map((p) => describePoint(sweep, p));
+  check(w1.labels.length === labels.length && w1.labels.every((l, i) => l.startsWith(labels[i])),
+    `it has one series per point that recommends a table, labelled ${labels.join(' | ')}`);
   const bars = expectedW1Bars(sweep);
-  check(w1.errorBars === bars && bars > 0, `it draws ${w1.errorBars} error bars (± jackknife SE of w₁)`);
+  check(w1.errorBars === bars, `it draws ${w1.errorBars} error bars (± jackknife SE of w₁; none on smoothed cells)`);
 }
 
 /** A run's job page links back to its sweep, and so does the job list. */

@@ -1,12 +1,14 @@
 // Chart files: the SVG and PNG downloads of a chart drawn in a PlotSlot (plots.js).
 //
 // SVG: a small serialiser of what the chart plots — it redraws the shown series (lines, points,
-// error bars, bands, guide lines) from the uPlot instance's data and current scales and the slot's
-// extras (chartkit.js) as vector paths, with its own axis ticks and a legend: a real vector figure,
-// not a picture of the canvas. PNG: uPlot's canvas as drawn (axes included) on a white page with
-// the chart's title above and a legend below, saved with canvas.toBlob.
+// filled and open markers, error bars, bands, guide lines) from the uPlot instance's data and
+// current scales and the slot's extras (chartkit.js) as vector paths, with its own axis ticks and a
+// legend (the series, then the slot's notes): a real vector figure, not a picture of the canvas.
+// PNG: uPlot's canvas as drawn (axes included) on a white page with the chart's title above and the
+// same legend below, saved with canvas.toBlob.
 
 import { saveBlob } from './api.js';
+import { MARKER_RADIUS } from './chartkit.js';
 import { h } from './format.js';
 
 const W = 820;
@@ -74,7 +76,8 @@ export function chartSvg(slot) {
   const X = (v) => { const f = fraction(u, 'x', v); return f === null ? null : M.left + f * plotW; };
   const Y = (v) => { const f = fraction(u, 'y', v); return f === null ? null : M.top + (1 - f) * plotH; };
   const series = shownSeries(u);
-  const legendRows = Math.ceil(series.length / LEGEND_COLS);
+  const notes = slot.notes ?? [];
+  const legendRows = Math.ceil(series.length / LEGEND_COLS) + notes.length;
   const height = PLOT_H + 12 + legendRows * LEGEND_ROW;
   const out = [];
   const title = slot.title ?? 'optimis chart';
@@ -127,7 +130,10 @@ export function chartSvg(slot) {
       }
       d.push(`${pen}${num(x)} ${num(y)}`);
       pen = 'L';
-      if (points) marks.push(`<circle cx="${num(x)}" cy="${num(y)}" r="2.5" fill="${color}"/>`);
+      const open = slot.markers?.[i - 1]?.open[k];
+      if (open) marks.push(`<circle class="marker-open" cx="${num(x)}" cy="${num(y)}" r="${MARKER_RADIUS}" fill="#fff" stroke="${color}" stroke-width="1.5"/>`);
+      else if (open === false) marks.push(`<circle class="marker" cx="${num(x)}" cy="${num(y)}" r="${MARKER_RADIUS}" fill="${color}"/>`);
+      else if (points) marks.push(`<circle cx="${num(x)}" cy="${num(y)}" r="2.5" fill="${color}"/>`);
     });
     const dashAttr = dash.length ? ` stroke-dasharray="${dash.join(' ')}"` : '';
     out.push(`<path class="series" data-label="${escapeXml(u.series[i].label)}" d="${d.join(' ')}" fill="none" stroke="${color}" stroke-width="${width}"${dashAttr}/>`);
@@ -165,6 +171,12 @@ export function chartSvg(slot) {
     out.push(`<line x1="${num(x)}" x2="${num(x + 22)}" y1="${y}" y2="${y}" stroke="${color}" stroke-width="2"${dashAttr}/>`);
     out.push(`<text x="${num(x + 28)}" y="${y + 4}">${escapeXml(u.series[i].label)}</text>`);
   });
+  const notesTop = PLOT_H + 12 + Math.ceil(series.length / LEGEND_COLS) * LEGEND_ROW;
+  notes.forEach((note, n) => {
+    const y = notesTop + n * LEGEND_ROW;
+    out.push(`<circle cx="${M.left + 11}" cy="${y}" r="${MARKER_RADIUS}" fill="${note.marker === 'open' ? '#fff' : '#444'}" stroke="#444" stroke-width="1.5"/>`);
+    out.push(`<text class="note" x="${M.left + 28}" y="${y + 4}">${escapeXml(note.text)}</text>`);
+  });
   out.push('</g></svg>');
   return `${out.join('\n')}\n`;
 }
@@ -190,7 +202,8 @@ export function chartPng(slot) {
   const source = u.ctx.canvas;
   const ratio = source.width / Math.max(1, source.clientWidth || source.width);
   const series = shownSeries(u);
-  const rows = Math.ceil(series.length / LEGEND_COLS);
+  const notes = slot.notes ?? [];
+  const rows = Math.ceil(series.length / LEGEND_COLS) + notes.length;
   const head = 30 * ratio;
   const canvas = document.createElement('canvas');
   canvas.width = source.width;
@@ -217,6 +230,20 @@ export function chartPng(slot) {
     ctx.lineTo(x + 22 * ratio, y);
     ctx.stroke();
     ctx.fillText(u.series[i].label, x + 28 * ratio, y + 4 * ratio);
+  });
+  const notesTop = head + source.height + (12 + Math.ceil(series.length / LEGEND_COLS) * LEGEND_ROW) * ratio;
+  ctx.setLineDash([]);
+  ctx.lineWidth = 1.5 * ratio;
+  notes.forEach((note, n) => {
+    const y = notesTop + n * LEGEND_ROW * ratio;
+    ctx.beginPath();
+    ctx.arc(21 * ratio, y, MARKER_RADIUS * ratio, 0, 2 * Math.PI);
+    ctx.fillStyle = note.marker === 'open' ? '#fff' : '#444';
+    ctx.fill();
+    ctx.strokeStyle = '#444';
+    ctx.stroke();
+    ctx.fillStyle = '#1d2430';
+    ctx.fillText(note.text, 38 * ratio, y + 4 * ratio);
   });
   return new Promise((resolve, reject) => canvas.toBlob((blob) => (blob ? resolve(blob) : reject(new Error('no PNG'))), 'image/png'));
 }

@@ -1,14 +1,18 @@
 // Chart kit: the uPlot plugins the charts share — error bars (± 1 standard error), shaded bands
-// around a line (± 1 SE), and guide lines (a vertical marker such as r₃ = a, a horizontal reference
-// such as the quadrature luminance) — and the y range that keeps all of them in view.
+// around a line (± 1 SE), point markers that are filled or open (a value with or without a
+// standard error of its own), and guide lines (a vertical marker such as r₃ = a, a horizontal
+// reference such as the quadrature luminance) — and the y range that keeps all of them in view.
 //
 // A chart's extras live on its PlotSlot (plots.js), indexed like the y series, so that a redraw
 // with new data needs no new plugin and the chart files (chartfiles.js) can draw the same things:
-//   slot.bars   [{ err: [...], color }]       error bars of series s + 1
-//   slot.bands  [{ lo: [...], hi: [...], color }]  a shaded band under series s + 1
-//   slot.guides { x: [{ value, label }], y: [{ value, label }] }
+//   slot.bars    [{ err: [...], color }]       error bars of series s + 1
+//   slot.bands   [{ lo: [...], hi: [...], color }]  a shaded band under series s + 1
+//   slot.markers [{ open: [...], color }]      a marker at every value of series s + 1, open where
+//                                              open[i] (the series itself then shows no points)
+//   slot.guides  { x: [{ value, label }], y: [{ value, label }] }
+//   slot.notes   ['…']                         legend lines of the chart files beside the series
 // Every plugin writes what it drew to the container's data attributes (the browser test reads
-// them): data-error-bars, data-bands, data-guides.
+// them): data-error-bars, data-bands, data-markers, data-open-markers, data-guides.
 
 /* global uPlot */
 
@@ -61,6 +65,54 @@ export function errorBars(slot) {
     });
     ctx.restore();
     slot.container.dataset.errorBars = drawn;
+  };
+  return { hooks: { draw: [draw] } };
+}
+
+/** The radius of a marker of `markers`, in CSS pixels. */
+export const MARKER_RADIUS = 3;
+
+/**
+ * Draws `slot.markers`: a filled disc at every value of the series, or an open circle where
+ * `open[i]` (a value without a standard error of its own, e.g. a smoothed cell), over the lines.
+ */
+export function markers(slot) {
+  const draw = (u) => {
+    const { ctx } = u;
+    const { left, top, width, height } = u.bbox;
+    const radius = MARKER_RADIUS * devicePixelRatio;
+    let filled = 0;
+    let open = 0;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(left, top, width, height);
+    ctx.clip();
+    ctx.lineWidth = 1.5 * devicePixelRatio;
+    ctx.setLineDash([]);
+    (slot.markers ?? []).forEach(({ open: isOpen, color }, s) => {
+      if (!u.series[s + 1]?.show) return;
+      u.data[s + 1].forEach((y, i) => {
+        if (y === null || y === undefined) return;
+        const x = u.valToPos(u.data[0][i], 'x', true);
+        const py = u.valToPos(y, 'y', true);
+        ctx.beginPath();
+        ctx.arc(x, py, radius, 0, 2 * Math.PI);
+        if (isOpen[i]) {
+          ctx.fillStyle = '#fff';
+          ctx.fill();
+          ctx.strokeStyle = color;
+          ctx.stroke();
+          open += 1;
+        } else {
+          ctx.fillStyle = color;
+          ctx.fill();
+          filled += 1;
+        }
+      });
+    });
+    ctx.restore();
+    slot.container.dataset.markers = filled + open;
+    slot.container.dataset.openMarkers = open;
   };
   return { hooks: { draw: [draw] } };
 }

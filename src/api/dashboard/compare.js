@@ -1,18 +1,22 @@
 // The compare page, #/compare?ids=1,2,… (2 to 8 jobs): their noise tables side by side (RMS % ± SE
-// per strategy, one column per job, under each job's key parameters) and their recommended w₁
-// against r₃ overlaid (one series per job, ± 1 SE bars, an r₂ bin selector, the spots' r₃ = a),
-// with CSV, SVG and PNG downloads. Polled while a job still runs. The paper's "weights are not
-// local" comparison is a spot job beside a uniform one (preset uniform-illumination).
+// per strategy, one column per job, under each job's key parameters, the recommended and unstable
+// rows marked) and their weights tables' w₁ against r₃ overlaid (one series per job, ± 1 SE bars,
+// open markers for cells without a data SE, an r₂ bin selector, the spots' r₃ = a): each job's
+// recommended table, or — when it recommends a per-path strategy — its table optimum at
+// optimal_cv's λ, labelled as not recommended (fig2.js). CSV, SVG and PNG downloads. Polled while a
+// job still runs. The paper's "weights are not local" comparison is a spot job beside a uniform
+// one (preset uniform-illumination).
 
 import { TERMINAL, api } from './api.js';
-import { errorBars, extent, guides } from './chartkit.js';
+import { errorBars, extent, guides, markers } from './chartkit.js';
 import { chartDownloads } from './chartfiles.js';
 import { csvButton } from './csv.js';
+import { figure2, figureSource, tableColumns, tableOptimumLambda } from './fig2.js';
 import {
   badge, fixed, formatCount, formatLuminance, formatParameter, formatRms, h, instantiate, showMessage, withError,
 } from './format.js';
 import { MAX_COMPARED } from './list.js';
-import { PlotSlot, STRATEGIES, binsOf, figure2, formatInterval, spotGuide, weightRange } from './plots.js';
+import { PlotSlot, binsOf, formatInterval, spotGuide, strategiesIn, weightRange } from './plots.js';
 
 const POLL_MS = 3000;
 const JOB_COLORS = ['#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#17becf'];
@@ -45,9 +49,10 @@ export function showCompare(app, query) {
   const { ids } = parsed;
   refs.title.textContent = ids.map((id) => `#${id}`).join(', ');
   document.title = `Compare ${ids.join(', ')} · optimis`;
-  const slot = new PlotSlot(refs['w1-plot'], `Recommended w₁ against r₃, jobs ${ids.join(', ')}`);
+  const slot = new PlotSlot(refs['w1-plot'], `w₁ against r₃ of each job's recommended table (or table optimum), jobs ${ids.join(', ')}`);
   const name = `optimis-compare-${ids.join('-')}`;
-  let entries = []; // per id: { id, job, result, error }
+  let entries = []; // per id: { id, job, result, figure (fig2.js's figureSource), error }
+  const optima = new Map(); // per id: the table optimum fetched last, { key, value }
   let r2 = null; // the lower edge of the r₂ bin shown
   let timer = null;
   let alive = true;
@@ -67,7 +72,7 @@ export function showCompare(app, query) {
       try {
         const job = await api(`/v1/jobs/${id}`);
         const result = job.progress.iterations_checkpointed > 0 ? await api(`/v1/jobs/${id}/result`).catch(() => null) : null;
-        return { id, job, result };
+        return { id, job, result, figure: result ? figureSource(result, await tableOptimum(id, result, optima), true) : null };
       } catch (error) {
         return { id, job: null, result: null, error: error.status === 404 ? `Job ${id} does not exist.` : error.message };
       }
@@ -101,7 +106,7 @@ export function showCompare(app, query) {
       param('iterations', 'Iterations', (e) => (e.result ? `${formatCount(e.result.iterations)}${e.result.partial ? ' (partial)' : ''}` : '—')),
       param('seed', 'Seed', (e) => String(e.job.spec.seed)),
       param('reference', 'Reference L·10⁵', (e) => (e.job.reference_luminance === null ? '—' : formatLuminance(e.job.reference_luminance))));
-    const strategies = STRATEGIES.filter((s) => shown.some((e) => e.result?.noise_table.some((r) => r.strategy === s)));
+    const strategies = strategiesIn(shown.map((e) => e.result?.noise_table ?? []));
     refs.rows.replaceChildren(...strategies.map((s) => h('tr', { 'data-strategy': s },
       h('th', { scope: 'row' }, h('code', {}, s)),
       shown.map((e) => {
@@ -112,13 +117,14 @@ export function showCompare(app, query) {
         return h('td', { class: `num${recommended ? ' recommended-cell' : ''}`, 'data-job': e.id },
           withError(row.rms_percent, row.rms_percent_stderr, formatRms),
           row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic' }, 'in-sample') : null,
-          recommended ? h('span', { class: 'recommended-mark', title: 'The weights drawn below' }, 'recommended') : null);
+          row.unstable ? h('span', { class: 'unstable-mark', title: 'Its fitted weights change from fold to fold by more than 0.25: never recommended' }, 'unstable') : null,
+          recommended ? h('span', { class: 'recommended-mark', title: e.result.recommended.reason ?? 'The recommended row' }, 'recommended') : null);
       }))));
   }
 
   /** The r₂ bins of the first job with weights; keeps the chosen one while it exists. */
   function renderSelector() {
-    const weights = entries.find((e) => e.result?.weights.length)?.result.weights ?? [];
+    const weights = entries.find((e) => e.figure?.weights)?.figure.weights ?? [];
     const bins = binsOf(weights, 'r2');
     if (r2 === null || !bins.some((b) => b[0] === r2)) r2 = bins[0]?.[0] ?? null;
     const options = bins.map((b) => h('option', { value: b[0] }, `r₂ ∈ ${formatInterval(b)}`));
@@ -128,21 +134,27 @@ export function showCompare(app, query) {
   }
 
   function drawOverlay() {
-    const withWeights = entries.filter((e) => e.result?.weights.length);
+    const withWeights = entries.filter((e) => e.figure?.weights);
+    // Why a job has no table to draw (fig2.js's message), or that it has no results yet.
+    const missing = entries.filter((e) => e.job && !e.figure?.weights).map((e) => `#${e.id}: ${e.figure?.message ?? 'no results yet.'}`);
     if (withWeights.length === 0) {
-      slot.clear('No weights yet: they appear with the first checkpoint of a job.');
-      showMessage(refs['w1-note'], '');
+      slot.clear(entries.some((e) => e.result) ? 'No weights table to draw.' : 'No weights yet: they appear with the first checkpoint of a job.');
+      showMessage(refs['w1-note'], missing.join(' '));
       return;
     }
-    const figures = withWeights.map((e) => ({ e, fig: figure2(e.result.weights) }));
+    const figures = withWeights.map((e) => ({ e, fig: figure2(e.figure.weights) }));
     const x = [...new Set(figures.flatMap(({ fig }) => fig.x))].sort((a, b) => a - b);
     const series = figures.map(({ e, fig }) => {
       const bin = fig.series.find((s) => s.r2[0] === r2) ?? fig.series[0];
       const at = new Map(fig.x.map((v, i) => [v, i]));
-      return { e, y: x.map((v) => (at.has(v) ? bin.y[at.get(v)] : null)), err: x.map((v) => (at.has(v) ? bin.err[at.get(v)] : null)) };
+      const pick = (list, none) => x.map((v) => (at.has(v) ? list[at.get(v)] : none));
+      return { e, y: pick(bin.y, null), err: pick(bin.err, null), open: pick(bin.open, false) };
     });
     const colorOf = (e) => JOB_COLORS[entries.filter((n) => n.job).indexOf(e) % JOB_COLORS.length];
     slot.bars = series.map((s) => ({ err: s.err, color: colorOf(s.e) }));
+    slot.markers = series.map((s) => ({ open: s.open, color: colorOf(s.e) }));
+    const open = series.reduce((n, s) => n + s.open.filter((o, i) => o && s.y[i] !== null).length, 0);
+    slot.notes = open ? [{ marker: 'open', text: 'open: no data SE (smoothed: set by its neighbours through λ), no bar' }] : [];
     const spots = new Map(); // a → the ids of the jobs lit by a spot of that radius
     for (const { e } of series) {
       for (const g of spotGuide(e.job.spec.scene.illumination)) spots.set(g.value, [...(spots.get(g.value) ?? []), e.id]);
@@ -151,21 +163,22 @@ export function showCompare(app, query) {
     slot.draw({
       series: [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) },
         ...series.map((s, k) => ({
-          label: `#${s.e.id} ${s.e.job.spec.preset} (${describeLight(s.e.job.spec.scene.illumination)})`,
-          stroke: slot.bars[k].color, width: 2, points: { show: true, size: 5 },
+          label: `#${s.e.id} ${s.e.job.spec.preset} (${describeLight(s.e.job.spec.scene.illumination)})${describeTable(s.e.figure)}`,
+          stroke: slot.bars[k].color, width: 2, points: { show: false },
           value: (u, v, si, i) => {
             const err = slot.bars[k]?.err[i];
-            return v === null ? '—' : `${fixed(v, 3)}${err === null || err === undefined ? '' : ` ± ${fixed(err, 3)}`}`;
+            if (v === null) return '—';
+            if (slot.markers[k]?.open[i]) return `${fixed(v, 3)} (no SE)`;
+            return `${fixed(v, 3)}${err === null || err === undefined ? '' : ` ± ${fixed(err, 3)}`}`;
           },
         }))],
       scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
-      axes: [{ label: `r₃ (cell midpoint), r₂ ∈ ${formatInterval(binsOf(withWeights[0].result.weights, 'r2').find((b) => b[0] === r2))}` }, { label: 'w₁' }],
-      plugins: [errorBars(slot), guides(slot)],
+      axes: [{ label: `r₃ (cell midpoint), r₂ ∈ ${formatInterval(binsOf(withWeights[0].figure.weights, 'r2').find((b) => b[0] === r2))}` }, { label: 'w₁' }],
+      plugins: [errorBars(slot), markers(slot), guides(slot)],
     }, [x, ...series.map((s) => s.y)]);
-    const missing = entries.length - withWeights.length;
     const kinds = new Set(withWeights.map((e) => e.job.spec.scene.illumination.kind));
-    const parts = [`Each job's recommended weights (first φ bin); bars: ± 1 jackknife standard error${spots.size ? '; dashed: the spot radius a' : ''}. The open tail cell of r₃ is left out.`];
-    if (missing) parts.push(`${missing} job${missing > 1 ? 's have' : ' has'} no weights yet.`);
+    const parts = [`Each job's recommended weights table (first φ bin) or, where a per-path strategy is recommended, its table optimum at optimal_cv's λ, drawn for reference and labelled "table optimum, not recommended"; a stacked table is its table part T₁. Bars: ± 1 jackknife standard error${open ? '; open markers: cells without a data standard error (smoothed), no bars' : ''}${spots.size ? '; dashed: the spot radius a' : ''}. The open tail cell of r₃ is left out.`];
+    parts.push(...missing);
     // The paper's closing comparison: the same join path gets different weights under different light.
     if (kinds.has('spot') && kinds.has('uniform')) parts.push('A spot and a uniform light: where their w₁ differ at the same r₃, the optimal weight of a join path depends on the light elsewhere — the paper\'s "weights are not local".');
     showMessage(refs['w1-note'], parts.join(' '));
@@ -179,11 +192,32 @@ export function showCompare(app, query) {
   };
 }
 
+/**
+ * The table optimum of job `id` when its `result` recommends a per-path strategy (fig2.js):
+ * { result } or { error }; null when not wanted. Kept in `optima` until the iterations or λ change.
+ */
+async function tableOptimum(id, result, optima) {
+  const lambda = tableOptimumLambda(result);
+  if (lambda === null) return null;
+  const key = `${result.iterations}:${result.partial}:${lambda}`;
+  if (optima.get(id)?.key !== key) {
+    const value = await api(`/v1/jobs/${id}/result?lambda=${lambda}`).then((optimum) => ({ result: optimum }), (error) => ({ error: error.message }));
+    optima.set(id, { key, value });
+  }
+  return optima.get(id).value;
+}
+
+/** Which table of a job the overlay draws, after its name in the legend. */
+function describeTable(figure) {
+  if (figure.kind === 'table-optimum') return `: table optimum (optimal_cv, λ = ${formatParameter(figure.lambda)}), not recommended`;
+  return `: recommended ${figure.strategy}${figure.heuristics.length ? ' (table part)' : ''}`;
+}
+
 /** The compare table as CSV: one row per job and strategy, with the job's key parameters. */
 function compareCsv(entries) {
   const columns = ['job_id', 'preset', 'illumination', 'spot_a', 'engine', 'light_paths', 'camera_paths', 'merge_radius', 'iterations', 'seed',
     'reference_luminance_model_units', 'strategy', 'luminance_model_units', 'luminance_stderr_model_units', 'rms_percent', 'rms_percent_stderr',
-    'in_sample', 'recommended', 'error'];
+    'in_sample', 'unstable', 'recommended', 'error'];
   const rows = entries.filter((e) => e.job && e.result).flatMap(({ job, result }) => result.noise_table.map((row) => ({
     job_id: job.id,
     preset: job.spec.preset,
@@ -202,17 +236,20 @@ function compareCsv(entries) {
     rms_percent: row.rms_percent,
     rms_percent_stderr: row.rms_percent_stderr,
     in_sample: row.in_sample,
+    unstable: row.unstable,
     recommended: result.recommended?.strategy === row.strategy,
     error: row.error,
   })));
   return { columns, rows };
 }
 
-/** Every compared job's recommended weights, one row per job and cell. */
+/** Every compared job's drawn weights table (recommended, or the table optimum: `table` says which), one row per job and cell. */
 function weightsCsv(entries) {
-  const columns = ['job_id', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2', 'w1_stderr', 'samples', 'status'];
-  const rows = entries.filter((e) => e.result).flatMap(({ id, result }) => result.weights.map((w) => ({
-    job_id: id, r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
+  const columns = ['job_id', 'table', 'strategy', 'lambda', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2', 'w1_stderr',
+    'samples', 'status'];
+  const rows = entries.filter((e) => e.figure?.weights).flatMap(({ id, figure }) => figure.weights.map((w) => ({
+    job_id: id, ...tableColumns(figure), lambda: figure.lambda,
+    r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
     w0: w.w0, w1: w.w1, w2: w.w2, w1_stderr: w.w1_stderr, samples: w.samples, status: w.status,
   })));
   return { columns, rows };

@@ -73,6 +73,14 @@ export function formatParameter(x) {
   return String(Number(x.toPrecision(6)));
 }
 
+/** A number with a real minus sign: `−0.126`. */
+export const signed = (x, digits) => `${x < 0 ? '−' : ''}${fixed(Math.abs(x), digits)}`;
+
+/** β of every heuristic stacked on a table, in words: `switch −0.126 ± 0.015, power_planes23 0.510 ± 1.212`. */
+export function formatBetas(heuristics) {
+  return heuristics.map((b) => `${b.strategy} ${signed(b.beta, 3)}${b.beta_stderr === null || b.beta_stderr === undefined ? '' : ` ± ${fixed(b.beta_stderr, 3)}`}`).join(', ');
+}
+
 export function withError(value, error, format) {
   return error === null || error === undefined ? format(value) : `${format(value)} ± ${format(error)}`;
 }

@@ -1,45 +1,71 @@
-// The noise table of a job (the paper's Table 1): per strategy its weights in words, L ± SE, the z
-// of L against the quadrature reference, RMS % ± SE, the paper's case number and — when the job
-// runs the paper's configuration — the paper's L and RMS; and the same table as CSV rows.
+// The noise table of a job (the paper's Table 1 and the rows issue 21 added): per strategy its
+// weights in words (β of the heuristics stacked on a table beneath), L ± SE, the z of L against the
+// row's expected luminance at the job's merge radius R, RMS % ± SE, the paper's case number and —
+// when the job runs the paper's configuration — the paper's L and RMS; the recommended row marked
+// (the server's `recommended`, which is not always the lowest RMS: the reason says why), the
+// in-sample, unstable and outside-the-fixed-weights rows marked; and the same table as CSV rows.
 
-import { fixed, formatLuminance, formatParameter, formatRms, h, withError } from './format.js';
-import { PAPER_TABLE1, paperMismatches, zScore } from './paper.js';
+import { fixed, formatBetas, formatLuminance, formatParameter, formatRms, h, signed, withError } from './format.js';
+import { PAPER_TABLE1, paperMismatches } from './paper.js';
 
-/** z in words: two decimals and a sign. */
-const formatZ = (z) => `${z > 0 ? '+' : z < 0 ? '−' : ''}${fixed(Math.abs(z), 2)}`;
+const MARKS = {
+  'in-sample': 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)',
+  unstable: 'Its fitted weights (or β) change from fold to fold by more than 0.25 (jackknife SE): never recommended',
+  outside: "Does not keep the solver's fixed weights: shown for comparison, never recommended",
+};
 
 /**
- * The rows of the table body, and the note under it about the paper's column: `paper` is whether
- * the paper's values apply (the header's paper columns are shown only then).
+ * The rows of the table body, and whether the paper's values apply (the header's paper columns
+ * are shown only then).
  */
 export function noiseRows(result, job) {
   const paper = paperMismatches(job.spec).length === 0;
-  const best = job.progress.best?.strategy;
-  const recommended = result.recommended?.strategy;
-  const rows = result.noise_table.map((row) => noiseRow(row, { spec: job.spec, best, recommended, folds: result.folds, reference: result.reference_luminance, paper }));
-  return { rows, paper };
+  const context = { spec: job.spec, recommended: result.recommended, folds: result.folds, paper };
+  return { rows: result.noise_table.map((row) => noiseRow(row, context)), paper };
 }
 
-/** The note beside the table: where the paper's values come from, or why they are not shown. */
+/** Why the recommended row is recommended, as the server says it, for under the table. */
+export function recommendedNote(result) {
+  const rec = result.recommended;
+  if (!rec) return [];
+  const what = rec.lambda === null || rec.lambda === undefined ? 'a per-path strategy: no weights table'
+    : `a table at λ = ${formatParameter(rec.lambda)}${rec.heuristics?.length ? ` with β: ${formatBetas(rec.heuristics)}` : ''}`;
+  return ['Recommended: ', h('code', {}, rec.strategy), ` (${what})`, rec.reason ? ` — ${rec.reason}.` : '.'];
+}
+
+/** The caption of the z column: the expectation at R, and the R → 0 reference beside it. */
+export function referenceNote(result, spec) {
+  const expected = result.noise_table.some((r) => r.z !== null && r.z !== undefined);
+  const parts = [expected
+    ? `z = (L − L_R) / SE(L), L_R the row's expected luminance at the job's R = ${formatParameter(spec.merge_radius)} by quadrature (hover a z for it). Fitted rows show —: their expectation depends on weights fitted to these iterations; compare their L with the per-path rows'.`
+    : `No expected luminance at the job's R = ${formatParameter(spec.merge_radius)} in this result, so no z (hover a — for why).`];
+  if (result.reference_luminance !== null) parts.push(`Reference in the limit R → 0 (quadrature): L·10⁵ = ${formatLuminance(result.reference_luminance)}.`);
+  return parts.join(' ');
+}
+
+/** The paper's column: where its values come from, or why they are not shown. */
 export function paperNote(spec) {
   const differs = paperMismatches(spec);
   if (differs.length === 0) {
     return "Paper: Ershov et al. 2020, Table 1 (10⁴ iterations; its case 5 is fitted and scored in-sample, like our optimal row). Its L and RMS do not depend on the number of iterations; ours carry ± 1 SE.";
   }
-  return `Paper values apply to the paper-table1 configuration only (this job differs in ${differs.map((f) => `${f}`).join(', ')}).`;
+  return `Paper values apply to the paper-table1 configuration only (this job differs in ${differs.join(', ')}).`;
 }
 
-function noiseRow(row, { spec, best, recommended, folds, reference, paper }) {
-  const z = row.error ? null : zScore(row.luminance, row.luminance_stderr, reference);
-  const zCell = h('td', {
-    class: `num${row.in_sample ? ' optimistic' : ''}`, 'data-col': 'z',
-    title: row.in_sample ? 'In-sample: the SE is too small and L biased, so this z is optimistic (too large in magnitude)' : null,
-  }, z === null ? '—' : `${formatZ(z)}${row.in_sample ? ' †' : ''}`);
+/** z in words: two decimals and a sign. */
+const formatZ = (z) => `${z > 0 ? '+' : ''}${signed(z, 2)}`;
+
+/** A mark after a row's name. */
+const mark = (cls, text, title) => h('span', { class: cls, title }, text);
+
+function noiseRow(row, context) {
+  const { recommended, paper } = context;
+  const isRecommended = row.strategy === recommended?.strategy;
   const numbers = row.error
     ? [h('td', { class: 'row-error', colspan: 3, 'data-col': 'error' }, row.error)]
     : [
       h('td', { class: 'num', 'data-col': 'luminance' }, withError(row.luminance, row.luminance_stderr, formatLuminance)),
-      zCell,
+      zCell(row),
       h('td', { class: 'num', 'data-col': 'rms' }, withError(row.rms_percent, row.rms_percent_stderr, formatRms)),
     ];
   const ours = PAPER_TABLE1[row.strategy];
@@ -47,33 +73,75 @@ function noiseRow(row, { spec, best, recommended, folds, reference, paper }) {
     h('td', { class: 'num paper-col', 'data-col': 'paper-luminance' }, ours ? fixed(ours.luminance * 1e5, 3) : ''),
     h('td', { class: 'num paper-col', 'data-col': 'paper-rms' }, ours ? `${ours.rms_percent}` : ''),
   ] : [];
-  return h('tr', { 'data-strategy': row.strategy, class: row.strategy === best ? 'best' : null },
+  return h('tr', { 'data-strategy': row.strategy, class: isRecommended ? 'recommended' : null },
     h('th', { scope: 'row' }, h('code', {}, row.strategy),
-      row.strategy === best ? h('span', { class: 'best-mark', title: "Lowest honest RMS among the rows that keep the solver's fixed weights (in-sample fits are left out)" }, 'best') : null,
-      row.strategy === recommended ? h('span', { class: 'recommended-mark', title: 'The weights table and chart show these weights' }, 'recommended') : null,
-      row.in_sample ? h('span', { class: 'in-sample-mark', title: 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)' }, 'in-sample') : null,
-      row.respects_fixed === false ? h('span', { class: 'outside-mark', title: "Does not keep the solver's fixed weights: shown for comparison, never best" }, 'outside fixed weights') : null),
+      isRecommended ? mark('recommended-mark', 'recommended', recommended.reason ?? 'The recommended weights') : null,
+      row.in_sample ? mark('in-sample-mark', 'in-sample', MARKS['in-sample']) : null,
+      row.unstable ? mark('unstable-mark', 'unstable', MARKS.unstable) : null,
+      row.respects_fixed === false ? mark('outside-mark', 'outside fixed weights', MARKS.outside) : null),
     h('td', { class: 'num', 'data-col': 'case' }, ours ? String(ours.case) : ''),
-    h('td', { 'data-col': 'weights' }, describeWeights(row, spec, folds)),
+    weightsCell(row, context),
     ...numbers,
     ...paperCells);
 }
 
+/** z against the row's expectation at R; "—" with the reason when it has none. */
+function zCell(row) {
+  const has = row.z !== null && row.z !== undefined;
+  const optimistic = has && row.in_sample;
+  const title = has
+    ? `Expected at R: L·10⁵ = ${formatLuminance(row.expected_luminance)}${optimistic ? '; in-sample: the SE is too small and L biased, so this z is optimistic' : ''}`
+    : row.expected_error ?? 'No expected luminance at R for this row';
+  return h('td', { class: `num${optimistic ? ' optimistic' : ''}`, 'data-col': 'z', title },
+    has ? `${formatZ(row.z)}${optimistic ? ' †' : ''}` : '—');
+}
+
+/** The weights in words; beneath, β of the heuristics stacked on a table; the λ path as a tooltip. */
+function weightsCell(row, { spec, folds }) {
+  const betas = row.heuristics?.length
+    ? h('span', { class: 'betas', 'data-betas': row.heuristics.length, title: 'β of each heuristic stacked on the table (± jackknife SE): a path\'s weights are the table\'s plus Σ β × the heuristic\'s' },
+      `β: ${formatBetas(row.heuristics)}`)
+    : null;
+  return h('td', { 'data-col': 'weights', title: describePath(row.cv_path) }, describeWeights(row, spec, folds), betas);
+}
+
+/** The λ grid a row's λ was chosen on, in words (the one-standard-error rule's curve). */
+function describePath(path) {
+  if (!path?.length) return null;
+  const points = path.map((p) => `λ = ${formatParameter(p.lambda)}: ${p.rms_percent === null ? '—' : withError(p.rms_percent, p.rms_percent_stderr, formatRms)} %${p.stable ? '' : ' (unstable)'}`);
+  return `Cross-fitted RMS by λ (chosen: the largest λ within one SE of the lowest, among stable fits):\n${points.join('\n')}`;
+}
+
+// A heuristic's name in words.
+const HEURISTICS = { switch: 'the switch', balance: 'balance heuristic', power: 'power heuristic', correlation_aware: 'correlation-aware heuristic' };
+
+/** A heuristic, possibly restricted to planes 2–3, in words: `power heuristic over planes 2–3 (w₀ = 0)`. */
+function describeHeuristic(name, sayW0 = true) {
+  const base = name.replace(/_planes23$/, '');
+  if (!(base in HEURISTICS)) return name;
+  return base === name ? HEURISTICS[base] : `${HEURISTICS[base]} over planes 2–3${sayW0 ? ' (w₀ = 0)' : ''}`;
+}
+
 /** The weights of each strategy in words, as in the paper's Table 1. */
 function describeWeights(row, spec, folds) {
-  switch (row.strategy) {
+  const name = row.strategy;
+  switch (name) {
     case 'plane1': return 'w₀ = 1';
     case 'plane2': return 'w₁ = 1';
     case 'plane3': return 'w₂ = 1';
     case 'switch': return describeSwitch(spec.scene.illumination);
     case 'optimal': return `fitted and scored on all iterations (${describeSolver(spec.solver)})`;
     case 'optimal_holdout': return `fitted, ${folds}-fold cross-fitted (${describeSolver(spec.solver)})`;
-    case 'optimal_cv': return describeCrossValidation(row, folds);
-    case 'balance': return 'balance heuristic';
-    case 'power': return 'power heuristic';
-    case 'correlation_aware': return 'correlation-aware heuristic';
-    default: return '';
+    case 'optimal_cv': return `table, ${describeCrossValidation(row, folds)}`;
+    case 'optimal_stacked': return `table + Σ β × heuristic (each that keeps the fixed weights), ${describeCrossValidation(row, folds)}`;
+    default:
+      break;
   }
+  if (name.endsWith('_corrected')) {
+    const at = row.lambda === null ? '' : ` = ${formatParameter(row.lambda)}`;
+    return `${describeHeuristic(name.slice(0, -'_corrected'.length), false)} corrected by a table (at optimal_stacked's λ${at}), ${folds}-fold cross-fitted`;
+  }
+  return describeHeuristic(name);
 }
 
 /** Mirrors the server's switch radius: the spot's a, the innermost ring, none for uniform light. */
@@ -96,15 +164,15 @@ function describeCrossValidation(row, folds) {
   const parts = [];
   if (row.lambda !== null) parts.push(`λ = ${formatParameter(row.lambda)}`);
   if (row.in_sample_rms_percent !== null) parts.push(`in-sample RMS ${formatRms(row.in_sample_rms_percent)} %`);
-  return `fitted, λ by cross-validation, ${folds}-fold cross-fitted${parts.length ? ` (${parts.join('; ')})` : ''}`;
+  return `λ by cross-validation (one-SE rule), ${folds}-fold cross-fitted${parts.length ? ` (${parts.join('; ')})` : ''}`;
 }
 
 /** The noise table as CSV rows (luminance in model units, RMS in percent; the paper's columns empty unless they apply). */
 export function noiseCsv(result, spec) {
   const paper = paperMismatches(spec).length === 0;
-  const columns = ['strategy', 'paper_case', 'luminance_model_units', 'luminance_stderr_model_units', 'reference_luminance_model_units',
-    'z_vs_reference', 'rms_percent', 'rms_percent_stderr', 'in_sample', 'respects_fixed', 'recommended', 'lambda',
-    'paper_luminance_model_units', 'paper_rms_percent', 'error'];
+  const columns = ['strategy', 'paper_case', 'luminance_model_units', 'luminance_stderr_model_units', 'expected_luminance_at_r_model_units',
+    'z_vs_expected', 'expected_error', 'reference_luminance_r0_model_units', 'rms_percent', 'rms_percent_stderr', 'in_sample', 'respects_fixed',
+    'unstable', 'recommended', 'lambda', 'heuristics', 'paper_luminance_model_units', 'paper_rms_percent', 'error'];
   const rows = result.noise_table.map((row) => {
     const ours = PAPER_TABLE1[row.strategy];
     return {
@@ -112,14 +180,19 @@ export function noiseCsv(result, spec) {
       paper_case: ours?.case,
       luminance_model_units: row.luminance,
       luminance_stderr_model_units: row.luminance_stderr,
-      reference_luminance_model_units: result.reference_luminance,
-      z_vs_reference: zScore(row.luminance, row.luminance_stderr, result.reference_luminance),
+      expected_luminance_at_r_model_units: row.expected_luminance,
+      z_vs_expected: row.z,
+      expected_error: row.expected_error,
+      reference_luminance_r0_model_units: result.reference_luminance,
       rms_percent: row.rms_percent,
       rms_percent_stderr: row.rms_percent_stderr,
       in_sample: row.in_sample,
       respects_fixed: row.respects_fixed,
+      unstable: row.unstable,
       recommended: row.strategy === result.recommended?.strategy,
       lambda: row.lambda,
+      // β of the stacked heuristics as JSON ([{strategy, beta, beta_stderr}]); empty for the others.
+      heuristics: row.heuristics?.length ? JSON.stringify(row.heuristics) : null,
       paper_luminance_model_units: paper ? ours?.luminance : null,
       paper_rms_percent: paper ? ours?.rms_percent : null,
       error: row.error,

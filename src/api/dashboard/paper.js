@@ -1,5 +1,6 @@
 // The paper: its Table 1, when a job runs the paper's configuration (so that its values apply),
-// and the z score of a luminance against the quadrature reference. No DOM here.
+// and the standard error of a luminance from its RMS. No DOM here. (A row's z is the server's,
+// against the row's own expectation at R: noisetable.js.)
 //
 // Source: Ershov, Frolov, Voloboy, Galaktionov (2020), "Direct optimal MIS weights for
 // bidirectional photon mapping", section 5, Table 1 (10⁴ iterations, weights fitted and scored on
@@ -38,12 +39,6 @@ const same = (a, b) => (typeof b === 'number' ? typeof a === 'number' && Math.ab
 /** The fields in which `spec` differs from the paper's configuration (none: the paper's values apply). */
 export function paperMismatches(spec) {
   return PAPER.filter(([, get, want]) => !same(get(spec), want)).map(([name]) => name);
-}
-
-/** z = (L − L_ref) / SE(L), or null when a number is missing. */
-export function zScore(luminance, stderr, reference) {
-  if (luminance === null || luminance === undefined || reference === null || reference === undefined || !(stderr > 0)) return null;
-  return (luminance - reference) / stderr;
 }
 
 /** SE(L) after `iterations` iterations from L and the per-iteration RMS %: L · (RMS/100) / √M. */

@@ -1,22 +1,43 @@
-// Plots: the uPlot charts of a job's result — the recommended w₁ against r₃ (the paper's Fig. 2,
-// ± 1 SE bars, the r₃ = a marker), the luminance against iterations (± 1 SE bands, the quadrature
-// reference) and the RMS against iterations — and what every chart shares (the chart slot, the
-// strategies' colours, the weights' range). uPlot is the vendored library, loaded before this
-// module as a classic script (a global); the plugins are chartkit.js's.
+// Plots: the uPlot charts of a job's history — the luminance against iterations (± 1 SE bands, the
+// quadrature reference) and the RMS against iterations — and what every chart shares (the chart
+// slot, the strategies' order and colours, the weights' range and cells; Fig. 2 is fig2.js's).
+// uPlot is the vendored library, loaded before this module as a classic script (a global); the
+// plugins are chartkit.js's.
 
 /* global uPlot */
 
-import { bands, errorBars, extent, guides, linearRange } from './chartkit.js';
+import { bands, extent, guides, linearRange } from './chartkit.js';
 import { fixed, formatCount, formatLuminance, formatParameter, formatRms, h, showMessage } from './format.js';
 import { luminanceStderr } from './paper.js';
 
+// Every strategy of a noise table, in the server's order (docs/model.md §8): the paper's cases, the
+// fits of a table, the heuristics, the heuristics over planes 2–3 (w₀ = 0), the stacked optimum and
+// each stackable heuristic corrected by a table (with w₀ free every heuristic is stackable).
 export const STRATEGIES = [
   'plane1', 'plane2', 'plane3', 'switch', 'optimal', 'optimal_holdout', 'optimal_cv', 'balance', 'power', 'correlation_aware',
+  'balance_planes23', 'power_planes23', 'correlation_aware_planes23', 'optimal_stacked', 'switch_corrected', 'balance_corrected',
+  'power_corrected', 'correlation_aware_corrected', 'balance_planes23_corrected', 'power_planes23_corrected',
+  'correlation_aware_planes23_corrected',
 ];
-export const STRATEGY_COLORS = {
+// A heuristic's variants take darker shades of its colour; the stacked optimum is navy.
+const STRATEGY_COLORS = {
   plane1: '#8c564b', plane2: '#1f77b4', plane3: '#2ca02c', switch: '#9467bd', optimal: '#d62728',
   optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', balance: '#17becf', power: '#7f7f7f', correlation_aware: '#bcbd22',
+  balance_planes23: '#0f8c99', power_planes23: '#525252', correlation_aware_planes23: '#8a8b10', optimal_stacked: '#1a237e',
+  switch_corrected: '#5e3c99', balance_corrected: '#0b6670', power_corrected: '#3a3a3a', correlation_aware_corrected: '#6b6c0a',
+  balance_planes23_corrected: '#08525a', power_planes23_corrected: '#262626', correlation_aware_planes23_corrected: '#4f500a',
 };
+export const strategyColor = (strategy) => STRATEGY_COLORS[strategy] ?? '#444';
+
+/**
+ * The strategies named in `lists` (each a list of rows with a `strategy`), in the order of
+ * STRATEGIES, then any this page does not know, in the order they come.
+ */
+export function strategiesIn(lists) {
+  const seen = [...new Set(lists.flatMap((rows) => rows.map((r) => r.strategy)))];
+  return [...STRATEGIES.filter((s) => seen.includes(s)), ...seen.filter((s) => !STRATEGIES.includes(s))];
+}
+
 // The weights plot clips the y axis to this range: with few samples a cell's fitted weights can be
 // in the hundreds, which would flatten every other cell to a line.
 export const WEIGHT_RANGE = [-1, 2];
@@ -66,11 +87,14 @@ export class PlotSlot {
 // Cells whose weights the server copied from a neighbour because the data say nothing about them.
 export const UNFITTED = new Set(['empty', 'uninformative']);
 
-/** Fits the data, but never beyond WEIGHT_RANGE, and always shows 0 and 1. */
-export function weightRange(u, min, max) {
-  const lo = Math.max(WEIGHT_RANGE[0], Math.min(min ?? 0, 0));
-  const hi = Math.min(WEIGHT_RANGE[1], Math.max(max ?? 1, 1));
-  const pad = 0.05 * (hi - lo);
+/**
+ * Fits the data, but never beyond WEIGHT_RANGE, and always shows `shown` (0 and 1 for weights;
+ * 0 alone for a table part, whose cells sum to 1 − Σβ and may all be small).
+ */
+export function weightRange(u, min, max, shown = [0, 1]) {
+  const lo = Math.max(WEIGHT_RANGE[0], Math.min(min ?? shown[0], ...shown));
+  const hi = Math.min(WEIGHT_RANGE[1], Math.max(max ?? shown.at(-1), ...shown));
+  const pad = 0.05 * (hi - lo) || 0.05;
   return [lo - pad, hi + pad];
 }
 
@@ -80,83 +104,24 @@ export const formatInterval = ([lo, hi]) => `[${formatParameter(lo)}, ${hi === n
 /** The lower edges of a coordinate's bins among `weights`, in order. */
 export const binsOf = (weights, key) => [...new Map(weights.map((w) => [w[key][0], w[key]])).values()].sort((a, b) => a[0] - b[0]);
 
-/**
- * The paper's Fig. 2 from a result's `weights`: w₁ against the r₃ cell midpoint, one series per r₂
- * bin, in the first φ bin (the paper finds the weights independent of φ); the open tail cell of r₃
- * is left out, and cells whose weights were copied from a neighbour are gaps. `err` is the
- * jackknife standard error of w₁.
- */
-export function figure2(weights) {
-  const phi = binsOf(weights, 'phi')[0];
-  const cells = weights.filter((w) => w.phi[0] === phi[0] && w.r3[1] !== null);
-  const mid = (w) => (w.r3[0] + w.r3[1]) / 2;
-  const x = [...new Set(cells.map(mid))].sort((a, b) => a - b);
-  const series = binsOf(cells, 'r2').map((r2) => {
-    const at = new Map(cells.filter((w) => w.r2[0] === r2[0] && !UNFITTED.has(w.status)).map((w) => [mid(w), w]));
-    return { r2, y: x.map((v) => at.get(v)?.w1 ?? null), err: x.map((v) => at.get(v)?.w1_stderr ?? null) };
-  });
-  return { x, series, phi, phiBins: binsOf(weights, 'phi').length };
-}
-
-const R2_COLORS = ['#1f5fa8', '#c4561d', '#2ca02c', '#9467bd'];
-
-/** The value shown in a legend: w₁ ± its SE. */
-const withBar = (slot, k) => (u, v, si, i) => {
-  const e = slot.bars?.[k]?.err[i];
-  return v === null ? '—' : `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
-};
-
 /** The spot's radius a as a vertical guide (the switch strategy's r₃ ≤ a), when the light is a spot. */
 export function spotGuide(illumination, label = 'r₃ = a') {
   return illumination.kind === 'spot' ? [{ value: illumination.a, label: `${label} = ${formatParameter(illumination.a)}` }] : [];
 }
 
-export function drawWeights(slot, note, weights, spec, fit) {
-  if (weights.length === 0) {
-    slot.clear('No fitted weights in this result.');
-    showMessage(note, '');
-    return;
-  }
-  const { x, series: bins, phi, phiBins } = figure2(weights);
-  slot.bars = bins.map((b, k) => ({ err: b.err, color: R2_COLORS[k % R2_COLORS.length] }));
-  slot.guides = { x: spotGuide(spec.scene.illumination), y: [] };
-  const series = [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
-  bins.forEach((b, k) => series.push({
-    label: `w₁, r₂ ∈ ${formatInterval(b.r2)}`, stroke: slot.bars[k].color, width: 2, dash: k ? [8, 4] : [],
-    points: { show: true, size: 5 }, value: withBar(slot, k),
-  }));
-  slot.draw({
-    series,
-    scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
-    axes: [{ label: `r₃ (cell midpoint)${phiBins > 1 ? `, φ ∈ ${formatInterval(phi.map((v) => Number(v.toFixed(3))))}` : ''}` }, { label: 'w₁' }],
-    cursor: { drag: { x: true, y: false } },
-    plugins: [errorBars(slot), guides(slot)],
-  }, [x, ...bins.map((b) => b.y)]);
-  const clipped = bins.flatMap((b) => b.y).filter((v) => v !== null && (v < WEIGHT_RANGE[0] || v > WEIGHT_RANGE[1])).length;
-  const w0 = spec.solver.fixed?.w0;
-  const parts = [fit
-    ? (fit.strategy === 'optimal'
-      ? `Weights fitted in-sample on all iterations at λ = ${formatParameter(fit.lambda)} (the cross-validated fit failed).`
-      : `Recommended weights: ${fit.strategy}, λ = ${formatParameter(fit.lambda)} chosen by cross-validation, fitted on all iterations.`)
-    : '',
-  'Bars: ± 1 jackknife standard error of w₁.',
-  w0 === 0 ? 'w₂ = 1 − w₁ (w₀ = 0 is fixed), so it is not drawn.' : 'w₂ = 1 − w₀ − w₁; w₀ and w₂ are in the weights CSV.',
-  `The open tail cell r₃ ≥ ${formatParameter(x.length ? binsOf(weights, 'r3').at(-1)[0] : 0)} is left out; gaps are cells without informative samples.`];
-  if (phiBins > 1) parts.push(`First of ${phiBins} φ bins.`);
-  if (slot.guides.x.length) parts.push('Dashed line: the spot radius a, where the switch strategy changes plane.');
-  if (clipped) parts.push(`${clipped} value${clipped > 1 ? 's lie' : ' lies'} outside [${WEIGHT_RANGE.join(', ')}] and ${clipped > 1 ? 'are' : 'is'} cut off.`);
-  showMessage(note, parts.filter(Boolean).join(' '));
-}
-
 // Shown at first on the luminance chart (the others are a click on the legend away): the paper's
-// fixed cases and the recommended fit; the in-sample optimum is optimistic, the heuristics crowd it.
+// fixed cases, the cross-validated table and the recommended row; the in-sample optimum is
+// optimistic, the other heuristics and fits crowd it.
 const LUMINANCE_SHOWN = new Set(['plane1', 'plane2', 'plane3', 'switch', 'optimal_cv']);
+
+/** The strategies the luminance chart shows at first, given the recommended one. */
+export const luminanceShown = (recommended) => new Set([...LUMINANCE_SHOWN, ...(recommended ? [recommended] : [])]);
 
 /**
  * The luminance of every strategy against iterations (× 10⁵, as the table), each with a band of
- * ± 1 SE, SE(L) = L · (RMS/100) / √M, and the quadrature reference as a horizontal line.
+ * ± 1 SE, SE(L) = L · (RMS/100) / √M, and the quadrature reference (R → 0) as a horizontal line.
  */
-export function drawLuminance(slot, note, points, reference) {
+export function drawLuminance(slot, note, points, reference, recommended) {
   if (points.length === 0) {
     slot.clear('No checkpoints yet.');
     showMessage(note, '');
@@ -166,7 +131,8 @@ export function drawLuminance(slot, note, points, reference) {
   const series = [{ label: 'iterations', value: (u, v) => (v === null ? '—' : formatCount(v)) }];
   const data = [x];
   slot.bands = [];
-  for (const strategy of STRATEGIES) {
+  const shown = luminanceShown(recommended);
+  for (const strategy of strategiesIn(points.map((p) => p.strategies))) {
     const rows = points.map((p) => p.strategies.find((s) => s.strategy === strategy) ?? null);
     const y = rows.map((r) => (r && Number.isFinite(r.luminance) ? r.luminance * 1e5 : null));
     const se = rows.map((r, i) => (y[i] === null ? null : luminanceStderr(r.luminance, r.rms_percent, points[i].iterations)));
@@ -174,26 +140,26 @@ export function drawLuminance(slot, note, points, reference) {
     slot.bands.push({
       lo: y.map((v, i) => (v === null || se[i] === null ? null : v - se[i] * 1e5)),
       hi: y.map((v, i) => (v === null || se[i] === null ? null : v + se[i] * 1e5)),
-      color: STRATEGY_COLORS[strategy],
+      color: strategyColor(strategy),
     });
     const k = slot.bands.length - 1;
     series.push({
-      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: STRATEGY_COLORS[strategy], width: 2,
-      show: LUMINANCE_SHOWN.has(strategy), points: { show: points.length < 40, size: 4 },
+      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), width: 2,
+      show: shown.has(strategy), points: { show: points.length < 40, size: 4 },
       value: (u, v, si, i) => {
         const band = slot.bands[k];
         return v === null ? '—' : `${fixed(v, 2)}${band?.hi[i] === null ? '' : ` ± ${fixed(band.hi[i] - v, 2)}`}`;
       },
     });
   }
-  slot.guides = { x: [], y: reference === null ? [] : [{ value: reference * 1e5, label: `reference (quadrature) ${formatLuminance(reference)}` }] };
+  slot.guides = { x: [], y: reference === null ? [] : [{ value: reference * 1e5, label: `reference R → 0 (quadrature) ${formatLuminance(reference)}` }] };
   slot.draw({
     series,
     scales: { x: { time: false }, y: { range: (u) => linearRange(extent(u, slot, false)) } },
     axes: [{ label: 'iterations M' }, { label: 'L·10⁵ (± 1 SE band)', size: 60 }],
     plugins: [bands(slot), guides(slot)],
   }, data);
-  showMessage(note, `Bands: ± 1 standard error, L · (RMS/100) / √M at each checkpoint. Dashed: the quadrature reference${reference === null ? ' (none for this scene)' : ''}. Click a legend entry to show or hide a strategy; the in-sample optimum is optimistic.${points.length === 1 ? ' One checkpoint so far: lines appear from the second on.' : ''}`);
+  showMessage(note, `Bands: ± 1 standard error, L · (RMS/100) / √M at each checkpoint. Dashed: the quadrature reference in the limit R → 0${reference === null ? ' (none for this scene)' : ''}; at the job's R a strategy may expect another L (the noise table's z is taken against that). Shown at first: the paper's cases 1–4, optimal_cv and the recommended row; click a legend entry to show or hide a strategy; the in-sample optimum is optimistic.${points.length === 1 ? ' One checkpoint so far: lines appear from the second on.' : ''}`);
 }
 
 export function drawHistory(slot, note, points) {
@@ -205,14 +171,14 @@ export function drawHistory(slot, note, points) {
   const x = points.map((p) => p.iterations);
   const series = [{ label: 'iterations', value: (u, v) => (v === null ? '—' : formatCount(v)) }];
   const data = [x];
-  for (const strategy of STRATEGIES) {
+  for (const strategy of strategiesIn(points.map((p) => p.strategies))) {
     // Log scale: a missing or non-positive RMS becomes a gap.
     data.push(points.map((p) => {
       const rms = p.strategies.find((s) => s.strategy === strategy)?.rms_percent;
       return rms > 0 ? rms : null;
     }));
     series.push({
-      label: strategy, stroke: STRATEGY_COLORS[strategy], width: 2, points: { show: points.length < 40, size: 4 },
+      label: strategy, stroke: strategyColor(strategy), width: 2, points: { show: points.length < 40, size: 4 },
       value: (u, v) => (v === null ? '—' : `${formatRms(v)} %`),
     });
   }

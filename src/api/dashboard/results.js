@@ -1,15 +1,17 @@
 // Results of a job: fetching its result (or a kept solve's, solves.js) and history as checkpoints
-// arrive, and showing them — the
-// noise table (noisetable.js), the charts (plots.js) — with the CSV downloads of the noise table,
-// the weights and the history, and the SVG/PNG downloads of the charts (chartfiles.js).
+// arrive — and, when a per-path strategy is recommended, the table optimum for Fig. 2 — and showing
+// them: the noise table (noisetable.js), Fig. 2 (fig2.js) and the history charts (plots.js), with
+// the CSV downloads of the noise table, the weights and the history, and the SVG/PNG downloads of
+// the charts (chartfiles.js).
 
 import { TERMINAL, api } from './api.js';
 import { chartDownloads } from './chartfiles.js';
 import { csvButton } from './csv.js';
-import { fixed, formatCount, formatLuminance, h, showMessage, withError } from './format.js';
-import { noiseCsv, noiseRows, paperNote } from './noisetable.js';
+import { fixed, formatCount, h, showMessage, withError } from './format.js';
+import { drawWeights, figureSource, tableColumns, tableOptimumLambda } from './fig2.js';
+import { noiseCsv, noiseRows, paperNote, recommendedNote, referenceNote } from './noisetable.js';
 import { luminanceStderr } from './paper.js';
-import { drawHistory, drawLuminance, drawWeights } from './plots.js';
+import { drawHistory, drawLuminance } from './plots.js';
 import { SolvesPanel } from './solves.js';
 
 /**
@@ -20,6 +22,8 @@ import { SolvesPanel } from './solves.js';
 export class ResultsLoader {
   constructor(id, refs, plots) {
     Object.assign(this, { id, refs, plots, shownKey: null, busy: false, again: false, stopped: false, result: null, history: null });
+    this.optimum = null; // the table optimum fetched last: { key, value }
+    this.figure = null; // what Fig. 2 shows (fig2.js's figureSource)
     this.solve = 'default';
     this.addDownloads();
     this.solves = new SolvesPanel(id, refs.solves, (name) => {
@@ -32,7 +36,7 @@ export class ResultsLoader {
     const { refs, plots, id } = this;
     refs['noise-downloads'].append(
       csvButton('Noise table (CSV)', `optimis-job-${id}-noise.csv`, () => noiseCsv(this.result, this.job.spec)),
-      csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.result)),
+      csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.figure)),
       csvButton('History (CSV)', `optimis-job-${id}-history.csv`, () => historyCsv(this.history)));
     refs['weights-downloads'].append(chartDownloads(plots.weights, `optimis-job-${id}-fig2-w1`));
     refs['luminance-downloads'].append(chartDownloads(plots.luminance, `optimis-job-${id}-luminance`));
@@ -67,7 +71,8 @@ export class ResultsLoader {
         api(this.solve === 'default' ? `/v1/jobs/${this.id}/result` : `/v1/jobs/${this.id}/solves/${encodeURIComponent(this.solve)}`),
         api(`/v1/jobs/${this.id}/history`),
       ]);
-      if (!this.stopped) this.show(result, history);
+      const optimum = this.solve === 'default' ? await this.tableOptimum(result) : null;
+      if (!this.stopped) this.show(result, history, optimum);
     } catch (error) {
       // 409: no checkpoint yet (or it is unreadable); the detail says which.
       // The next checkpoint tries again (not the next progress event: that would be 4 requests/s).
@@ -83,6 +88,23 @@ export class ResultsLoader {
     }
   }
 
+  /**
+   * The table optimum at optimal_cv's λ when `result` recommends a per-path strategy (Fig. 2 draws
+   * it for reference): { result } or { error }; null when not wanted. Fetched again only when the
+   * iterations or λ change (the server re-solves for every request).
+   */
+  async tableOptimum(result) {
+    const lambda = tableOptimumLambda(result);
+    if (lambda === null) return null;
+    const key = `${result.iterations}:${result.partial}:${lambda}`;
+    if (this.optimum?.key !== key) {
+      const value = await api(`/v1/jobs/${this.id}/result?lambda=${lambda}`)
+        .then((optimum) => ({ result: optimum }), (error) => ({ error: error.message }));
+      this.optimum = { key, value };
+    }
+    return this.optimum.value;
+  }
+
   showNothing(text) {
     const refs = this.refs;
     showMessage(refs['no-results'], text);
@@ -91,16 +113,20 @@ export class ResultsLoader {
     refs['result-status'].replaceChildren();
     showMessage(refs.reference, '');
     showMessage(refs['paper-note'], '');
+    refs['recommended-note'].replaceChildren();
+    refs['recommended-note'].hidden = true;
     showMessage(refs['solve-error'], '');
     refs.gain.textContent = '';
     refs.warnings.hidden = true;
     refs.merges.textContent = '';
     this.plots.weights.clear('The weights appear after the first checkpoint.');
+    refs['weights-kind'].textContent = '';
+    this.figure = null;
     this.plots.luminance.clear('The luminance appears after the first checkpoint.');
     this.plots.history.clear('The RMS history appears after the first checkpoint.');
   }
 
-  show(result, history) {
+  show(result, history, optimum) {
     this.result = result;
     this.history = history;
     const refs = this.refs;
@@ -111,11 +137,12 @@ export class ResultsLoader {
       ? h('span', { class: 'badge badge-partial', title: 'The numbers change as the job runs' },
         `partial · ${formatCount(result.iterations)} iterations`)
       : h('span', { class: 'badge badge-final' }, `final · ${formatCount(result.iterations)} iterations`));
-    showMessage(refs.reference, result.reference_luminance === null ? ''
-      : `Reference (quadrature): L·10⁵ = ${formatLuminance(result.reference_luminance)}; z = (L − L_ref) / SE(L).`);
+    showMessage(refs.reference, referenceNote(result, this.job.spec));
     const { rows, paper } = noiseRows(result, this.job);
     for (const th of refs['noise-table'].querySelectorAll('thead .paper-col')) th.hidden = !paper;
     refs['noise-rows'].replaceChildren(...rows);
+    refs['recommended-note'].replaceChildren(...recommendedNote(result));
+    refs['recommended-note'].hidden = !result.recommended;
     showMessage(refs['paper-note'], paperNote(this.job.spec));
     showMessage(refs['solve-error'], result.solve_error ? `The weight fit failed: ${result.solve_error}` : '');
     refs.gain.textContent = describeGain(result.gain);
@@ -123,16 +150,23 @@ export class ResultsLoader {
       h('code', {}, w.code), ` ${w.message}`, w.cells?.length ? ` (cells ${w.cells.join(', ')})` : '')));
     refs.warnings.hidden = result.warnings.length === 0;
     refs.merges.textContent = describeMerges(result.merges_per_iteration);
-    drawWeights(this.plots.weights, refs['weights-note'], result.weights, this.job.spec, result.weights_fit);
-    drawLuminance(this.plots.luminance, refs['luminance-note'], history.points, result.reference_luminance);
+    this.figure = figureSource(result, optimum, this.solve === 'default');
+    drawWeights(this.plots.weights, { note: refs['weights-note'], kind: refs['weights-kind'] }, this.figure, this.job.spec, `Job ${this.id}`);
+    drawLuminance(this.plots.luminance, refs['luminance-note'], history.points, result.reference_luminance, result.recommended?.strategy);
     drawHistory(this.plots.history, refs['history-note'], history.points);
   }
 }
 
-/** Every cell's weights as CSV rows (an open interval's upper edge empty). */
-function weightsCsv(result) {
-  const columns = ['r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2', 'w0_stderr', 'w1_stderr', 'w2_stderr', 'samples', 'status'];
-  const rows = result.weights.map((w) => ({
+/**
+ * Every cell's weights of the table Fig. 2 shows (`figure`, fig2.js's figureSource) as CSV rows (an
+ * open interval's upper edge empty): `table` says whether it is the recommended table (of a stacked
+ * row: its table part) or the table optimum drawn for reference; none when there is no table.
+ */
+function weightsCsv(figure) {
+  const columns = ['table', 'strategy', 'lambda', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2',
+    'w0_stderr', 'w1_stderr', 'w2_stderr', 'samples', 'status'];
+  const rows = (figure?.weights ?? []).map((w) => ({
+    ...tableColumns(figure), lambda: figure.lambda,
     r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
     w0: w.w0, w1: w.w1, w2: w.w2, w0_stderr: w.w0_stderr, w1_stderr: w.w1_stderr, w2_stderr: w.w2_stderr,
     samples: w.samples, status: w.status,
@@ -155,8 +189,8 @@ function historyCsv(history) {
 
 function describeGain(gain) {
   if (!gain) return '';
-  const se = gain.stderr === null ? '' : ` ± ${fixed(gain.stderr, 2)}`;
-  return `Gain of ${gain.strategy} over the best per-path strategy within the fixed weights (${gain.versus}): variance ratio ${fixed(gain.value, 2)}${se} (jackknife over the folds).`;
+  const se = gain.stderr === null ? '' : ` ± ${fixed(gain.stderr, 3)}`;
+  return `Gain of the recommended ${gain.strategy} over the best other per-path strategy within the fixed weights (${gain.versus}): variance ratio ${fixed(gain.value, 3)}${se} (paired jackknife over the folds).`;
 }
 
 function describeMerges(merges) {

@@ -4,7 +4,7 @@
 
 import { TERMINAL, api, download, hasToken } from './api.js';
 import {
-  badge, formatCount, formatRms, formatTime, h, instantiate, showMessage, updateProgress, withError,
+  badge, formatCount, formatParameter, formatRms, formatTime, h, instantiate, showMessage, updateProgress, withError,
 } from './format.js';
 import { chartDownloads } from './chartfiles.js';
 import { PlotSlot } from './plots.js';
@@ -150,10 +150,13 @@ function fillPointRow(tr, point) {
   if (state.textContent !== stateText) state.replaceChildren(point.state ? badge(point.state) : 'deleted');
   const f = point.figures;
   source.textContent = f ? `${f.source}${f.partial ? ', partial' : ''} · ${formatCount(f.iterations)} iterations` : '—';
-  const chosen = f?.recommended && f.noise_table.find((r) => r.strategy === f.recommended.strategy);
+  const rec = f?.recommended;
+  const chosen = rec && f.noise_table.find((r) => r.strategy === rec.strategy);
   if (chosen && chosen.rms_percent !== null) {
-    rms.textContent = `${withError(chosen.rms_percent, chosen.rms_percent_stderr, formatRms)} (${chosen.strategy})`;
-    rms.title = '';
+    // A per-path strategy has no λ (and no weights table).
+    const how = rec.lambda === null || rec.lambda === undefined ? 'per path' : `λ = ${formatParameter(rec.lambda)}`;
+    rms.textContent = `${withError(chosen.rms_percent, chosen.rms_percent_stderr, formatRms)} (${chosen.strategy}, ${how})`;
+    rms.title = rec.reason ?? '';
   } else {
     rms.textContent = f?.error ? 'no weights' : '—';
     rms.title = f?.error ?? '';

@@ -1,8 +1,9 @@
 // Sweep data: what the sweep page's charts show, read from a sweep resource (GET /v1/sweeps/{id}):
 // which value of every axis a point takes, the RMS of every strategy against one swept field (the
-// other axes fixed), and the recommended w₁ against r₃ of every point. No DOM and no uPlot here.
+// other axes fixed), and the recommended w₁ against r₃ of every point that recommends a table. No
+// DOM and no uPlot here.
 
-import { STRATEGIES, UNFITTED } from './plots.js';
+import { UNFITTED, strategiesIn } from './plots.js';
 
 /**
  * Which value (an index into the axis's values) of every axis point `index` takes, as the server
@@ -41,17 +42,13 @@ export const isNumericAxis = (axis) => axis.values.every((v) => typeof v === 'nu
 export const hasSelectors = (spec) => spec.mode !== 'zip' && spec.axes.length > 1;
 
 /** The strategies of every point's noise table, in the order of the job page's table. */
-function strategiesOf(points) {
-  const seen = new Set(points.flatMap((p) => p.figures?.noise_table.map((r) => r.strategy) ?? []));
-  const known = STRATEGIES.filter((s) => seen.has(s));
-  return [...known, ...[...seen].filter((s) => !STRATEGIES.includes(s)).sort()];
-}
+const strategiesOf = (points) => strategiesIn(points.map((p) => p.figures?.noise_table ?? []));
 
 /**
  * RMS % of every strategy against axis `a`, the other axes at the value indices `fixed` (grid of
  * several axes only). x is the field's value when the axis is numeric, else the value's index
  * (`labels` names them). Per strategy: y (null where missing or not positive: the y axis is
- * logarithmic), its standard error `err` (null for optimal_cv and the other rows without one), and
+ * logarithmic), its standard error `err` (null for the in-sample optimal and other rows without one), and
  * `outside`: 'all', 'some' or '' of the points where the row does not keep the fixed weights.
  */
 export function rmsAgainst(sweep, a, fixed) {
@@ -85,10 +82,13 @@ export function rmsAgainst(sweep, a, fixed) {
 const firstBin = (rows, key) => Math.min(...rows.map((w) => w[key][0]));
 
 /**
- * The recommended w₁ of every point against r₃, in the first r₂ bin and the first φ bin: x is the
- * union of the cells' midpoints (the open tail cell [lo, ∞) is left out); per point, w₁ (null in
- * cells whose weights the server copied from a neighbour, as on the job page) and its jackknife
- * standard error. `bins` tells whether there were several r₂ or φ bins, and which were taken.
+ * The recommended w₁ of every point that recommends a weights table, against r₃, in the first r₂
+ * bin and the first φ bin: x is the union of the cells' midpoints (the open tail cell [lo, ∞) is
+ * left out); per point, w₁ (null in cells whose weights the server copied from a neighbour, as on
+ * the job page), its jackknife standard error and whether the cell has none (`open`: smoothed).
+ * A table with heuristics stacked on it is its table part (its label says so). `bins` tells
+ * whether there were several r₂ or φ bins, and which were taken; `perPath` lists the points that
+ * recommend a per-path strategy (no table) and `missing` counts those without figures yet.
  */
 export function w1AgainstR3(sweep) {
   const cellsOf = (point) => {
@@ -101,20 +101,26 @@ export function w1AgainstR3(sweep) {
   const cells = sweep.points.map(cellsOf);
   const mid = (w) => (w.r3[0] + w.r3[1]) / 2;
   const x = [...new Set(cells.flat().map(mid))].sort((m, n) => m - n);
-  const series = sweep.points.map((point, i) => {
+  const open = (w) => w.status === 'smoothed' || w.w1_stderr === null || w.w1_stderr === undefined;
+  const series = sweep.points.flatMap((point, i) => {
+    if (cells[i].length === 0) return [];
     const at = new Map(cells[i].filter((w) => !UNFITTED.has(w.status)).map((w) => [mid(w), w]));
-    return {
+    const part = point.figures.recommended?.heuristics?.length > 0;
+    return [{
       point: point.index,
-      label: describePoint(point, sweep.fields),
+      label: `${describePoint(point, sweep.fields)}${part ? ` (${point.figures.recommended.strategy}: table part)` : ''}`,
       y: x.map((v) => at.get(v)?.w1 ?? null),
-      err: x.map((v) => at.get(v)?.w1_stderr ?? null),
-    };
+      err: x.map((v) => (at.has(v) && !open(at.get(v)) ? at.get(v).w1_stderr : null)),
+      open: x.map((v) => (at.has(v) ? open(at.get(v)) : false)),
+    }];
   });
+  const perPath = sweep.points.filter((p, i) => cells[i].length === 0 && p.figures?.recommended && p.figures.recommended.lambda === null)
+    .map((p) => ({ point: p.index, label: describePoint(p, sweep.fields), strategy: p.figures.recommended.strategy }));
   const first = sweep.points.find((p) => p.figures?.weights?.length)?.figures.weights ?? [];
   const count = (key) => new Set(first.map((w) => w[key][0])).size;
   const bins = {
     r2: count('r2') > 1 ? first.find((w) => w.r2[0] === firstBin(first, 'r2')).r2 : null,
     phi: count('phi') > 1 ? first.find((w) => w.phi[0] === firstBin(first, 'phi')).phi : null,
   };
-  return { x, series, bins, missing: cells.filter((c) => c.length === 0).length };
+  return { x, series, bins, perPath, missing: sweep.points.filter((p) => !p.figures).length };
 }

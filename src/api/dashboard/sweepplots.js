@@ -1,14 +1,15 @@
 // The sweep page's charts: per swept field, the RMS of every strategy against the field's value
-// (with a selector per other axis of a grid), and the recommended w₁ against r₃ of every point,
-// both with error bars (± 1 standard error; chartkit.js) and SVG/PNG downloads (chartfiles.js).
-// The numbers come from sweepdata.js.
+// (with a selector per other axis of a grid), and the recommended w₁ against r₃ of every point
+// that recommends a weights table (open markers for cells without a data SE), both with error bars
+// (± 1 standard error; chartkit.js) and SVG/PNG downloads (chartfiles.js). The numbers come from
+// sweepdata.js.
 
 /* global uPlot */
 
-import { errorBars, extent, logRange } from './chartkit.js';
+import { errorBars, extent, logRange, markers } from './chartkit.js';
 import { chartDownloads } from './chartfiles.js';
 import { fixed, formatParameter, formatRms, h, showMessage } from './format.js';
-import { PlotSlot, STRATEGY_COLORS, weightRange } from './plots.js';
+import { PlotSlot, strategyColor, weightRange } from './plots.js';
 import { describeValue, hasSelectors, rmsAgainst, w1AgainstR3 } from './sweepdata.js';
 
 const POINT_COLORS = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
@@ -56,7 +57,7 @@ function drawRms(slot, note, data, field, sweep) {
   slot.xLabels = data.numeric ? null : data.labels;
   const xValue = (u, v) => (v === null ? '—' : data.numeric ? formatParameter(v) : data.labels[v]);
   const series = [{ label: field, value: xValue }];
-  slot.bars = data.series.map((s) => ({ err: s.err, color: STRATEGY_COLORS[s.strategy] ?? '#444' }));
+  slot.bars = data.series.map((s) => ({ err: s.err, color: strategyColor(s.strategy) }));
   data.series.forEach((s, k) => {
     const outside = { all: ' (outside fixed weights)', some: ' (outside fixed weights at some points)', '': '' }[s.outside];
     series.push({
@@ -76,7 +77,7 @@ function drawRms(slot, note, data, field, sweep) {
     plugins: [errorBars(slot)],
   }, [data.x, ...data.series.map((s) => s.y)]);
   const predicted = data.points.some((i) => sweep.points[i].figures?.source === 'predicted');
-  const parts = ['Bars: ± 1 standard error (the cross-validated optimal_cv has none).',
+  const parts = ['Bars: ± 1 standard error (the in-sample optimal has none).',
     "Dashed: strategies outside the solver's fixed weights, shown for comparison."];
   if (hasSelectors(sweep.spec)) parts.push('The other axes are at the values selected above.');
   if (predicted) parts.push('Some points are predicted from one run with noise components.');
@@ -126,19 +127,27 @@ export class RmsChart {
 /** The recommended w₁ of every point against r₃ (cell midpoints), one line per point. */
 export function drawW1(slot, note, sweep) {
   const data = w1AgainstR3(sweep);
+  const perPath = data.perPath.length
+    ? `${data.perPath.length} of ${sweep.points.length} points recommend a per-path strategy, which has no weights table (${data.perPath.map((p) => `${p.label}: ${p.strategy}`).join('; ')}); a measured point's job page draws its table optimum instead.`
+    : '';
   if (data.x.length === 0) {
-    slot.clear('No weights yet: they appear with the first checkpoint of a run.');
-    showMessage(note, '');
+    slot.clear(data.perPath.length ? 'No point recommends a weights table.' : 'No weights yet: they appear with the first checkpoint of a run.');
+    showMessage(note, perPath);
     return;
   }
   slot.bars = data.series.map((s, k) => ({ err: s.err, color: POINT_COLORS[k % POINT_COLORS.length] }));
+  slot.markers = data.series.map((s, k) => ({ open: s.open, color: POINT_COLORS[k % POINT_COLORS.length] }));
+  const open = data.series.reduce((n, s) => n + s.open.filter((o, i) => o && s.y[i] !== null).length, 0);
+  slot.notes = open ? [{ marker: 'open', text: 'open: no data SE (smoothed: set by its neighbours through λ), no bar' }] : [];
   const series = [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
   data.series.forEach((s, k) => series.push({
     label: s.label, stroke: slot.bars[k].color, width: 1.5,
-    dash: POINT_DASHES[Math.floor(k / POINT_COLORS.length) % POINT_DASHES.length], points: { show: true, size: 4 },
+    dash: POINT_DASHES[Math.floor(k / POINT_COLORS.length) % POINT_DASHES.length], points: { show: false },
     value: (u, v, si, i) => {
       const e = slot.bars[k]?.err[i];
-      return v === null ? '—' : `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
+      if (v === null) return '—';
+      if (slot.markers[k]?.open[i]) return `${fixed(v, 3)} (no SE)`;
+      return `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
     },
   }));
   const bins = [];
@@ -148,9 +157,10 @@ export function drawW1(slot, note, sweep) {
     series,
     scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
     axes: [{ label: `r₃ (cell midpoint)${bins.length ? `, first bin: ${bins.join(', ')}` : ''}` }, { label: 'w₁' }],
-    plugins: [errorBars(slot)],
+    plugins: [errorBars(slot), markers(slot)],
   }, [data.x, ...data.series.map((s) => s.y)]);
-  const parts = ['The recommended weights of each point; bars: ± 1 jackknife standard error. The open tail cell of r₃ is left out; gaps are cells without informative samples.'];
-  if (data.missing) parts.push(`${data.missing} of ${data.series.length} points have no weights yet.`);
+  const parts = [`The recommended weights table of each point that has one (a stacked recommendation: its table part); bars: ± 1 jackknife standard error${open ? '; open markers: cells without a data standard error (smoothed), no bars' : ''}. The open tail cell of r₃ is left out; gaps are cells without informative samples.`];
+  if (perPath) parts.push(perPath);
+  if (data.missing) parts.push(`${data.missing} of ${sweep.points.length} points have no figures yet.`);
   showMessage(note, parts.join(' '));
 }
