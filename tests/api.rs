@@ -1,10 +1,8 @@
 //! The HTTP API against a real server on 127.0.0.1 with a SQLite file in a temporary directory.
 
-mod common;
-
 use std::time::Duration;
 
-use common::{TestServer, assert_problem, small_job};
+use crate::common::{TestServer, assert_problem, small_job};
 use futures_util::StreamExt;
 use reqwest::Method;
 use serde_json::{Value, json};
@@ -333,10 +331,22 @@ async fn solve_recomputes_from_the_stored_moments() {
     let optimal = |r: &Value| r["noise_table"][4]["lambda"].clone();
     assert_eq!(optimal(&smooth), 10.0);
     let grid = server.solve(id, &json!({ "cv_lambdas": [10] })).await.json();
-    assert_eq!(grid["recommended"]["lambda"], 10.0);
-    assert_ne!(grid["weights"], stored["weights"]);
+    let cv = |r: &Value| r["noise_table"].as_array().unwrap().iter().find(|x| x["strategy"] == "optimal_cv").cloned();
+    assert_eq!(cv(&grid).unwrap()["lambda"], 10.0, "the cross-validation chooses from the grid given");
+    assert_ne!(cv(&grid), cv(&stored));
+    // A fitted recommendation (if the guard lets one through) is at a λ of that grid.
+    assert!(
+        grid["recommended"]["lambda"].is_null() || grid["recommended"]["lambda"] == 10.0,
+        "{}",
+        grid["recommended"]
+    );
     let free = server.solve(id, &json!({ "fixed": { "w0": null }, "lambda": 1e-3 })).await.json();
-    assert!(free["weights"].as_array().unwrap().iter().any(|w| w["w0"] != 0.0), "w0 is fitted once freed");
+    let optimal = |r: &Value| r["noise_table"].as_array().unwrap().iter().find(|x| x["strategy"] == "optimal").cloned();
+    assert_ne!(optimal(&free), optimal(&stored), "the table is re-fitted with w0 free");
+    // The weights table is the recommended fitted row's (none when a per-path strategy wins).
+    let weights = free["weights"].as_array().unwrap();
+    assert_eq!(weights.is_empty(), free["recommended"]["lambda"].is_null(), "{}", free["recommended"]);
+    assert!(weights.is_empty() || weights.iter().any(|w| w["w0"] != 0.0), "w0 is fitted once freed");
     let unchanged = server.result(id).await;
     assert_eq!(unchanged, stored, "solve stores nothing");
     server.stop().await;

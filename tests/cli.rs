@@ -89,7 +89,8 @@ fn four_shards_merged_equal_a_single_run() {
         String::from_utf8(ok(optimis(dir.path(), &["report", "study.json", "--solver", r#"{"lambda": 0.5}"#], &[])))
             .unwrap();
     assert!(tables.contains("λ = 0.5, in-sample (optimistic)"), "{tables}");
-    assert!(tables.contains("recommended weights (optimal_cv"), "{tables}");
+    // The recommendation's table, or — a per-path strategy recommended — why it has none.
+    assert!(tables.contains("recommended weights (") || tables.contains("it has no table"), "{tables}");
     let in_sample =
         String::from_utf8(ok(optimis(dir.path(), &["report", "study.json", "--weights-lambda", "0.5"], &[]))).unwrap();
     assert!(in_sample.contains("weights fitted on all iterations at λ = 0.5"), "{in_sample}");
@@ -187,7 +188,8 @@ fn predict_and_budget_read_a_run_with_noise_components() {
         &[],
     )))
     .unwrap();
-    assert!(text.contains("predicted for N_F = 2000000") && text.contains("re-fitted"), "{text}");
+    assert!(text.contains("predicted for N_F = 2000000") && text.contains("cross-fitted"), "{text}");
+    assert!(text.contains("recommended at this budget: "), "{text}");
     let plan: Value = serde_json::from_slice(&ok(optimis(
         dir.path(),
         &["budget", "comp.json", "--light-cost", "1e-8", "--camera-cost", "1e-6", "--iteration-cost", "0.01", "--json"],
@@ -197,7 +199,25 @@ fn predict_and_budget_read_a_run_with_noise_components() {
     assert_eq!(plan["paper"]["strategy"], "switch");
     assert_eq!(plan["paper"]["budget"]["light_paths"], 10_000_000);
     let points = plan["points"].as_array().unwrap();
-    assert_eq!(points.iter().filter(|p| p["strategy"] == "plane1").count(), 25, "5 × 5 budgets");
+    // The search starts a decade each way and widens by half decades: a grid of half-decade steps
+    // over the range it reports, at least 5 × 5.
+    let steps = |axis: &str| {
+        let [lo, hi] = [0, 1].map(|i| plan["search"][axis][i].as_f64().unwrap());
+        (2.0 * (hi / lo).log10()).round() as usize + 1
+    };
+    let (light_steps, camera_steps) = (steps("light_paths"), steps("camera_paths"));
+    assert!(light_steps >= 5 && camera_steps >= 5, "{}", plan["search"]);
+    assert_eq!(points.iter().filter(|p| p["strategy"] == "plane1").count(), light_steps * camera_steps);
+    // The run's recommendation is headlined unless its weights depend on the budget (then the
+    // stacked optimum, with a note that says why).
+    let recommended = plan["recommended"].as_str().unwrap();
+    if recommended.starts_with("correlation_aware") {
+        assert_eq!(plan["headline"], "optimal_stacked");
+        assert!(plan["headline_note"].as_str().unwrap().contains(recommended), "{}", plan["headline_note"]);
+    } else {
+        assert_eq!(plan["headline"], recommended);
+        assert!(plan["headline_note"].is_null());
+    }
     for best in plan["best"].as_array().unwrap() {
         let t = best["seconds_to_target"].as_f64().unwrap();
         for p in points.iter().filter(|p| p["strategy"] == best["strategy"]) {
@@ -208,12 +228,12 @@ fn predict_and_budget_read_a_run_with_noise_components() {
         assert!((t - expected).abs() <= 1e-9 * t, "time = iterations × seconds per iteration");
     }
     // The fixed-time curve: T is the paper's time; each ratio's point is a grid point's R·√(t/T),
-    // the lowest of its strategy at that ratio. The 5 × 5 grid has 9 ratios, half a decade apart.
+    // the lowest of its strategy at that ratio. An n × m grid has n + m − 1 ratios, half a decade apart.
     let fixed = &plan["fixed_time"];
     let big_t = fixed["seconds"].as_f64().unwrap();
     assert_eq!(big_t, plan["paper"]["seconds_to_target"].as_f64().unwrap());
     let curve = fixed["curve"].as_array().unwrap();
-    assert_eq!(curve.iter().filter(|c| c["strategy"] == "plane1").count(), 9, "{curve:?}");
+    assert_eq!(curve.iter().filter(|c| c["strategy"] == "plane1").count(), light_steps + camera_steps - 1, "{curve:?}");
     let at_t =
         |p: &Value| p["rms_percent"].as_f64().unwrap() * (p["seconds_per_iteration"].as_f64().unwrap() / big_t).sqrt();
     let ratio = |p: &Value| {
@@ -273,14 +293,27 @@ fn set_progress_csv_and_exit_codes() {
     let switch = report["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == "switch").unwrap();
     let row = lines.iter().find(|l| l.starts_with("switch,")).unwrap();
     assert_eq!(row.split(',').nth(3).unwrap().parse::<f64>().unwrap(), switch["rms_percent"].as_f64().unwrap());
-    let weights = std::fs::read_to_string(dir.path().join("weights.csv")).unwrap();
-    assert_eq!(weights.lines().count(), 1 + 52);
-    for (line, w) in weights.lines().skip(1).zip(report["weights"].as_array().unwrap()) {
-        let cells: Vec<&str> = line.split(',').collect();
-        assert_eq!(cells.len(), 15, "{line}");
-        assert_eq!(cells[14], w["status"].as_str().unwrap(), "statuses as the JSON writes them");
-        assert_eq!(cells[9].parse::<f64>().unwrap(), w["w1"].as_f64().unwrap());
-    }
+    let same_weights = |csv: &str, report: &Value| {
+        let weights = std::fs::read_to_string(dir.path().join(csv)).unwrap();
+        let rows = report["weights"].as_array().unwrap();
+        assert_eq!(weights.lines().count(), 1 + rows.len());
+        for (line, w) in weights.lines().skip(1).zip(rows) {
+            let cells: Vec<&str> = line.split(',').collect();
+            assert_eq!(cells.len(), 15, "{line}");
+            assert_eq!(cells[14], w["status"].as_str().unwrap(), "statuses as the JSON writes them");
+            assert_eq!(cells[9].parse::<f64>().unwrap(), w["w1"].as_f64().unwrap());
+        }
+    };
+    same_weights("weights.csv", &report);
+    // A per-path strategy recommended has no table (its weights are the heuristic's); a fitted
+    // row's table is asked for by λ.
+    assert_eq!(report["weights"].as_array().unwrap().is_empty(), report["recommended"]["lambda"].is_null());
+    let args = ["report", "a.json", "--weights-lambda", "0.1", "--weights-of", "optimal_stacked", "--json"];
+    let args = [&args[..], &["--weights-csv", "stacked.csv"]].concat();
+    let stacked: Value = serde_json::from_slice(&ok(optimis(dir.path(), &args, &[]))).unwrap();
+    assert_eq!(stacked["weights"].as_array().unwrap().len(), 52);
+    assert_eq!(stacked["weights_fit"]["strategy"], "optimal_stacked");
+    same_weights("stacked.csv", &stacked);
     let quiet =
         optimis(dir.path(), &["run", "--preset", "paper-table1", "--iterations", "50", "--quiet", "--json"], &[]);
     assert!(quiet.status.success() && quiet.stderr.is_empty(), "{}", String::from_utf8_lossy(&quiet.stderr));

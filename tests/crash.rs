@@ -2,9 +2,7 @@
 //! database, and the job ends with moments bit-identical to an uninterrupted run, while finished
 //! jobs and their results are untouched.
 
-mod common;
-
-use common::process::Process;
+use crate::common::process::Process;
 
 use serde_json::json;
 
@@ -40,7 +38,11 @@ async fn a_killed_server_resumes_jobs_bit_identically() {
     assert_eq!(done["progress"]["iterations_done"], 40);
     let document = second.moments(id).await;
 
-    assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments differ from an uninterrupted run");
+    assert_eq!(
+        document["moments"],
+        crate::common::uninterrupted_moments(&spec),
+        "moments differ from an uninterrupted run"
+    );
 
     // The finished job is untouched.
     assert_eq!(second.job(finished).await, finished_before);

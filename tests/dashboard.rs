@@ -5,13 +5,11 @@
 //! Without them the test is skipped, unless `OPTIMIS_REQUIRE_BROWSER=1` (as in CI), where a missing
 //! prerequisite fails it.
 
-mod common;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::{TestServer, assert_problem};
+use crate::common::{TestServer, assert_problem};
 use tokio::process::Command;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";

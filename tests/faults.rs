@@ -2,10 +2,8 @@
 //! strategies; and twenty SIGKILLs at random moments (many during checkpoint writes) never lose or
 //! corrupt work.
 
-mod common;
-
-use common::process::Process;
-use common::{TestServer, assert_problem, small_job};
+use crate::common::process::Process;
+use crate::common::{TestServer, assert_problem, small_job};
 use serde_json::json;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -130,7 +128,11 @@ async fn twenty_kills_never_lose_or_corrupt_work() {
     let done = last.wait_for_state(id, "succeeded").await;
     assert_eq!(done["progress"]["iterations_done"], 300);
     let document = last.moments(id).await;
-    assert_eq!(document["moments"], common::uninterrupted_moments(&spec), "moments equal an uninterrupted run's");
+    assert_eq!(
+        document["moments"],
+        crate::common::uninterrupted_moments(&spec),
+        "moments equal an uninterrupted run's"
+    );
     let history = last.history(id).await;
     assert!(history["points"].as_array().unwrap().len() >= 20);
     assert_eq!(snapshot(&last).await, before, "the finished job's data did not change");

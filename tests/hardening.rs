@@ -3,14 +3,13 @@
 //! answered wrongly, or lost data) before the fix. Hangs are caught by hang guards of a minute —
 //! guards against a freeze, not performance limits: every request here answers in milliseconds.
 
-mod common;
-
 use std::future::Future;
 use std::time::Duration;
 
-use common::{TestServer, assert_problem};
+use crate::common::{TestServer, assert_problem};
 use futures_util::StreamExt;
 use optimis::sim::document::MomentsDocument;
+use optimis::sim::engines::strategies::PathStrategy;
 use optimis::sim::math::exact_sum::ExactSum;
 use optimis::sim::stats::moments::packed_index;
 use reqwest::Method;
@@ -217,7 +216,7 @@ async fn a_full_disk_acknowledges_nothing_and_loses_nothing() {
     assert_eq!(done["progress"]["iterations_done"], 400);
     assert!(checkpointed.as_u64().unwrap() < 400);
     let document = server.moments(running).await;
-    assert_eq!(document["moments"], common::uninterrupted_moments(&running_spec), "every iteration, once");
+    assert_eq!(document["moments"], crate::common::uninterrupted_moments(&running_spec), "every iteration, once");
     assert_eq!(server.get("/readyz").await.status, 200);
     assert_eq!(server.job(first).await["state"], "succeeded");
     server.stop().await;
@@ -271,7 +270,11 @@ async fn documents_are_parsed_bounded_and_exactly() {
     let mut long = doc.clone();
     long["moments"]["folds"][0]["sum_yy"] = json!(vec![0.5; 200_000]);
     let problem = assert_problem(server.merge(target, &long).await, 422);
-    assert!(problem["detail"].as_str().unwrap().contains("more than 131841 entries"), "{problem}");
+    // The bound: the packed upper triangle of the largest grid's moment vector (format 3: w0 and w1
+    // per cell of the 256 allowed, the base, one column per stackable heuristic).
+    let dimension = 2 * 256 + 1 + PathStrategy::STACKABLE.len();
+    let bound = dimension * (dimension + 1) / 2;
+    assert!(problem["detail"].as_str().unwrap().contains(&format!("more than {bound} entries")), "{problem}");
     // A u128 counter beyond 2^64 (Σ m² of 2^33 merge events), as the server itself would export it.
     let (_, other) = finished(&server, 2).await;
     let mut typed: MomentsDocument = serde_json::from_value(other).unwrap();

@@ -1,10 +1,8 @@
 //! Every configurable limit, and bearer authentication (missing, wrong and right token).
 
-mod common;
-
 use std::time::Duration;
 
-use common::{Client, TestServer, assert_problem, small_job};
+use crate::common::{Client, TestServer, assert_problem, small_job};
 use reqwest::Method;
 use serde_json::json;
 

@@ -4,14 +4,12 @@
 //!
 //! The hostile peers are raw TCP servers of the test's own on loopback ports.
 
-mod common;
-
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
-use common::process::{Process, free_port};
-use common::{Client, TestServer, assert_problem};
+use crate::common::process::{Process, free_port};
+use crate::common::{Client, TestServer, assert_problem};
 use serde_json::json;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;

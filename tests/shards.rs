@@ -3,10 +3,8 @@
 //! merges that must be refused (same shard twice, another configuration, a corrupted or truncated
 //! document, an unreachable peer), each leaving the target's statistics unchanged.
 
-mod common;
-
-use common::assert_problem;
-use common::process::{Process, free_port};
+use crate::common::assert_problem;
+use crate::common::process::{Process, free_port};
 use serde_json::{Value, json};
 
 fn study(seed: u64, shard: Option<(u64, u64)>, radius: f64) -> Value {

@@ -265,7 +265,9 @@ fn recommended_weights_are_the_guarded_honest_best_within_the_fixed_weights() {
     assert_eq!(warned.is_some(), cost.value + 2.0 * cost_se < 1.0, "{warnings:?}");
 
     // Fig. 2 from the table optimum: w1 ≈ 0.8–0.9 inside the spot (r3 ≤ a = 0.02) where the cell's
-    // own samples set it, falling to the tail (r3 ≥ 0.05).
+    // own samples set it, falling to the tail (r3 ≥ 0.05). The one-standard-error rule picks the
+    // largest λ within noise of the best (λ = 1 here), whose penalty pulls the spot's cells towards
+    // their lower neighbours by a bias the data SE does not contain: the band starts at 0.7.
     let cv = &table.fitted.iter().find(|f| f.strategy.name() == "optimal_cv").unwrap().scored;
     let se = cv.cross_fit.weight_stderr().expect("jackknife SE of the weights");
     let mut tails = Vec::new();
@@ -273,7 +275,7 @@ fn recommended_weights_are_the_guarded_honest_best_within_the_fixed_weights() {
         let bounds = config.cells.bounds(a);
         let (w1, s) = (cell.w[1], se[a][1]);
         if bounds.r3[1].is_some_and(|hi| hi <= 0.02) && cell.samples >= 30 && cell.status.from_data() {
-            assert!((0.8 - 2.0 * s..=0.9 + 2.0 * s).contains(&w1), "cell {a}: w1 = {w1} ± {s}");
+            assert!((0.7 - 2.0 * s..=0.9 + 2.0 * s).contains(&w1), "cell {a}: w1 = {w1} ± {s}");
         } else if bounds.r3[1].is_none() {
             assert!(w1 + 2.0 * s < 0.2, "tail cell {a}: w1 = {w1} ± {s}");
             tails.push(a);

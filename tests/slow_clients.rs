@@ -6,11 +6,9 @@
 //! Timeouts are shortened for the test; hang guards of half a minute catch a connection that is
 //! never closed.
 
-mod common;
-
 use std::time::Duration;
 
-use common::TestServer;
+use crate::common::TestServer;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 

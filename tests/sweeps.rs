@@ -3,13 +3,11 @@
 //! bad axes named in 422s, the points limit, predicted axes, cancel and delete cascading; and the
 //! CSV exports of a job's tables.
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{TestServer, assert_problem};
+use crate::common::{TestServer, assert_problem};
 use serde_json::{Value, json};
 
 /// A 2 × 2 grid at a small paper-preset budget (restricted engine: milliseconds per run).
@@ -71,10 +69,11 @@ async fn a_sweep_runs_as_jobs_and_its_table_equals_the_clis() {
         assert_eq!(f["iterations"], 60);
         let rows = f["noise_table"].as_array().unwrap();
         assert!(rows.iter().all(|r| r["in_sample"] == false), "only honest rows");
-        assert_eq!(f["recommended"]["strategy"], "optimal_cv");
-        assert_eq!(f["weights"].as_array().unwrap().len(), 52);
-        // The point's figures are its job's.
+        // The point's figures are its job's: its recommendation, and the table of a fitted one.
         let result = server.result(p["job_id"].as_i64().unwrap()).await;
+        assert_eq!(f["recommended"], result["recommended"]);
+        let fitted = !f["recommended"]["lambda"].is_null();
+        assert_eq!(f["weights"].as_array().unwrap().len(), if fitted { 52 } else { 0 }, "{}", f["recommended"]);
         let switch = |rows: &[Value]| rows.iter().find(|r| r["strategy"] == "switch").cloned().unwrap();
         assert_eq!(switch(rows), switch(result["noise_table"].as_array().unwrap()));
     }
@@ -224,7 +223,8 @@ async fn a_jobs_tables_download_as_csv() {
     assert_eq!(rows.len(), 1 + table.len());
     for (row, json) in rows[1..].iter().zip(table) {
         assert_eq!(row[0], json["strategy"].as_str().unwrap());
-        assert_eq!(row[1].parse::<f64>().unwrap(), json["luminance"].as_f64().unwrap());
+        // A row that could not be computed (its `error` says why) has empty fields.
+        assert_eq!(row[1].parse::<f64>().ok(), json["luminance"].as_f64(), "{json}");
     }
     let by_accept = server
         .send(server.builder(reqwest::Method::GET, &format!("/v1/jobs/{id}/result")).header("accept", "text/csv"))

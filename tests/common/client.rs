@@ -91,10 +91,6 @@ impl Client {
         self
     }
 
-    pub fn base(&self) -> &str {
-        &self.base
-    }
-
     pub fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

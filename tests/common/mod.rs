@@ -3,7 +3,6 @@
 //!
 //! A [`TestServer`] (and a [`process::Process`]) dereferences to a [`Client`] of its base URL:
 //! `server.submit(&spec)`, `server.wait_for_state(id, "succeeded")`, `server.get("/healthz")`.
-#![allow(dead_code)] // each test binary uses a different subset
 
 pub mod client;
 pub mod process;
@@ -15,8 +14,7 @@ use optimis::jobs::RunPolicy;
 use optimis::server::{ConnectionLimits, RunningServer, ServerConfig, spawn};
 use serde_json::Value;
 
-#[allow(unused_imports)] // each test binary uses a different subset
-pub use client::{Client, Reply, assert_problem};
+pub use client::{Client, assert_problem};
 
 /// A server for one test.
 pub struct TestServer {

@@ -90,7 +90,8 @@ pub struct BudgetPlan {
     /// What the run recommends at its own budget.
     pub recommended: Option<Strategy>,
     /// The strategy headlined: the recommended one, or — when its weights depend on the budget
-    /// and cannot be predicted — the best predictable strategy that keeps the fixed weights.
+    /// and cannot be predicted — the stacked optimum (else optimal_cv), the fitted family that
+    /// contains the recommended weights' predictable kin and keeps the fixed weights.
     pub headline: Option<Strategy>,
     /// Why the headline is not the recommended strategy, if so.
     pub headline_note: Option<String>,

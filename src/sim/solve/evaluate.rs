@@ -208,8 +208,22 @@ fn coefficients(
             _ => false,
         })
     };
-    let beta_sum: f64 = heuristics.iter().map(|h| h.beta).sum();
     let mut v = DVector::zeros(layout.dimension());
+    // The heuristics first: a table's sum is checked against their β.
+    for (i, h) in heuristics.iter().enumerate() {
+        let field = format!("{named}[{i}]");
+        let index = h.strategy.path().and_then(|p| layout.heuristic_index(p)).ok_or_else(|| {
+            invalid(
+                &field,
+                format!("{} has no column in these moments (a stackable heuristic of format 3)", h.strategy),
+            )
+        })?;
+        if !h.beta.is_finite() || h.beta.abs() > 1e6 {
+            return Err(invalid(&field, "β must be finite with |β| ≤ 1e6"));
+        }
+        v[index] += h.beta;
+    }
+    let beta_sum: f64 = heuristics.iter().map(|h| h.beta).sum();
     for (a, cell) in given.weights.iter().enumerate() {
         let b = grid.bounds(a);
         if !(same(cell.r2, b.r2) && same(cell.r3, b.r3) && same(cell.phi, b.phi)) {
@@ -236,18 +250,5 @@ fn coefficients(
         v[k + a] = cell.w1;
     }
     v[layout.b_index()] = 1.0 - beta_sum;
-    for (i, h) in heuristics.iter().enumerate() {
-        let field = format!("{named}[{i}]");
-        let index = h.strategy.path().and_then(|p| layout.heuristic_index(p)).ok_or_else(|| {
-            invalid(
-                &field,
-                format!("{} has no column in these moments (a stackable heuristic of format 3)", h.strategy),
-            )
-        })?;
-        if !h.beta.is_finite() || h.beta.abs() > 1e6 {
-            return Err(invalid(&field, "β must be finite with |β| ≤ 1e6"));
-        }
-        v[index] += h.beta;
-    }
     Ok(v)
 }

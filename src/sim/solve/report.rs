@@ -114,6 +114,8 @@ pub struct RunReport {
     pub guard: Option<Gain>,
     /// What the data cannot support (empty when nothing is wrong).
     pub warnings: Vec<Warning>,
+    /// Why the weights could not be fitted (every fitted row's `error` says so too), even when a
+    /// per-path strategy is recommended in their place; null when the fit succeeded.
     pub solve_error: Option<String>,
     pub merges_per_iteration: MergesPerIteration,
     pub fingerprint: String,
@@ -233,6 +235,8 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         },
         (None, Err(e)) => (Vec::new(), None, Some(e.clone())),
     };
+    let fit_error = || table.rows.iter().find(|r| r.strategy == Strategy::OptimalCv).and_then(|r| r.error.clone());
+    let solve_error = solve_error.or_else(fit_error);
     let [plane1, plane2, plane3] = merge_rates_of(&table.pooled);
     RunReport {
         iterations: moments.iterations(),

@@ -1,0 +1,25 @@
+//! The integration tests, one binary: each module below was a test binary of its own (see
+//! Cargo.toml's `autotests = false`). Run one module with `cargo test --release --test integration
+//! MODULE::`, e.g. `cargo test --release --test integration dashboard::`.
+
+mod common;
+
+mod api;
+mod architecture;
+mod cli;
+mod crash;
+mod dashboard;
+mod engines;
+mod faults;
+mod formats;
+mod hardening;
+mod hostile_documents;
+mod limits;
+mod peers;
+mod prediction;
+mod readme;
+mod recommendation;
+mod shards;
+mod simulation;
+mod slow_clients;
+mod sweeps;
