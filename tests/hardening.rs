@@ -249,6 +249,9 @@ async fn cross_site_requests_are_refused() {
     assert_problem(evil, 403);
     let rebinding = post().header("host", "evil.example:8080").header("origin", "http://evil.example:8080");
     assert_problem(server.send(rebinding.json(&small(1))).await, 403);
+    // A Host that only starts like a loopback address is not one.
+    let spoofed = post().header("host", "[::1].evil.example");
+    assert_problem(server.send(spoofed.json(&small(1))).await, 403);
     assert!(server.list("").await.is_empty(), "nothing was created");
     // The dashboard's own requests (same origin) and curl's (no origin) pass.
     let own = format!("http://{}", server.base.trim_start_matches("http://"));

@@ -40,8 +40,11 @@ pub struct Guard {
 fn host_only(authority: &str) -> String {
     let authority = authority.trim().to_ascii_lowercase();
     if let Some(rest) = authority.strip_prefix('[') {
-        // [v6]:port
-        return rest.split(']').next().unwrap_or_default().to_string();
+        // `[v6]` or `[v6]:port` and nothing else: `[::1].evil.example` is not a loopback host but
+        // an unparsable one (kept whole, so that no check accepts it).
+        let Some((v6, after)) = rest.split_once(']') else { return authority };
+        let port = after.strip_prefix(':').map(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+        return if after.is_empty() || port == Some(true) { v6.to_string() } else { authority };
     }
     match authority.rsplit_once(':') {
         Some((host, port)) if port.chars().all(|c| c.is_ascii_digit()) => host.to_string(),
@@ -194,6 +197,10 @@ mod tests {
     fn hosts_are_compared_without_ports() {
         assert_eq!(host_only("LOCALHOST:8080"), "localhost");
         assert_eq!(host_only("[::1]:80"), "::1");
+        assert_eq!(host_only("[::1]"), "::1");
+        for spoof in ["[::1].evil.example", "[::1]:80.evil.example", "[::1]:", "[::1"] {
+            assert!(!is_loopback_host(&host_only(spoof)), "{spoof}");
+        }
         assert_eq!(host_only("example.org"), "example.org");
         assert!(is_loopback_host("127.3.4.5") && is_loopback_host("::1") && !is_loopback_host("10.0.0.1"));
     }

@@ -56,7 +56,7 @@ pub struct ServeArgs {
     /// Most jobs waiting in the queue (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub max_queued_jobs: u64,
-    /// Most points of one sweep (`POST /v1/sweeps`; each run is a queued job).
+    /// Most points, and most runs, of one sweep (`POST /v1/sweeps`; each run is a queued job).
     #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_SWEEP_POINTS as u64, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_sweep_points: u64,
     /// Most event streams open at once (beyond: 429 with Retry-After).

@@ -38,11 +38,11 @@ use super::checkpoint::spec_json;
 use super::error::JobError;
 use super::peers::Peers;
 use super::policy::{RunPolicy, check_budget, check_iteration_work, range_len, refuse_shard_extension, target_total};
+use super::references::scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row, rfc3339};
 use super::scheduler::scheduler;
 use super::state::{ActiveJob, Inner, MergeReservation, StopReason};
 use crate::metrics::{JobSample, Metrics};
-use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::{SpecError, ValidJob, parse_job_spec};
 use crate::store::{Inserted, NewJob, Store, StoreError};
@@ -235,12 +235,9 @@ impl JobManager {
                 let job = parse_job_spec(&document)?.validate()?;
                 check_budget(&policy, &job.spec, range_len(&job.spec))?;
                 check_iteration_work(&policy, &job)?;
-                let reference = reference_luminance(&job.config.scene);
-                if let Err(e) = &reference {
-                    tracing::warn!(error = %e, "the job has no reference luminance");
-                }
+                let reference = scene_reference(&job.config.scene);
                 let hash = hash_body.then(|| sha256_hex(document.to_string().as_bytes()));
-                Ok((job, reference.ok(), hash))
+                Ok((job, reference, hash))
             })
             .await??;
         let new = NewJob {

@@ -50,6 +50,11 @@ fn check_name(name: &str) -> Result<(), JobError> {
         && name.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || matches!(b, b'_' | b'-' | b'.'));
     check(ok, "name", || format!("must be 1 to 64 characters of a-z, 0-9, '_', '-', '.', got {name:?}"))?;
     check(name != DEFAULT_SOLVE, "name", || "`default` is the job's own options; choose another name".to_string())?;
+    // Browsers and curl resolve `.` and `..` path segments before sending: such a solve could be
+    // stored but never read back.
+    check(name != "." && name != "..", "name", || {
+        format!("{name:?} is a path segment that browsers and curl resolve away; choose another name")
+    })?;
     Ok(())
 }
 
@@ -117,4 +122,20 @@ impl JobManager {
 
 fn no_solve(id: i64, name: &str) -> JobError {
     JobError::NotFound(format!("{id} with a solve named {name:?}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_bounded_and_reachable() {
+        for good in ["s1", "lambda-0.1", "a.b", "...", &"x".repeat(64)] {
+            assert!(check_name(good).is_ok(), "{good}");
+        }
+        for bad in ["", ".", "..", "default", "A", "a/b", "a b", &"x".repeat(65)] {
+            let Err(JobError::Invalid(e)) = check_name(bad) else { panic!("{bad:?} accepted") };
+            assert_eq!(e.field, "name");
+        }
+    }
 }

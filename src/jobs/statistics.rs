@@ -19,9 +19,8 @@ use super::error::JobError;
 use super::manager::JobManager;
 use super::peers::CONCURRENT_PULLS;
 use super::policy::check_budget;
-use super::references::expected_luminances;
+use super::references::{expected_luminances, scene_reference};
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
-use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::model::params::check;
@@ -396,7 +395,7 @@ impl JobManager {
                 }
                 let job = spec.validate()?;
                 check_budget(&policy, &job.spec, moments.iterations())?;
-                let reference = reference_luminance(&job.config.scene).ok();
+                let reference = scene_reference(&job.config.scene);
                 let checkpoint = checkpoint_of(&moments, &job, reference)?;
                 let new = NewJob {
                     spec: spec_json(&job.spec)?,

@@ -9,6 +9,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -19,13 +20,29 @@ use super::checkpoint::spec_json;
 use super::error::JobError;
 use super::manager::JobManager;
 use super::policy::{check_budget, check_iteration_work, range_len};
+use super::references::{scene_reference, scene_reference_is_cached};
 use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
-use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::model::scene::Scene;
 use crate::sim::spec::SpecError;
 use crate::sim::sweep::{
     PointFigures, PointResults, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures,
 };
 use crate::store::{JobRow, NewJob, SweepRow};
+
+/// How long a sweep's creation may spend on reference quadratures; the runs of scenes not reached
+/// by then keep no R → 0 reference (an optional figure) rather than hold a request thread longer.
+const REFERENCE_DEADLINE: Duration = Duration::from_secs(10);
+
+/// Set when the request that creates a sweep is dropped (its client went away), so that the
+/// quadratures it started on the request pool stop at the next scene.
+#[derive(Default)]
+struct Abandoned(Arc<AtomicBool>);
+
+impl Drop for Abandoned {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
 
 /// Most sweeps' predicted figures kept in memory (beyond it the cache starts over).
 const MAX_CACHED_RUNS: usize = 1024;
@@ -107,10 +124,12 @@ impl JobManager {
             return Err(JobError::ShuttingDown);
         }
         let policy = self.inner.policy.clone();
-        let (plan, new_jobs, valid) = self
+        // Planning and the checks of every run first (cheap), then the queue's room, and only then
+        // the reference quadratures — once per distinct scene, cached across requests, stopped
+        // when the client goes away, the server shuts down or the deadline passes.
+        let (plan, valid) = self
             .compute(move || -> Result<_, JobError> {
                 let plan = plan(&document, policy.max_sweep_points)?;
-                let mut new_jobs = Vec::with_capacity(plan.runs.len());
                 let mut valid = Vec::with_capacity(plan.runs.len());
                 for run in &plan.runs {
                     let job = run.spec.validate()?;
@@ -123,33 +142,58 @@ impl JobManager {
                     };
                     check_budget(&policy, &job.spec, range_len(&job.spec)).map_err(at_run)?;
                     check_iteration_work(&policy, &job).map_err(at_run)?;
-                    new_jobs.push(NewJob {
-                        spec: spec_json(&job.spec)?,
-                        fingerprint: job.config.fingerprint().to_string(),
-                        iterations_total: range_len(&job.spec),
-                        reference_luminance: reference_luminance(&job.config.scene).ok(),
-                        idempotency_key: None,
-                        request_hash: None,
-                        now: 0,
-                    });
                     valid.push(job);
                 }
-                Ok((plan, new_jobs, valid))
+                Ok((plan, valid))
             })
             .await??;
-        let queued = self.inner.queue.lock().expect("queue").len();
-        if queued + new_jobs.len() > self.inner.policy.max_queued_jobs {
-            return Err(JobError::Busy {
-                detail: format!(
-                    "the sweep's {} runs do not fit in the queue ({queued} jobs waiting, at most {} queued: --max-queued-jobs)",
-                    new_jobs.len(),
-                    self.inner.policy.max_queued_jobs
-                ),
-                retry_after_seconds: 30,
-            });
-        }
+        self.check_room_for(valid.len())?;
+        let abandoned = Abandoned::default();
+        let (flag, shutdown) = (abandoned.0.clone(), self.shutdown_signal());
+        let scenes: Vec<Scene> = valid.iter().map(|job| job.config.scene.clone()).collect();
+        let references = self
+            .compute(move || {
+                let started = Instant::now();
+                let mut out = Vec::with_capacity(scenes.len());
+                for scene in &scenes {
+                    if flag.load(Ordering::Relaxed) || *shutdown.borrow() {
+                        return None;
+                    }
+                    let cached = scene_reference_is_cached(&scene.spec);
+                    // Past the deadline a run keeps no R → 0 reference (an optional figure).
+                    out.push(if cached || started.elapsed() < REFERENCE_DEADLINE {
+                        scene_reference(scene)
+                    } else {
+                        None
+                    });
+                }
+                Some(out)
+            })
+            .await?;
+        drop(abandoned);
+        let references = references.ok_or(JobError::ShuttingDown)?;
+        let new_jobs = valid
+            .iter()
+            .zip(references)
+            .map(|(job, reference)| -> Result<NewJob, JobError> {
+                Ok(NewJob {
+                    spec: spec_json(&job.spec)?,
+                    fingerprint: job.config.fingerprint().to_string(),
+                    iterations_total: range_len(&job.spec),
+                    reference_luminance: reference,
+                    idempotency_key: None,
+                    request_hash: None,
+                    now: 0,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        self.check_room_for(new_jobs.len())?;
         let spec_text = serde_json::to_string(&plan.spec).map_err(|e| JobError::Internal(e.to_string()))?;
         let _guard = self.inner.lifecycle.lock().await;
+        // Nothing is acknowledged once the server is stopping.
+        if self.is_shutting_down() {
+            return Err(JobError::ShuttingDown);
+        }
         let now = now_ms();
         let (id, rows) = self.inner.store.insert_sweep(&spec_text, &new_jobs, now).await?;
         for (row, job) in rows.iter().zip(valid) {
@@ -158,6 +202,21 @@ impl JobManager {
         drop(_guard);
         let row = SweepRow { id, spec: spec_text, created_at: now };
         self.sweep_resource(&row, &plan, false).await
+    }
+
+    /// 429 unless `runs` more jobs fit in the queue.
+    fn check_room_for(&self, runs: usize) -> Result<(), JobError> {
+        let queued = self.inner.queue.lock().expect("queue").len();
+        if queued + runs > self.inner.policy.max_queued_jobs {
+            return Err(JobError::Busy {
+                detail: format!(
+                    "the sweep's {runs} runs do not fit in the queue ({queued} jobs waiting, at most {} queued: --max-queued-jobs)",
+                    self.inner.policy.max_queued_jobs
+                ),
+                retry_after_seconds: 30,
+            });
+        }
+        Ok(())
     }
 
     /// A sweep with every point's figures.

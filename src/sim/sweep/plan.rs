@@ -213,6 +213,17 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
         };
         points.push(PlannedPoint { index, values, run, predicted, measured_run });
     }
+    // The limit bounds what a sweep queues: its runs, direct ones for measured predictions included.
+    if runs.len() > max_points {
+        return Err(SpecError::new(
+            if spec.measure_predictions { "measure_predictions" } else { "axes" },
+            format!(
+                "the sweep queues {} runs for its {} points; this server runs at most {max_points} per sweep",
+                runs.len(),
+                points.len()
+            ),
+        ));
+    }
     Ok(SweepPlan { spec, runs, points })
 }
 
@@ -428,6 +439,8 @@ mod tests {
         measured["measure_predictions"] = json!(true);
         let p = plan(&measured, 64).unwrap();
         assert_eq!(p.runs.len(), 2 + 6, "one direct run per predicted point");
+        let over = plan(&measured, 7).unwrap_err();
+        assert_eq!(over.field, "measure_predictions", "6 points but 8 runs: {over}");
         assert_eq!(p.points[4].measured_run, Some(6));
         assert!(!p.runs[6].spec.noise_components);
         assert_eq!((p.runs[6].spec.light_paths, p.runs[6].spec.scene.l3), (3001, 3.0));
