@@ -92,6 +92,7 @@ pub struct Metrics {
     job_rate: Family<JobLabels, Gauge<f64, AtomicU64>>,
     iterations: Counter,
     light_paths: Counter<f64, AtomicU64>,
+    sweep_refits: Counter,
 }
 
 impl Default for Metrics {
@@ -136,6 +137,12 @@ impl Metrics {
             "Light paths (N_F per iteration) of all jobs' iterations since the server started",
             light_paths.clone(),
         );
+        let sweep_refits = Counter::default();
+        registry.register(
+            "sweep_refits",
+            "Re-fits of a sweep run's predicted points (one per checkpoint read, single flight)",
+            sweep_refits.clone(),
+        );
         let build = Family::<BuildLabels, Gauge>::default();
         build.get_or_create(&BuildLabels { version: env!("CARGO_PKG_VERSION").to_string() }).set(1);
         registry.register("build_info", "The optimis version serving (always 1)", build);
@@ -149,7 +156,13 @@ impl Metrics {
             job_rate,
             iterations,
             light_paths,
+            sweep_refits,
         }
+    }
+
+    /// Counts one re-fit of a sweep run's predicted points.
+    pub fn count_sweep_refit(&self) {
+        self.sweep_refits.inc();
     }
 
     /// Counts iterations a job computed, with their light paths.

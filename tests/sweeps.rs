@@ -282,3 +282,27 @@ async fn named_solves_are_kept_listed_and_bounded() {
     assert_eq!(deleted.status, 204);
     assert_problem(server.get(&format!("/v1/jobs/{id}/solves/s1")).await, 404);
 }
+
+/// Issue 22, item 2: concurrent reads of a predicted sweep re-fit its run's points once (single
+/// flight), and later reads of the same checkpoint not at all.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_reads_of_a_predicted_sweep_refit_it_once() {
+    let server = TestServer::start().await;
+    let doc = json!({
+        "base": { "iterations": 100, "light_paths": 1_000_000, "seed": 6 },
+        "axes": [{ "field": "light_paths", "values": [300_000, 1_000_000, 3_000_000], "by": "prediction" }]
+    });
+    let created = server.post("/v1/sweeps", &doc).await.json();
+    let id = created["id"].as_i64().unwrap();
+    // Waited for through the job, so that no read of the sweep re-fits before the four below.
+    server.wait_for_state(created["points"][0]["job_id"].as_i64().unwrap(), "succeeded").await;
+    let path = format!("/v1/sweeps/{id}");
+    let reads = futures_util::future::join_all((0..4).map(|_| server.get_json(&path))).await;
+    assert!(reads.iter().all(|r| r["points"][2]["figures"]["source"] == "predicted"), "{:?}", reads[0]);
+    assert!(reads.windows(2).all(|w| w[0]["points"] == w[1]["points"]), "every reader sees the same figures");
+    server.get_json(&path).await;
+    let metrics = server.get("/metrics").await.text();
+    let refits = metrics.lines().find(|l| l.starts_with("optimis_sweep_refits_total ")).expect("the counter");
+    assert_eq!(refits, "optimis_sweep_refits_total 1", "one re-fit for five reads of one checkpoint");
+    server.stop().await;
+}

@@ -83,6 +83,7 @@ impl JobManager {
             merging: Mutex::new(HashSet::new()),
             verified: Mutex::new(HashMap::new()),
             predictions: Default::default(),
+            refit: Default::default(),
             wake: Notify::new(),
             running: AtomicUsize::new(0),
             driver_ended: Notify::new(),

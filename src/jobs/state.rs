@@ -101,6 +101,9 @@ pub(crate) struct Inner {
     pub(super) verified: Mutex<HashMap<i64, String>>,
     /// Predicted figures of sweep runs, per (job, checkpoint checksum) (`sweeps`).
     pub(super) predictions: super::sweeps::PredictionCache,
+    /// One re-fit of predicted sweep points at a time (`sweeps`): concurrent reads of a sweep wait
+    /// for it and then read its result from `predictions` instead of each re-fitting every point.
+    pub(super) refit: tokio::sync::Mutex<()>,
     /// Wakes the scheduler: a job was queued or a worker became free.
     pub(super) wake: Notify,
     pub(super) running: AtomicUsize,

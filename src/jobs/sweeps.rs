@@ -1,11 +1,14 @@
 //! Sweeps on the server: a sweep document planned (`sim::sweep`), its runs inserted as ordinary
 //! queued jobs in one transaction, and its figures and table read back from their checkpoints.
 //!
-//! Bounds: a sweep has at most `--max-sweep-points` points and is refused whole (429) when its
-//! runs would not fit in the queue; every run passes the same budget and work checks as a
-//! submitted job. Planning, validation and the reference quadratures run on the request pool;
-//! predicted points are computed there too, once per checkpoint of their run (a small cache keyed
-//! by the checkpoint's checksum), so a dashboard polling a finished sweep does not re-fit them.
+//! Bounds: a sweep has at most `--max-sweep-points` points and runs and is refused whole (429)
+//! when its runs would not fit in the queue (checked before any quadrature); every run passes the
+//! same budget and work checks as a submitted job. Planning, validation and the reference
+//! quadratures (once per distinct scene, stopped when the client leaves or the server stops) run
+//! on the request pool; predicted points are computed there too, once per checkpoint of their run
+//! (a small cache keyed by the checkpoint's checksum) and one re-fit at a time (concurrent readers
+//! wait for it, up to a timeout, then read the cache), so neither a dashboard polling a sweep nor
+//! several readers at once re-fit every point each.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -116,6 +119,9 @@ pub(super) struct CachedPredictions {
 /// While a run is still running, its predictions are re-fitted at most this often (each of its
 /// checkpoints changes the moments, and a re-fit of every predicted point is real work).
 const REFIT_INTERVAL: Duration = Duration::from_secs(10);
+
+/// The longest a read of a sweep waits for another request's re-fit before it is answered 429.
+const REFIT_WAIT: Duration = Duration::from_secs(20);
 
 impl JobManager {
     /// Plans a sweep, checks every run as a job, and queues the runs; acknowledged once stored.
@@ -402,11 +408,26 @@ impl JobManager {
         }
         let Some((_, _, checksum)) = self.inner.store.load_result(job).await? else { return Ok(Vec::new()) };
         let running = self.active(job).is_some();
-        if let Some(hit) = self.inner.predictions.lock().expect("prediction cache").get(&job)
-            && (hit.checksum == checksum || (running && hit.made.elapsed() < REFIT_INTERVAL))
-        {
-            return Ok(hit.figures.as_ref().clone());
+        let cached = || {
+            let cache = self.inner.predictions.lock().expect("prediction cache");
+            let hit = cache.get(&job)?;
+            (hit.checksum == checksum || (running && hit.made.elapsed() < REFIT_INTERVAL))
+                .then(|| hit.figures.as_ref().clone())
+        };
+        if let Some(hit) = cached() {
+            return Ok(hit);
         }
+        // Single flight: one re-fit at a time, and a reader that waited finds its run re-fitted.
+        let Ok(_refit) = tokio::time::timeout(REFIT_WAIT, self.inner.refit.lock()).await else {
+            return Err(JobError::Busy {
+                detail: "other sweeps' predicted points are being re-fitted; retry".into(),
+                retry_after_seconds: 5,
+            });
+        };
+        if let Some(hit) = cached() {
+            return Ok(hit);
+        }
+        self.inner.metrics.count_sweep_refit();
         let result = self.result(job).await?;
         let (state, _, spec, merged) = self.state_and_total(job).await?;
         let (moments, _) = self.checkpoint_moments(job, &spec, merged).await?;
