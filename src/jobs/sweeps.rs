@@ -23,7 +23,7 @@ use super::checkpoint::spec_json;
 use super::error::JobError;
 use super::manager::JobManager;
 use super::policy::{check_budget, check_iteration_work, range_len};
-use super::references::{scene_reference, scene_reference_is_cached};
+use super::references::{cached_scene_reference, scene_reference};
 use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
 use crate::sim::model::scene::Scene;
 use crate::sim::spec::SpecError;
@@ -165,13 +165,11 @@ impl JobManager {
                     if flag.load(Ordering::Relaxed) || *shutdown.borrow() {
                         return None;
                     }
-                    let cached = scene_reference_is_cached(&scene.spec);
-                    // Past the deadline a run keeps no R → 0 reference (an optional figure).
-                    out.push(if cached || started.elapsed() < REFERENCE_DEADLINE {
-                        scene_reference(scene)
-                    } else {
-                        None
-                    });
+                    // Past the deadline a run keeps no R → 0 reference (an optional figure)
+                    // unless its scene's is already known.
+                    out.push(cached_scene_reference(scene).unwrap_or_else(|| {
+                        (started.elapsed() < REFERENCE_DEADLINE).then(|| scene_reference(scene)).flatten()
+                    }));
                 }
                 Some(out)
             })
@@ -193,6 +191,7 @@ impl JobManager {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        // Again: other requests may have filled the queue while the quadratures ran.
         self.check_room_for(new_jobs.len())?;
         let spec_text = serde_json::to_string(&plan.spec).map_err(|e| JobError::Internal(e.to_string()))?;
         let _guard = self.inner.lifecycle.lock().await;
