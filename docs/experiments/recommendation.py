@@ -53,7 +53,11 @@ def main():
         doc = os.path.join(a.work, f"run-{s}-{a.iterations}.json")
         res = os.path.join(a.work, f"result-{s}-{a.iterations}.json")
         if not os.path.exists(res):
-            text = run(base + ["--iterations", str(a.iterations), "--seed", str(s), "--json", "--out", doc])
+            if os.path.exists(doc):
+                # A kept run: re-solve its moments (what a change of the solver needs).
+                text = run([a.optimis, "report", doc, "--json"] + solver_flags(a.set))
+            else:
+                text = run(base + ["--iterations", str(a.iterations), "--seed", str(s), "--json", "--out", doc])
             open(res, "w").write(text)
         r = json.load(open(res))
         rec = r["recommended"]
@@ -83,6 +87,20 @@ def main():
     out["summary"] = summary(out["seeds"])
     json.dump(out, sys.stdout, indent=1)
     print()
+
+
+def solver_flags(sets):
+    """The `--set solver.…` options as `report --solver` JSON (the only ones this script passes)."""
+    solver = {}
+    for s in sets:
+        key, _, value = s.partition("=")
+        path = key.split(".")
+        assert path[0] == "solver", f"only solver.… settings can re-solve a kept run, got {s}"
+        node = solver
+        for p in path[1:-1]:
+            node = node.setdefault(p, {})
+        node[path[-1]] = json.loads(value)
+    return ["--solver", json.dumps(solver)] if solver else []
 
 
 def fitted_rows(a, doc, long_doc, result):

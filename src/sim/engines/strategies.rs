@@ -68,6 +68,15 @@ impl PathStrategy {
         Self::CorrelationAwarePlanes23,
     ];
 
+    /// The heuristics the stacked optimum puts on its table together (docs/model.md §7): the
+    /// switch and the correlation-aware heuristic (over all planes, and renormalised over planes
+    /// 2–3). The balance and power heuristics weigh paths by the same densities as the
+    /// correlation-aware one, so their columns differ from its column by little: stacked together,
+    /// their coefficients trade off against one another (β of ±3 with SEs as large at 10⁴
+    /// iterations, docs/results.md §10) and the fit pays for that noise. Each of them is still
+    /// corrected by a table on its own (the `…_corrected` rows).
+    pub const STACKED: [PathStrategy; 3] = [Self::Switch, Self::CorrelationAware, Self::CorrelationAwarePlanes23];
+
     /// Position in [`PathStrategy::ALL`] (the index of its sums in the moments).
     pub fn index(self) -> usize {
         self as usize

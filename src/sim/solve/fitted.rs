@@ -1,7 +1,8 @@
 //! The fitted rows of the noise table: the paper's table cross-fitted at the spec's λ
 //! (`optimal_holdout`) and at a λ chosen by cross-validation (`optimal_cv`), the stacked optimum —
-//! the table with every heuristic that keeps the fixed weights stacked on it (`optimal_stacked`,
-//! docs/model.md §7) — and, for insight, each such heuristic corrected by a table alone
+//! the table with the switch and the correlation-aware heuristics that keep the fixed weights
+//! stacked on it (`optimal_stacked`, docs/model.md §7) — and, for insight, each heuristic that
+//! keeps them corrected by a table alone
 //! (`…_corrected`, at the stacked optimum's λ, so that they cost one cross-fit each instead of a λ
 //! search). Every figure is cross-fitted; the rows chosen by cross-validation also carry their
 //! in-sample figures, labelled as such.
@@ -9,7 +10,7 @@
 use super::crossfit::{CrossFitting, Scored, Selection, score, select_lambda};
 use super::options::SolverOptions;
 use super::row::{HeuristicWeight, LambdaScore, NoiseRow};
-use super::solver::stackable;
+use super::solver::{stack_family, stackable};
 use super::strategy::Strategy;
 use crate::sim::model::cells::CellGrid;
 
@@ -46,7 +47,8 @@ pub fn fitted_rows(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -
         out.rows.push(NoiseRow::failed(Strategy::OptimalStacked, why.to_string()));
         return out;
     }
-    let stacked = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &family).map_err(no_lambda);
+    let stacked =
+        select_lambda(cf, grid, fixed, &solver.cv_lambdas, &stack_family(cf.all.layout, fixed)).map_err(no_lambda);
     let lambda = stacked.as_ref().ok().map(|s| s.chosen.cross_fit.lambda);
     out.push_selection(Strategy::OptimalStacked, stacked, cf);
     for &h in &family {

@@ -22,7 +22,7 @@ use super::row::path_fold_sums;
 use super::row::path_row;
 pub use super::row::{HeuristicWeight, NoiseRow, WeightErrors, path_rows, respects_fixed};
 pub(crate) use super::row::{central_3_4, power_sums};
-use super::solver::{Fit, SolveError, fit, stackable};
+use super::solver::{Fit, SolveError, fit, stack_family};
 use super::strategy::Strategy;
 use crate::sim::engines::tally::PathStrategy;
 use crate::sim::model::cells::CellGrid;
@@ -96,7 +96,7 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
     }
 }
 
-/// The stacked optimum with the fixed weights freed (every heuristic admitted), at the λ the
+/// The stacked optimum with the fixed weights freed (all its heuristics admitted), at the λ the
 /// stacked (or else the table's) optimum chose: what freeing the fixed weights would give.
 fn unconstrained_optimum(
     cf: &CrossFitting,
@@ -105,7 +105,7 @@ fn unconstrained_optimum(
     fitted: &[Fitted],
 ) -> Option<Scored> {
     let free = FixedWeights::default();
-    let family = stackable(cf.all.layout, &free);
+    let family = stack_family(cf.all.layout, &free);
     let lambda = [Strategy::OptimalStacked, Strategy::OptimalCv]
         .iter()
         .find_map(|s| fitted.iter().find(|f| f.strategy == *s))

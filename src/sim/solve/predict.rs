@@ -24,7 +24,7 @@ use super::noise::{NoiseRow, respects_fixed};
 use super::options::SolverOptions;
 use super::recommend::{FoldSums, recommend};
 use super::report::{RecommendedWeights, WeightRow, weight_rows};
-use super::solver::stackable;
+use super::solver::stack_family;
 use super::strategy::Strategy;
 use super::ystats::{YStats, unpack};
 use crate::sim::engines::layout::Layout;
@@ -227,7 +227,7 @@ impl Predictor {
             None => rows.push(NoiseRow::failed(Strategy::OptimalCv, "every fold needs at least 2 iterations".into())),
             Some(cf) => {
                 // Heuristics whose weights depend on N_F and N_B have no column at another budget.
-                let family: Vec<PathStrategy> = stackable(cf.all.layout, &solver.fixed)
+                let family: Vec<PathStrategy> = stack_family(cf.all.layout, &solver.fixed)
                     .into_iter()
                     .filter(|h| from == to || !h.depends_on_budget())
                     .collect();

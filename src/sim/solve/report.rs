@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
 use super::recommend::Gain;
-use super::solver::stackable;
+use super::solver::stack_family;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
 use super::warnings::{Warning, warnings};
@@ -205,7 +205,7 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         (Some(q), _) => {
             let family = match q.strategy {
                 Strategy::Optimal => Ok(Vec::new()),
-                Strategy::OptimalStacked => Ok(stackable(moments.layout(), &solver.fixed)),
+                Strategy::OptimalStacked => Ok(stack_family(moments.layout(), &solver.fixed)),
                 s => PathStrategy::STACKABLE
                     .into_iter()
                     .find(|&h| Strategy::corrected(h) == Some(s))

@@ -150,6 +150,12 @@ pub fn stackable(layout: Layout, fixed: &FixedWeights) -> Vec<PathStrategy> {
     layout.heuristics().iter().copied().filter(|&h| admits(fixed, h)).collect()
 }
 
+/// The heuristics the stacked optimum stacks together on a table of moments in `layout` under
+/// `fixed`: those of [`PathStrategy::STACKED`] that can be stacked.
+pub fn stack_family(layout: Layout, fixed: &FixedWeights) -> Vec<PathStrategy> {
+    stackable(layout, fixed).into_iter().filter(|h| PathStrategy::STACKED.contains(h)).collect()
+}
+
 /// Free parameterisation of one cell: (T₀, T₁) = base + Σ_k z_k·coef_k.
 fn cell_parameters(fixed: &FixedWeights) -> ([f64; 2], Vec<[f64; 2]>) {
     match (fixed.w0, fixed.w1, fixed.w2) {

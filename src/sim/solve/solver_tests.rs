@@ -193,6 +193,25 @@ fn the_stacked_family_finds_a_heuristic_that_beats_every_table() {
     assert!(stackable(Layout::new(k, 2), &FixedWeights::default()).is_empty());
 }
 
+/// The stacked optimum stacks the switch and the correlation-aware heuristics that keep the fixed
+/// weights (docs/model.md §7): not the balance and power ones, whose columns nearly repeat them.
+#[test]
+fn the_stack_is_the_switch_and_the_correlation_aware_heuristics_that_keep_the_fixed_weights() {
+    use PathStrategy::*;
+    let layout = Layout::new(4, 3);
+    let paper = FixedWeights { w0: Some(0.0), ..Default::default() };
+    assert_eq!(stack_family(layout, &paper), vec![Switch, CorrelationAwarePlanes23]);
+    assert_eq!(
+        stack_family(layout, &FixedWeights::default()),
+        vec![Switch, CorrelationAware, CorrelationAwarePlanes23]
+    );
+    let w1 = FixedWeights { w1: Some(0.5), ..Default::default() };
+    assert!(stack_family(layout, &w1).is_empty());
+    assert!(stack_family(Layout::new(4, 2), &paper).is_empty());
+    // Every stacked heuristic is one the moments keep a column of.
+    assert!(PathStrategy::STACKED.iter().all(|h| PathStrategy::STACKABLE.contains(h)));
+}
+
 /// Under a penalty, a cell with fewer than 30 merge events is set by its neighbours and says so.
 #[test]
 fn penalty_dominated_cells_are_smoothed() {

@@ -43,8 +43,9 @@ pub enum Strategy {
     PowerPlanes23,
     /// The correlation-aware heuristic over planes 2 and 3 (w0 = 0).
     CorrelationAwarePlanes23,
-    /// The stacked optimum: a table plus β_h times every heuristic that keeps the fixed weights,
-    /// λ chosen by cross-validation, cross-fitted figures (docs/model.md §7).
+    /// The stacked optimum: a table plus β_h times the switch and the correlation-aware
+    /// heuristics that keep the fixed weights, λ chosen by cross-validation, cross-fitted figures
+    /// (docs/model.md §7).
     OptimalStacked,
     /// The switch corrected by a table (β fitted too), at the stacked optimum's λ.
     SwitchCorrected,
