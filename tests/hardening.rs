@@ -496,3 +496,32 @@ async fn a_corrupted_checkpoint_is_reported_not_served() {
     assert_eq!(server.job(id).await["state"], "succeeded", "the job is unchanged");
     server.stop().await;
 }
+
+/// Issue 22, item 6: a checkpoint corrupted under a running server, after its result was served
+/// (and its moments verified), is reported by the next result read once the verification has
+/// aged (`REVERIFY_AFTER`, 1 s) — not served unflagged for as long as the server runs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_checkpoint_corrupted_under_a_running_server_is_reported() {
+    let server = TestServer::start().await;
+    let (id, _) = finished(&server, 2).await;
+    assert_eq!(server.get(&format!("/v1/jobs/{id}/result")).await.status, 200);
+    let url = format!("sqlite://{}", server.dir.path().join("optimis.db").display());
+    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
+    let mut moments: Vec<u8> =
+        sqlx::query_scalar("SELECT moments FROM checkpoints WHERE job_id = ?").bind(id).fetch_one(&db).await.unwrap();
+    let at = moments.windows(9).position(|w| w == b"\"sum_yy\":").unwrap() + 40;
+    let pos = at + moments[at..].iter().position(|b| (b'1'..=b'8').contains(b)).unwrap();
+    moments[pos] += 1;
+    sqlx::query("UPDATE checkpoints SET moments = ? WHERE job_id = ?")
+        .bind(&moments)
+        .bind(id)
+        .execute(&db)
+        .await
+        .unwrap();
+    db.close().await;
+    // Past the verification's age (an ordering, not a limit on how fast the server is).
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
+    assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
+    server.stop().await;
+}

@@ -250,3 +250,162 @@ async fn two_servers_with_tokens_exchange_a_study_over_https() {
     a.kill();
     b.kill();
 }
+
+/// Issue 22, item 4: a study of slow but valid sources ends at its deadline (`--study-deadline`),
+/// with a problem naming `sources` and the deadline, instead of holding its request for the sum of
+/// its pulls' deadlines (eight sources that trickle their documents took 47.8 s; 256 could take
+/// hours). Nothing is created.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_study_of_slow_sources_ends_at_its_deadline() {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    tokio::spawn(async move {
+        while let Ok((mut stream, _)) = listener.accept().await {
+            tokio::spawn(async move {
+                let mut request = [0u8; 4096];
+                let _ = stream.read(&mut request).await;
+                let head = "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 100000\r\n\r\n{";
+                if stream.write_all(head.as_bytes()).await.is_err() {
+                    return;
+                }
+                // A byte every 100 ms: never idle long enough for the read timeout.
+                while stream.write_all(b" ").await.is_ok() {
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+            });
+        }
+    });
+    let allowed = base.clone();
+    let server = TestServer::start_with(move |c| {
+        c.peers = allow(&[&allowed]);
+        c.policy.study_deadline = Duration::from_secs(2);
+    })
+    .await;
+    let sources: Vec<_> = (1..=8).map(|i| json!({ "from": format!("{base}/v1/jobs/{i}") })).collect();
+    let problem = assert_problem(server.study(&json!({ "sources": sources })).await, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.starts_with("sources:") && detail.contains("study deadline of 2 s"), "{detail}");
+    assert_eq!(server.get("/v1/jobs").await.json()["jobs"].as_array().unwrap().len(), 0, "nothing was created");
+    server.stop().await;
+}
+
+/// Writes a self-signed certificate for `localhost` (marked CA:TRUE when `ca`, as a plain
+/// `openssl req -x509` makes it) and its key to `dir`; the paths.
+fn self_signed(dir: &std::path::Path, name: &str, ca: bool) -> (std::path::PathBuf, std::path::PathBuf) {
+    let mut params = rcgen::CertificateParams::new(vec!["localhost".to_string()]).unwrap();
+    if ca {
+        params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    }
+    let key = rcgen::KeyPair::generate().unwrap();
+    let cert = params.self_signed(&key).unwrap();
+    let (cert_path, key_path) = (dir.join(format!("{name}.pem")), dir.join(format!("{name}.key")));
+    std::fs::write(&cert_path, cert.pem()).unwrap();
+    secret_file(&key_path, &key.serialize_pem());
+    (cert_path, key_path)
+}
+
+/// Issue 22, item 7: a peer serving a self-signed certificate marked CA:TRUE (what `openssl req
+/// -x509` makes; WebPKI refuses it as a server's own certificate, `CaUsedAsEndEntity`) is trusted
+/// when that certificate is given to `--peer-ca`: it is pinned. A peer with another certificate is
+/// refused, and the problem says why (the TLS error, and the flag that would trust it) instead of
+/// only "handshake failed".
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_self_signed_certificate_given_to_peer_ca_is_pinned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cert, key) = self_signed(dir.path(), "peer", true);
+    let (other, _) = self_signed(dir.path(), "other", true);
+    let files = optimis::server::TlsFiles { cert: cert.clone(), key };
+    let peer = TestServer::start_with(move |c| c.tls = Some(files)).await;
+    let port = peer.base.rsplit(':').next().unwrap().to_string();
+    let base = format!("https://localhost:{port}");
+    let source = json!({ "sources": [{ "from": format!("{base}/v1/jobs/999") }] });
+
+    let (b, ca) = (base.clone(), cert.clone());
+    let trusting = TestServer::start_with(move |c| {
+        c.peers = allow(&[&b]);
+        c.peer_ca = Some(ca);
+    })
+    .await;
+    let problem = assert_problem(trusting.study(&source).await, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.contains("404"), "the handshake passed and the peer answered: {detail}");
+
+    let b = base.clone();
+    let other_ca = TestServer::start_with(move |c| {
+        c.peers = allow(&[&b]);
+        c.peer_ca = Some(other);
+    })
+    .await;
+    let problem = assert_problem(other_ca.study(&source).await, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("TLS handshake") && detail.contains("certificate") && detail.contains("--peer-ca"),
+        "{detail}"
+    );
+    for server in [trusting, other_ca, peer] {
+        server.stop().await;
+    }
+}
+
+/// An Ed25519 key pair in the PEM files OpenSSL writes; (private, public) paths.
+fn signing_keys(dir: &std::path::Path, name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let pair = rcgen::KeyPair::generate_for(&rcgen::PKCS_ED25519).unwrap();
+    let (private, public) = (dir.join(format!("{name}.pem")), dir.join(format!("{name}.pub.pem")));
+    secret_file(&private, &pair.serialize_pem());
+    std::fs::write(&public, pair.public_key_pem()).unwrap();
+    (private, public)
+}
+
+/// Issue 22, item 12: provenance. Server B signs what it exports (`--signing-key`); server A
+/// trusts B's key (`--trust`) and signs its own exports. A study of B's job verifies; a document
+/// of B's edited and re-sealed (its checksum recomputed, as anyone can) is refused with 422 naming
+/// the signature; an unsigned one is refused while `--trust` is set.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_servers_with_signing_keys_exchange_a_verified_study_and_refuse_forgeries() {
+    let dir = tempfile::tempdir().unwrap();
+    let (key_a, _) = signing_keys(dir.path(), "a");
+    let (key_b, public_b) = signing_keys(dir.path(), "b");
+    let b = TestServer::start_with(move |c| c.signing_key = Some(key_b)).await;
+    let allowed = b.base.clone();
+    let a = TestServer::start_with(move |c| {
+        c.peers = allow(&[&allowed]);
+        c.trust = vec![public_b];
+        c.signing_key = Some(key_a);
+    })
+    .await;
+    let spec = json!({ "iterations": 6, "light_paths": 100_000, "camera_paths": 30, "seed": 5 });
+    let job = b.submit_and_wait(&spec).await;
+    let exported = b.moments(job).await;
+    let b_key = exported["signature"]["key_id"].as_str().expect("B signs its exports").to_string();
+    assert_eq!(exported["signature"]["algorithm"], "ed25519");
+
+    let study = a.study(&json!({ "sources": [{ "from": format!("{}/v1/jobs/{job}", b.base) }] })).await;
+    assert_eq!(study.status, 201, "{}", study.text());
+    let merged = study.json()["id"].as_i64().unwrap();
+    let a_export = a.moments(merged).await;
+    let a_key = a_export["signature"]["key_id"].as_str().expect("A signs what it exports");
+    assert_ne!(a_key, b_key);
+    assert_eq!(a_export["moments"], exported["moments"], "the study holds B's statistics");
+
+    // Edited (another solver λ claimed) and re-sealed: a valid checksum, a broken signature.
+    let mut doc: optimis::sim::document::MomentsDocument = serde_json::from_value(exported.clone()).unwrap();
+    doc.spec.solver.lambda = 0.5;
+    let forged = serde_json::to_value(doc.sealed()).unwrap();
+    let problem = assert_problem(a.study(&json!({ "sources": [forged] })).await, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.starts_with("sources[0].signature:") && detail.contains("edited"), "{detail}");
+    // Unsigned: refused, saying how to trust a key.
+    let mut unsigned = exported.clone();
+    unsigned.as_object_mut().unwrap().remove("signature");
+    let problem = assert_problem(a.study(&json!({ "sources": [unsigned.clone()] })).await, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.contains("unsigned") && detail.contains("--trust"), "{detail}");
+    // B trusts nobody: it takes the unsigned document as before.
+    let target =
+        b.submit_and_wait(&json!({ "iterations": 6, "light_paths": 100_000, "camera_paths": 30, "seed": 6 })).await;
+    let plain = b.merge(target, &unsigned).await;
+    assert_eq!(plain.status, 200, "{}", plain.text());
+    for server in [a, b] {
+        server.stop().await;
+    }
+}

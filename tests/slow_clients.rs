@@ -75,3 +75,63 @@ async fn idle_connections_cannot_exhaust_the_server() {
     }
     server.stop().await;
 }
+
+/// Issue 22, item 3: a document request takes a processing slot only once its body is whole, so
+/// clients trickling study bodies (more of them than `--max-document-requests`) hold none: a third
+/// study is answered on its merits (422, its source list is empty), not told to retry (429).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn trickling_document_bodies_hold_no_processing_slot() {
+    let server = TestServer::start_with(|c| c.http.max_document_requests = 2).await;
+    let addr = server.base.trim_start_matches("http://").to_string();
+    let mut tricklers = Vec::new();
+    for _ in 0..3 {
+        let mut s = TcpStream::connect(&addr).await.unwrap();
+        let head = "POST /v1/studies HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n\
+                    Content-Length: 100000\r\n\r\n{\"sources\": [";
+        s.write_all(head.as_bytes()).await.unwrap();
+        tricklers.push(s);
+    }
+    // Let the server read their heads and start waiting for their bodies (the old code took a
+    // slot there; a study then waited 10 s for one and was answered 429).
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    for s in &mut tricklers {
+        s.write_all(b" ").await.unwrap();
+    }
+    let reply = server.post("/v1/studies", &serde_json::json!({ "sources": [] })).await;
+    assert_eq!(reply.status, 422, "{}", reply.text());
+    assert!(reply.text().contains("sources"), "{}", reply.text());
+    drop(tricklers);
+    server.stop().await;
+}
+
+/// Issue 22, item 5: one client address holds at most `--max-connections-per-client` connections;
+/// a further one is answered 429 and closed at once (not held until the header timeout), and
+/// another client — here 127.0.0.2, loopback too — is served while the first holds its share
+/// half-open. (One client with 600 half-open connections once held the server at ~10 s latency.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_client_cannot_hold_every_connection() {
+    let server = TestServer::start_with(|c| {
+        c.connections.max_connections = 8;
+        c.connections.max_per_client = 4;
+        c.connections.header_timeout = Duration::from_secs(120);
+    })
+    .await;
+    let addr = server.base.trim_start_matches("http://").to_string();
+    let mut held = Vec::new();
+    for _ in 0..4 {
+        let mut s = TcpStream::connect(&addr).await.unwrap();
+        s.write_all(b"GET /healthz HTTP/1.1\r\n").await.unwrap(); // half a head, never finished
+        held.push(s);
+    }
+    // Give the accept loop time to admit the four (an ordering, not a speed limit).
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut over = TcpStream::connect(&addr).await.unwrap();
+    let answer = until_closed(&mut over).await;
+    assert!(answer.starts_with("HTTP/1.1 429") && answer.contains("--max-connections-per-client"), "{answer}");
+
+    let other = reqwest::Client::builder().local_address(std::net::IpAddr::from([127, 0, 0, 2])).build().unwrap();
+    let health = other.get(format!("{}/healthz", server.base)).send().await.unwrap();
+    assert_eq!(health.status(), 200);
+    drop(held);
+    server.stop().await;
+}

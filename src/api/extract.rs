@@ -6,8 +6,12 @@
 //! inline for small bodies, on the blocking pool above [`INLINE_PARSE_LIMIT`] so that no tokio
 //! worker spends milliseconds parsing; a syntax error is a 400 that says where, and what the JSON
 //! means is checked by the handlers (422). [`DocumentBody`] hands the bytes of a moments document
-//! to the job layer, which parses them straight into typed values on its request pool; at most a
-//! few such requests are read at once ([`super::AppState::documents`]).
+//! to the job layer, which parses them straight into typed values on its request pool. A document
+//! body is read against a byte budget shared by all document requests
+//! ([`super::AppState::document_memory`]), taken as its bytes arrive — so a client trickling a
+//! body holds only what it sent — and only once it is whole does the request take one of the few
+//! processing slots ([`super::AppState::documents`]): a slot is never held while waiting for a
+//! client's bytes.
 
 use std::time::Duration;
 
@@ -16,7 +20,9 @@ use axum::extract::rejection::BytesRejection;
 use axum::extract::{FromRequest, FromRequestParts, Path, Request};
 use axum::http::StatusCode;
 use axum::http::request::Parts;
+use futures_util::StreamExt;
 use serde_json::Value;
+use tokio::sync::OwnedSemaphorePermit;
 
 use super::AppState;
 use super::error::ApiError;
@@ -25,7 +31,8 @@ use super::error::ApiError;
 /// the blocking pool.
 const INLINE_PARSE_LIMIT: usize = 64 << 10;
 
-/// How long a document request waits for a free reading slot before it is told to retry.
+/// How long a document request, its body read, waits for a free processing slot before it is
+/// told to retry.
 const DOCUMENT_SLOT_WAIT: Duration = Duration::from_secs(10);
 
 /// Reads the whole body within `timeout`, honouring the route's size limit.
@@ -76,18 +83,62 @@ impl FromRequest<AppState> for JsonBody {
     }
 }
 
-/// The bytes of a moments document (merges and studies), read under the document size limit
-/// while holding one of the few document slots.
+/// The bytes of a moments document (merges and studies), read under the document size limit and
+/// the shared byte budget, then given one of the few processing slots.
 pub struct DocumentBody {
     pub bytes: Bytes,
     /// Held until the handler has finished with the document.
-    pub _slot: tokio::sync::OwnedSemaphorePermit,
+    pub _slot: OwnedSemaphorePermit,
+    /// The body's share of the byte budget, held as long as its bytes are.
+    pub _memory: Vec<OwnedSemaphorePermit>,
+}
+
+/// Reads a document body chunk by chunk within the body timeout and the document size limit,
+/// taking the byte budget for each chunk as it arrives.
+async fn read_document(req: Request, state: &AppState) -> Result<(Bytes, Vec<OwnedSemaphorePermit>), ApiError> {
+    let (timeout, limit) = (state.body_timeout, state.document_bytes);
+    let read = async {
+        let mut body = req.into_body().into_data_stream();
+        let mut bytes = Vec::new();
+        let mut memory = Vec::new();
+        while let Some(chunk) = body.next().await {
+            let chunk =
+                chunk.map_err(|e| ApiError::MalformedJson(format!("the request body could not be read: {e}")))?;
+            if bytes.len() + chunk.len() > limit {
+                return Err(ApiError::PayloadTooLarge(format!(
+                    "the request body is too large: more than {limit} bytes (--document-limit)"
+                )));
+            }
+            let n = u32::try_from(chunk.len()).expect("a chunk is at most the document limit");
+            memory.push(
+                state
+                    .document_memory
+                    .clone()
+                    .acquire_many_owned(n)
+                    .await
+                    .map_err(|_| ApiError::Unavailable("the server is shutting down".into()))?,
+            );
+            bytes.extend_from_slice(&chunk);
+        }
+        Ok((Bytes::from(bytes), memory))
+    };
+    let (bytes, memory) = tokio::time::timeout(timeout, read).await.map_err(|_| {
+        ApiError::RequestTimeout(format!(
+            "the request body did not arrive within {} s (--body-timeout)",
+            timeout.as_secs_f64()
+        ))
+    })??;
+    if bytes.iter().all(u8::is_ascii_whitespace) {
+        return Err(ApiError::MalformedJson("the request body is empty; expected a JSON object".into()));
+    }
+    Ok((bytes, memory))
 }
 
 impl FromRequest<AppState> for DocumentBody {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
+        let (bytes, memory) = read_document(req, state).await?;
         let slot = tokio::time::timeout(DOCUMENT_SLOT_WAIT, state.documents.clone().acquire_owned())
             .await
             .map_err(|_| ApiError::TooManyRequests {
@@ -95,8 +146,7 @@ impl FromRequest<AppState> for DocumentBody {
                 retry_after_seconds: 5,
             })?
             .map_err(|_| ApiError::Unavailable("the server is shutting down".into()))?;
-        let bytes = read_body(req, state).await?;
-        Ok(DocumentBody { bytes, _slot: slot })
+        Ok(DocumentBody { bytes, _slot: slot, _memory: memory })
     }
 }
 

@@ -53,10 +53,20 @@ pub struct AppState {
     pub guard: Guard,
     /// The whole request body must arrive within this.
     pub body_timeout: Duration,
-    /// Document requests (merges, studies) being read or processed at once: each may hold up to
-    /// `--document-limit` bytes and its parsed document.
+    /// Document requests (merges, studies) processed at once, their bodies read: each holds its
+    /// parsed document and its share of the heavy work.
     pub documents: Arc<tokio::sync::Semaphore>,
+    /// Bytes of document bodies held at once, taken as they arrive (`extract`):
+    /// [`DOCUMENT_MEMORY_BODIES`] times the document limit.
+    pub document_memory: Arc<tokio::sync::Semaphore>,
+    /// The document routes' body limit, bytes.
+    pub document_bytes: usize,
 }
+
+/// Whole document bodies held beyond those being processed: room for a few uploads to arrive
+/// while `--max-document-requests` are being merged, so that the budget bounds memory without
+/// making an upload wait for another's processing.
+pub const DOCUMENT_MEMORY_BODIES: usize = 2;
 
 #[derive(OpenApi)]
 #[openapi(
@@ -169,6 +179,10 @@ pub fn router(jobs: JobManager, limits: &HttpLimits, token: Option<BearerToken>,
         guard,
         body_timeout: limits.body_timeout,
         documents: Arc::new(tokio::sync::Semaphore::new(limits.max_document_requests)),
+        document_memory: Arc::new(tokio::sync::Semaphore::new(
+            (limits.max_document_requests + DOCUMENT_MEMORY_BODIES).saturating_mul(limits.document_bytes),
+        )),
+        document_bytes: limits.document_bytes,
     };
     let body_limit = limits.body_bytes;
     router

@@ -27,6 +27,16 @@ pub struct MergeArgs {
     /// Where to write the merged document.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// Accept only documents signed by this Ed25519 public key (PEM); repeatable, as the server's
+    /// `--trust`.
+    #[cfg(feature = "server")]
+    #[arg(long, value_name = "FILE")]
+    pub trust: Vec<PathBuf>,
+    /// Sign the merged document with this Ed25519 private key (PKCS#8 PEM), as the server's
+    /// `--signing-key`.
+    #[cfg(feature = "server")]
+    #[arg(long, value_name = "FILE")]
+    pub signing_key: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -72,9 +82,21 @@ pub(super) fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError>
 
 pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     let documents = args.documents.iter().map(read_document).collect::<Result<Vec<_>, _>>()?;
+    #[cfg(feature = "server")]
+    let provenance = {
+        use crate::jobs::signing::Provenance;
+        let provenance =
+            Provenance::load(args.signing_key.as_deref(), &args.trust).map_err(|e| CliError::Config(e.to_string()))?;
+        for (doc, path) in documents.iter().zip(&args.documents) {
+            provenance.trust.check(doc, "").map_err(|e| CliError::Config(format!("{}: {e}", path.display())))?;
+        }
+        provenance
+    };
     // The error names the input at fault (the first that conflicts with those before it).
     let merged = merge_documents_at(&documents)
         .map_err(|(i, source)| CliError::Document { path: args.documents[i].clone(), source })?;
+    #[cfg(feature = "server")]
+    let merged = provenance.sign(merged);
     write_atomically(&args.out, &merged.to_json())?;
     eprintln!(
         "merged {} documents: {} iterations → {}",

@@ -59,6 +59,9 @@ pub struct ServeArgs {
     /// Most points, and most runs, of one sweep (`POST /v1/sweeps`; each run is a queued job).
     #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_SWEEP_POINTS as u64, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_sweep_points: u64,
+    /// Seconds a study (`POST /v1/studies`) may take to gather and merge its sources.
+    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_STUDY_DEADLINE.as_secs_f64(), value_parser = positive_seconds)]
+    pub study_deadline: f64,
     /// Most event streams open at once (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_event_streams: u64,
@@ -68,6 +71,9 @@ pub struct ServeArgs {
     /// Most connections open at once (further ones wait to be accepted).
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_connections: u64,
+    /// Most connections open at once from one client address (further ones: 429, closed).
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub max_connections_per_client: u64,
     /// Seconds for a request head (or a TLS handshake) to arrive; also how long a keep-alive
     /// connection may sit idle between requests.
     #[arg(long, default_value_t = 10.0, value_parser = positive_seconds)]
@@ -92,6 +98,14 @@ pub struct ServeArgs {
     /// PEM certificates trusted for https peers besides the system's (e.g. a self-signed one).
     #[arg(long, value_name = "FILE")]
     pub peer_ca: Option<PathBuf>,
+    /// Sign exported moments documents with this Ed25519 private key (PKCS#8 PEM, e.g. from
+    /// `openssl genpkey -algorithm ed25519`).
+    #[arg(long, value_name = "FILE")]
+    pub signing_key: Option<PathBuf>,
+    /// Accept in merges and studies only documents signed by this Ed25519 public key (PEM, e.g. from
+    /// `openssl pkey -in KEY -pubout`); repeatable. Without it signatures are not required.
+    #[arg(long, value_name = "FILE")]
+    pub trust: Vec<PathBuf>,
     /// A host name this server also answers to when bound to loopback (a proxy's public name).
     /// Repeatable.
     #[arg(long = "allowed-host", value_name = "NAME")]
@@ -183,6 +197,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
             max_cells: args.max_cells as usize,
             max_queued_jobs: args.max_queued_jobs as usize,
             max_sweep_points: args.max_sweep_points as usize,
+            study_deadline: Duration::from_secs_f64(args.study_deadline),
         },
         http: HttpLimits {
             body_bytes: args.body_limit as usize,
@@ -193,6 +208,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         },
         connections: ConnectionLimits {
             max_connections: args.max_connections as usize,
+            max_per_client: args.max_connections_per_client as usize,
             header_timeout: Duration::from_secs_f64(args.header_timeout),
             send_timeout: Duration::from_secs_f64(args.send_timeout),
         },
@@ -200,6 +216,8 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         tls: args.tls_cert.zip(args.tls_key).map(|(cert, key)| TlsFiles { cert, key }),
         peers,
         peer_ca: args.peer_ca,
+        signing_key: args.signing_key,
+        trust: args.trust,
         allowed_hosts: args.allowed_hosts,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;

@@ -28,7 +28,7 @@ impl JobManager {
         let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
         let done = checkpoint.iterations_done;
         let evaluation = self
-            .compute(move || -> Result<Evaluation, JobError> {
+            .compute_heavy(move |_| -> Result<Evaluation, JobError> {
                 let job = spec.validate()?;
                 evaluate(&moments, &job.config.cells, &given).map_err(|e| SpecError::new(e.field, e.message).into())
             })

@@ -24,7 +24,6 @@
 //! memory and their transitions in `state`; the loop that starts them in `scheduler`.
 
 use std::collections::{HashMap, HashSet, VecDeque};
-use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
@@ -35,12 +34,14 @@ use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
 use super::checkpoint::spec_json;
+use super::compute::{Pools, Stop};
 use super::error::JobError;
 use super::peers::Peers;
 use super::policy::{RunPolicy, check_budget, check_iteration_work, range_len, refuse_shard_extension, target_total};
 use super::references::scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row, rfc3339};
 use super::scheduler::scheduler;
+use super::signing::Provenance;
 use super::state::{ActiveJob, Inner, MergeReservation, StopReason};
 use crate::metrics::{JobSample, Metrics};
 use crate::sim::math::digest::sha256_hex;
@@ -58,22 +59,25 @@ impl JobManager {
     /// (running ones first, each to resume from its last checkpoint; a job whose cancel was
     /// acknowledged ends cancelled instead) and starts the scheduler.
     ///
-    /// `pool` runs the jobs; `requests` runs the computations requests wait for; `peers` are the
+    /// `pool` runs the jobs; `pools` run the computations requests wait for; `provenance` signs
+    /// exports and checks what merges bring; `peers` are the
     /// servers merges may pull from.
     pub async fn start(
         store: Store,
         policy: RunPolicy,
         pool: Arc<rayon::ThreadPool>,
-        requests: rayon::ThreadPool,
+        pools: Pools,
         metrics: Arc<Metrics>,
         peers: Peers,
+        provenance: Provenance,
     ) -> Result<Self, StoreError> {
         let (shutdown, _) = watch::channel(false);
         let inner = Arc::new(Inner {
             store,
             pool,
-            requests,
+            pools,
             peers,
+            provenance,
             metrics,
             policy,
             runtime: Handle::current(),
@@ -162,20 +166,21 @@ impl JobManager {
         Ok(())
     }
 
-    /// Runs `f` on the request pool and awaits its result (CPU work stays off tokio's workers).
+    /// Runs light work `f` (parsing, validation, checksums) on the request pool and awaits it.
     pub(super) async fn compute<T: Send + 'static>(
         &self,
         f: impl FnOnce() -> T + Send + 'static,
     ) -> Result<T, JobError> {
-        let (tx, rx) = tokio::sync::oneshot::channel();
-        self.inner.requests.spawn(move || {
-            // A panic must not abort the process (rayon's default for spawned work).
-            let _ = tx.send(std::panic::catch_unwind(AssertUnwindSafe(f)));
-        });
-        match rx.await {
-            Ok(Ok(value)) => Ok(value),
-            _ => Err(JobError::Internal("a computation panicked".into())),
-        }
+        self.inner.pools.light(f).await
+    }
+
+    /// Runs heavy work `f` (quadratures, re-fits, re-solves, predictions) on the bounded heavy
+    /// pool (`compute`): 429 when it stays full; `f` can see that its request went away.
+    pub(super) async fn compute_heavy<T: Send + 'static>(
+        &self,
+        f: impl FnOnce(&Stop) -> T + Send + 'static,
+    ) -> Result<T, JobError> {
+        self.inner.pools.heavy(self.shutdown_signal(), f).await
     }
 
     /// Receives shutdown: true once the server is stopping.

@@ -11,24 +11,30 @@
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
 //! * [`state`] — the jobs in memory (`ActiveJob`, `StopReason`) and the transitions of their state;
+//! * [`compute`] — the pools a request's CPU work runs on: light work, and bounded heavy work;
 //! * [`references`] — each configuration's expected luminances, computed once;
 //! * [`checkpoint`] — the stored forms: spec JSON, checkpoint encoding and verified decoding;
 //! * [`policy`] — what this server accepts: budgets, the work of an iteration, extension targets;
+//! * [`peer_tls`] — how https peers' certificates are verified (roots, and `--peer-ca` pins);
+//! * [`signing`] — provenance: this server's signature on exports, the keys merges require;
 //! * [`peers`] — moments documents pulled from allowed peer servers, for merges;
 //! * [`resource`], [`documents`] — what the API shows of a job; [`error`] — what job operations fail with.
 
 pub mod checkpoint;
+pub mod compute;
 pub mod documents;
 pub mod driver;
 pub mod error;
 pub mod evaluation;
 pub mod manager;
+pub mod peer_tls;
 pub mod peers;
 pub mod policy;
 pub mod prediction;
 pub mod references;
 pub mod resource;
 pub mod scheduler;
+pub mod signing;
 pub mod solves;
 pub mod state;
 pub mod statistics;

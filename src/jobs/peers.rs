@@ -14,10 +14,11 @@
 //!   [`ERROR_BODY_LIMIT`] bytes and never echoed (a peer's error text could hold anything, and
 //!   echoing it would make this server an oracle for what sits at a URL);
 //! * at most [`CONCURRENT_PULLS`] pulls at once, server-wide, so that memory stays below that many
-//!   document limits.
+//!   document limits; a pull waits at most [`PULL_WAIT`] for its turn (then 429), and a study's
+//!   pulls together at most its deadline (`--study-deadline`).
 //!
-//! https peers are verified against the system's roots plus any `--peer-ca` certificates (rustls,
-//! with the ring provider).
+//! https peers are verified against the system's roots plus any `--peer-ca` certificates, each of
+//! which is also pinned (`peer_tls`; rustls with the ring provider).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -26,7 +27,11 @@ use std::time::Duration;
 use reqwest::Url;
 use tokio::sync::Semaphore;
 
+use rustls::pki_types::CertificateDer;
+use rustls::pki_types::pem::PemObject;
+
 use super::error::JobError;
+use super::peer_tls::client_config;
 
 /// Time to establish a connection to a peer.
 pub const PEER_CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
@@ -38,6 +43,8 @@ pub const PEER_DEADLINE: Duration = Duration::from_secs(120);
 pub const ERROR_BODY_LIMIT: usize = 4096;
 /// Pulls in flight at once, over all requests.
 pub const CONCURRENT_PULLS: usize = 4;
+/// Longest a pull waits for one of the [`CONCURRENT_PULLS`] before its request is answered 429.
+pub const PULL_WAIT: Duration = Duration::from_secs(30);
 
 /// One allowed peer: a base URL (scheme, host, port and an optional path prefix) and the bearer
 /// token this server presents to it.
@@ -182,16 +189,19 @@ impl Peers {
             .read_timeout(PEER_READ_TIMEOUT)
             .timeout(PEER_DEADLINE)
             .user_agent(concat!("optimis/", env!("CARGO_PKG_VERSION")));
+        let mut extra = Vec::new();
         if let Some(path) = ca {
             let pem =
                 std::fs::read(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
-            let certs = reqwest::Certificate::from_pem_bundle(&pem)
+            extra = CertificateDer::pem_slice_iter(&pem)
+                .collect::<Result<Vec<_>, _>>()
                 .map_err(|e| PeerConfigError::Ca { path: path.to_path_buf(), message: e.to_string() })?;
-            if certs.is_empty() {
+            if extra.is_empty() {
                 return Err(PeerConfigError::Ca { path: path.to_path_buf(), message: "holds no certificate".into() });
             }
-            builder = builder.tls_certs_merge(certs);
         }
+        let tls = client_config(extra).map_err(|e| PeerConfigError::Client(e.to_string()))?;
+        builder = builder.tls_backend_preconfigured(tls);
         let client = builder.build().map_err(|e| PeerConfigError::Client(e.to_string()))?;
         Ok(Self { allowed, client, document_limit, pulls: Semaphore::new(CONCURRENT_PULLS) })
     }
@@ -229,7 +239,15 @@ impl Peers {
     /// Fetches the moments document of the job at `url` on an allowed peer (unparsed bytes).
     pub async fn pull(&self, url: &str, field: &str) -> Result<Vec<u8>, JobError> {
         let (target, peer) = self.resolve(url, field)?;
-        let _permit = self.pulls.acquire().await.map_err(|_| JobError::ShuttingDown)?;
+        let _permit = match tokio::time::timeout(PULL_WAIT, self.pulls.acquire()).await {
+            Ok(permit) => permit.map_err(|_| JobError::ShuttingDown)?,
+            Err(_) => {
+                return Err(JobError::Busy {
+                    detail: format!("{field}: {CONCURRENT_PULLS} other pulls from peers are in flight; retry"),
+                    retry_after_seconds: 10,
+                });
+            }
+        };
         let peer_error = |message: String| JobError::Peer { field: field.to_string(), message };
         let fetch = async {
             let mut request = self.client.get(target.clone());
@@ -283,15 +301,39 @@ impl Peers {
 /// A transport error in plain words, without the peer's own text.
 fn describe(target: &Url, e: &reqwest::Error) -> String {
     let what = if e.is_timeout() {
-        "timed out"
+        "timed out".to_string()
+    } else if let Some(tls) = tls_error(e) {
+        format!(
+            "failed its TLS handshake: {tls} (trust a private CA or the peer's own certificate with --peer-ca \
+             FILE)"
+        )
     } else if e.is_connect() {
-        "could not be reached (connection or TLS handshake failed)"
+        "could not be reached (connection refused or failed)".to_string()
     } else if e.is_body() || e.is_decode() {
-        "broke off while sending the document"
+        "broke off while sending the document".to_string()
     } else {
-        "failed"
+        "failed".to_string()
     };
     format!("the request to the peer {target} {what}")
+}
+
+/// The TLS error under a failed request, if that is what failed: what rustls says is wrong with
+/// the handshake (e.g. `invalid peer certificate: UnknownIssuer`), which names no content of the
+/// peer's and so can be shown.
+fn tls_error(e: &reqwest::Error) -> Option<String> {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(err) = source {
+        if let Some(tls) = err.downcast_ref::<rustls::Error>() {
+            return Some(tls.to_string());
+        }
+        // An io::Error's source() skips the error it wraps (tokio-rustls wraps rustls' there, and
+        // hyper wraps that io::Error in another): step into what it wraps instead.
+        source = match err.downcast_ref::<std::io::Error>().and_then(|io| io.get_ref()) {
+            Some(inner) => Some(inner as &(dyn std::error::Error + 'static)),
+            None => err.source(),
+        };
+    }
+    None
 }
 
 /// The `/moments` URL of a peer job URL, or why it is not one.

@@ -26,11 +26,18 @@ pub struct RunPolicy {
     pub max_queued_jobs: usize,
     /// Most points of one sweep.
     pub max_sweep_points: usize,
+    /// Longest a study may take to gather and merge its sources (its pulls included).
+    pub study_deadline: Duration,
 }
 
 /// Default per-iteration work limit: 10¹⁰ light-path equivalents, about 45 s of the brute force
 /// on 2 cores (the paper's brute-force iteration is 10⁷, its restricted one ~3·10³).
 pub const DEFAULT_MAX_ITERATION_WORK: f64 = 1e10;
+
+/// Default study deadline: enough for [`super::peers::CONCURRENT_PULLS`] slow peers at a time to
+/// deliver documents at the document limit twice over, short enough that no study holds a request
+/// for hours.
+pub const DEFAULT_STUDY_DEADLINE: Duration = Duration::from_secs(180);
 
 /// Default limit on the points of a sweep.
 pub const DEFAULT_MAX_SWEEP_POINTS: usize = 256;
@@ -47,6 +54,7 @@ impl Default for RunPolicy {
             max_cells: crate::sim::model::cells::MAX_CELLS,
             max_queued_jobs: 1000,
             max_sweep_points: DEFAULT_MAX_SWEEP_POINTS,
+            study_deadline: DEFAULT_STUDY_DEADLINE,
         }
     }
 }

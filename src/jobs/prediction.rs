@@ -51,7 +51,7 @@ impl JobManager {
         let measured = Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
         let to = Budget { light_paths: request.light_paths, camera_paths: request.camera_paths };
         let prediction = self
-            .compute(move || -> Result<Prediction, JobError> {
+            .compute_heavy(move |_| -> Result<Prediction, JobError> {
                 let job = spec.validate()?;
                 predict(&moments, &job.config.cells, &solver, measured, to)
                     .map_err(|e| JobError::Conflict(e.to_string()))

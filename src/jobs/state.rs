@@ -8,6 +8,7 @@
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
@@ -19,6 +20,12 @@ use super::resource::{JobResource, JobState, now_ms, rfc3339};
 use crate::metrics::Metrics;
 use crate::sim::spec::ValidJob;
 use crate::store::Store;
+
+/// How long a verification of a job's stored moments stands: a result read after it hashes them
+/// again. One hash (milliseconds for a paper-sized checkpoint) per job per second, however many
+/// reads a dashboard or a load makes, and a checkpoint corrupted under a running server is
+/// reported within a second rather than never.
+pub const REVERIFY_AFTER: Duration = Duration::from_secs(1);
 
 /// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
 pub(super) const MAX_VERIFIED: usize = 100_000;
@@ -79,11 +86,13 @@ pub(crate) struct Inner {
     pub store: Store,
     /// The simulation pool, shared by the running jobs.
     pub pool: Arc<rayon::ThreadPool>,
-    /// A small pool for computations a request waits for (validation, verification, re-solves):
-    /// on the simulation pool they would queue behind thousands of chunks of the running jobs.
-    pub(super) requests: rayon::ThreadPool,
+    /// The pools for computations a request waits for (`compute`): on the simulation pool they
+    /// would queue behind thousands of chunks of the running jobs.
+    pub(super) pools: super::compute::Pools,
     /// The allowed peers and the client that pulls from them.
     pub(super) peers: Peers,
+    /// The signing key for exports and the keys merges require (`signing`).
+    pub(super) provenance: super::signing::Provenance,
     pub metrics: Arc<Metrics>,
     pub policy: RunPolicy,
     pub runtime: Handle,
@@ -95,10 +104,11 @@ pub(crate) struct Inner {
     pub(super) lifecycle: tokio::sync::Mutex<()>,
     /// Jobs a merge is changing; std Mutex, held for set operations only.
     pub(super) merging: Mutex<HashSet<i64>>,
-    /// The checkpoint checksum of each job whose stored moments were last verified against it
-    /// (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
-    /// checkpoint changed since. std Mutex, map operations only.
-    pub(super) verified: Mutex<HashMap<i64, String>>,
+    /// The checkpoint checksum of each job whose stored moments were last verified against it, and
+    /// when (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
+    /// checkpoint changed since or [`REVERIFY_AFTER`] passed (the stored bytes can still rot or be
+    /// edited under a running server). std Mutex, map operations only.
+    pub(super) verified: Mutex<HashMap<i64, (String, Instant)>>,
     /// Predicted figures of sweep runs, per (job, checkpoint checksum) (`sweeps`).
     pub(super) predictions: super::sweeps::PredictionCache,
     /// One re-fit of predicted sweep points at a time (`sweeps`): concurrent reads of a sweep wait
@@ -178,7 +188,14 @@ impl Inner {
         if verified.len() >= MAX_VERIFIED {
             verified.clear();
         }
-        verified.insert(id, checksum.to_string());
+        verified.insert(id, (checksum.to_string(), Instant::now()));
+    }
+
+    /// Whether job `id`'s stored moments were verified against `checksum` less than
+    /// [`REVERIFY_AFTER`] ago.
+    pub(crate) fn recently_verified(&self, id: i64, checksum: &str) -> bool {
+        let verified = self.verified.lock().expect("verified map");
+        verified.get(&id).is_some_and(|(c, at)| c == checksum && at.elapsed() < REVERIFY_AFTER)
     }
 
     /// Whether the server is stopping.

@@ -21,7 +21,7 @@ use super::peers::CONCURRENT_PULLS;
 use super::policy::check_budget;
 use super::references::{expected_luminances, scene_reference};
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
-use crate::sim::document::{DocumentError, MomentsDocument, merged_spec, parse_json};
+use crate::sim::document::{DocumentError, DocumentSignature, MomentsDocument, merged_spec, parse_json};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::model::params::check;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
@@ -47,12 +47,13 @@ struct SourceFields {
     spec: Option<JobSpec>,
     moments: Option<Moments>,
     checksum: Option<String>,
+    signature: Option<DocumentSignature>,
 }
 
 /// Where merged statistics come from.
 pub enum Source {
-    /// A document in the request, verified.
-    Document(Box<MomentsDocument>),
+    /// A document in the request, verified; `field` is its JSON path (empty for a merge's body).
+    Document { doc: Box<MomentsDocument>, field: String },
     /// The job at this URL on a peer server; `field` is the JSON path of the URL.
     Peer { url: String, field: String },
 }
@@ -70,6 +71,7 @@ impl SourceFields {
                 self.spec.is_some(),
                 self.moments.is_some(),
                 self.checksum.is_some(),
+                self.signature.is_some(),
             ];
             if others.iter().any(|&x| x) {
                 return Err(SpecError::new(at, "a peer source has exactly one field, `from`").into());
@@ -85,9 +87,10 @@ impl SourceFields {
             spec: self.spec.ok_or_else(|| missing("spec"))?,
             moments: self.moments.ok_or_else(|| missing("moments"))?,
             checksum: self.checksum.ok_or_else(|| missing("checksum"))?,
+            signature: self.signature,
         };
         doc.verify()?;
-        Ok(Source::Document(Box::new(doc)))
+        Ok(Source::Document { doc: Box::new(doc), field: at.to_string() })
     }
 }
 
@@ -175,13 +178,14 @@ impl JobManager {
         Ok(checkpoint)
     }
 
-    /// The results of the latest checkpoint. Its moments are verified against their checksum the
-    /// first time this checkpoint is served (a corrupted checkpoint answers 409, not a stale
-    /// result); later requests read the result alone, as a dashboard polls it many times a second.
+    /// The results of the latest checkpoint. Its moments are verified against their checksum when
+    /// this checkpoint is first served and again once the last verification is older than
+    /// [`REVERIFY_AFTER`](super::state::REVERIFY_AFTER) (a corrupted checkpoint answers 409, not a stale result); the reads in
+    /// between read the result alone, as a dashboard or a load polls it many times a second.
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
         let (state, total, _, _) = self.state_and_total(id).await?;
         let (done, json, checksum) = self.inner.store.load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let known = self.inner.verified.lock().expect("verified map").get(&id) == Some(&checksum);
+        let known = self.inner.recently_verified(id, &checksum);
         let (done, json) = if known {
             (done, json)
         } else {
@@ -246,7 +250,7 @@ impl JobManager {
         let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
         let done = checkpoint.iterations_done;
         let report = self
-            .compute(move || -> Result<RunReport, JobError> {
+            .compute_heavy(move |_| -> Result<RunReport, JobError> {
                 let job = spec.validate()?;
                 let weights = weights_lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
                 let expected = expected_luminances(&job.config);
@@ -259,31 +263,38 @@ impl JobManager {
     }
 
     /// The latest checkpoint's moments as a portable, checksummed document (its canonical JSON
-    /// text, made on the request pool). A merged job's spec says how many iterations it holds (and
-    /// no shard), so that its document verifies.
+    /// text, made on the request pool), signed if this server has a signing key. A merged job's
+    /// spec says how many iterations it holds (and no shard), so that its document verifies.
     pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
         let (_, _, spec, merged) = self.state_and_total(id).await?;
         let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
+        let inner = self.inner.clone();
         self.compute(move || {
             let spec = if merged { merged_spec(&spec, &moments) } else { spec };
-            MomentsDocument::new(spec, moments).to_json()
+            inner.provenance.sign(MomentsDocument::new(spec, moments)).to_json()
         })
         .await
     }
 
     /// The verified document of a source (pulled from its peer if it names one).
     async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
-        match source {
-            Source::Document(doc) => Ok(*doc),
+        let (doc, field) = match source {
+            Source::Document { doc, field } => (*doc, field),
             Source::Peer { url, field } => {
                 let bytes = self.inner.peers.pull(&url, &field).await?;
                 let doc = self.compute(move || MomentsDocument::from_json(&bytes)).await?;
-                doc.map_err(|e| JobError::Peer {
-                    field,
+                let doc = doc.map_err(|e| JobError::Peer {
+                    field: field.clone(),
                     message: format!("the peer {url} sent an unusable document: {e}"),
-                })
+                })?;
+                (doc, field)
             }
-        }
+        };
+        // With --trust, only documents signed by a trusted key (checked after the checksum, which
+        // the signature covers, was recomputed from the content).
+        let at = field.strip_suffix(".from").or_else(|| field.strip_suffix("from")).unwrap_or(&field);
+        self.inner.provenance.trust.check(&doc, at)?;
+        Ok(doc)
     }
 
     /// Checks, without a connection, that every peer source is allowed (so that a study with one
@@ -324,11 +335,12 @@ impl JobManager {
             (row, reservation)
         };
         // Verify, merge and summarise with the lock released (the reservation keeps extend and
-        // delete away), on the request pool, into a copy of the target's statistics.
+        // delete away), on the heavy pool (the summary re-fits), into a copy of the target's
+        // statistics.
         let checkpoint = self.inner.store.load_checkpoint(id).await?;
         let policy = self.inner.policy.clone();
         let (checkpoint, spec) = self
-            .compute(move || -> Result<(Checkpoint, String), JobError> {
+            .compute_heavy(move |_| -> Result<(Checkpoint, String), JobError> {
                 let spec = parse_stored_spec(&row)?;
                 let job = spec.validate()?;
                 let mut moments = match checkpoint {
@@ -364,30 +376,44 @@ impl JobManager {
         let arrivals = stream::iter(sources.into_iter().enumerate())
             .map(|(i, source)| async move { self.fetch(source).await.map(|doc| (i, doc)) })
             .buffer_unordered(CONCURRENT_PULLS);
-        let mut first: Option<(usize, JobSpec)> = None;
-        let mut total: Option<Moments> = None;
-        let mut arrivals = std::pin::pin!(arrivals);
-        while let Some((i, doc)) = arrivals.try_next().await? {
-            if first.as_ref().is_none_or(|(j, _)| i < *j) {
-                first = Some((i, doc.spec.clone()));
+        let gather = async {
+            let mut first: Option<(usize, JobSpec)> = None;
+            let mut total: Option<Moments> = None;
+            let mut arrivals = std::pin::pin!(arrivals);
+            while let Some((i, doc)) = arrivals.try_next().await? {
+                if first.as_ref().is_none_or(|(j, _)| i < *j) {
+                    first = Some((i, doc.spec.clone()));
+                }
+                total = Some(match total {
+                    None => doc.moments,
+                    Some(mut acc) => self
+                        .compute(move || {
+                            acc.merge(&doc.moments)?;
+                            Ok::<_, crate::sim::stats::moments::MergeError>(acc)
+                        })
+                        .await?
+                        .map_err(DocumentError::from)?,
+                });
             }
-            total = Some(match total {
-                None => doc.moments,
-                Some(mut acc) => self
-                    .compute(move || {
-                        acc.merge(&doc.moments)?;
-                        Ok::<_, crate::sim::stats::moments::MergeError>(acc)
-                    })
-                    .await?
-                    .map_err(DocumentError::from)?,
-            });
-        }
+            Ok::<_, JobError>((first, total))
+        };
+        // The whole gathering is bounded (each pull is too, but a study of many slow sources
+        // would otherwise hold its request for the sum of their deadlines).
+        let deadline = self.inner.policy.study_deadline;
+        let (first, total) = tokio::time::timeout(deadline, gather).await.map_err(|_| JobError::Peer {
+            field: "sources".into(),
+            message: format!(
+                "the sources did not all arrive and merge within the study deadline of {} s (--study-deadline); \
+                 nothing was created",
+                deadline.as_secs_f64()
+            ),
+        })??;
         let (Some((_, base)), Some(moments)) = (first, total) else {
             return Err(SpecError::new("sources", "must list at least one source").into());
         };
         let policy = self.inner.policy.clone();
         let (new, checkpoint) = self
-            .compute(move || -> Result<(NewJob, Checkpoint), JobError> {
+            .compute_heavy(move |_| -> Result<(NewJob, Checkpoint), JobError> {
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let mut spec = merged_spec(&base, &moments);
                 if let Some(patch) = &solver {

@@ -12,7 +12,6 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -33,19 +32,8 @@ use crate::sim::sweep::{
 use crate::store::{JobRow, NewJob, SweepRow};
 
 /// How long a sweep's creation may spend on reference quadratures; the runs of scenes not reached
-/// by then keep no R → 0 reference (an optional figure) rather than hold a request thread longer.
+/// by then keep no R → 0 reference (an optional figure) rather than hold the heavy pool longer.
 const REFERENCE_DEADLINE: Duration = Duration::from_secs(10);
-
-/// Set when the request that creates a sweep is dropped (its client went away), so that the
-/// quadratures it started on the request pool stop at the next scene.
-#[derive(Default)]
-struct Abandoned(Arc<AtomicBool>);
-
-impl Drop for Abandoned {
-    fn drop(&mut self) {
-        self.0.store(true, Ordering::Relaxed);
-    }
-}
 
 /// Most sweeps' predicted figures kept in memory (beyond it the cache starts over).
 const MAX_CACHED_RUNS: usize = 1024;
@@ -154,15 +142,13 @@ impl JobManager {
             })
             .await??;
         self.check_room_for(valid.len())?;
-        let abandoned = Abandoned::default();
-        let (flag, shutdown) = (abandoned.0.clone(), self.shutdown_signal());
         let scenes: Vec<Scene> = valid.iter().map(|job| job.config.scene.clone()).collect();
         let references = self
-            .compute(move || {
+            .compute_heavy(move |stop| {
                 let started = Instant::now();
                 let mut out = Vec::with_capacity(scenes.len());
                 for scene in &scenes {
-                    if flag.load(Ordering::Relaxed) || *shutdown.borrow() {
+                    if stop.stopped() {
                         return None;
                     }
                     // Past the deadline a run keeps no R → 0 reference (an optional figure)
@@ -174,7 +160,6 @@ impl JobManager {
                 Some(out)
             })
             .await?;
-        drop(abandoned);
         let references = references.ok_or(JobError::ShuttingDown)?;
         let new_jobs = valid
             .iter()
@@ -433,7 +418,7 @@ impl JobManager {
         let plan = plan.clone();
         let partial = result.partial || state != JobState::Succeeded;
         let figures = self
-            .compute(move || -> Result<_, JobError> {
+            .compute_heavy(move |_| -> Result<_, JobError> {
                 let valid = plan.runs[r].spec.validate()?;
                 Ok(point_figures(&plan, r, &moments, &valid.config.cells, &result.report, partial))
             })

@@ -4,6 +4,9 @@
 //!
 //! * at most `max_connections` at once — beyond it the loop stops accepting (new connections wait
 //!   in the kernel's backlog and cost no file descriptor) until one closes;
+//! * at most `max_per_client` of them from one client address ([`PerClient`]): a further
+//!   connection from it is answered 429 and closed at once, so that one client holding half-open
+//!   connections cannot take the slots every other client needs;
 //! * a TLS handshake and the request head must arrive within `header_timeout` (hyper's
 //!   `header_read_timeout`, which also closes keep-alive connections idle for that long);
 //! * a response that cannot be sent for `send_timeout` — the client stopped reading it — closes
@@ -14,10 +17,12 @@
 //! * on shutdown, connections finish their current request and close
 //!   ([`hyper_util::server::graceful`]), for at most [`GRACE`].
 
+use std::collections::HashMap;
 use std::future::Future;
 use std::io;
+use std::net::IpAddr;
 use std::pin::Pin;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
@@ -39,6 +44,8 @@ pub const GRACE: Duration = Duration::from_secs(10);
 pub struct ConnectionLimits {
     /// Most connections open at once.
     pub max_connections: usize,
+    /// Most connections open at once from one client address.
+    pub max_per_client: usize,
     /// A request head (and a TLS handshake) must arrive within this; keep-alive connections idle
     /// this long are closed.
     pub header_timeout: Duration,
@@ -48,7 +55,12 @@ pub struct ConnectionLimits {
 
 impl Default for ConnectionLimits {
     fn default() -> Self {
-        Self { max_connections: 512, header_timeout: Duration::from_secs(10), send_timeout: Duration::from_secs(60) }
+        Self {
+            max_connections: 512,
+            max_per_client: 128,
+            header_timeout: Duration::from_secs(10),
+            send_timeout: Duration::from_secs(60),
+        }
     }
 }
 
@@ -62,6 +74,7 @@ pub async fn serve(
     shutdown: impl Future<Output = ()>,
 ) {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let clients = Arc::new(PerClient { open: Mutex::new(HashMap::new()), limit: limits.max_per_client });
     let graceful = GracefulShutdown::new();
     let mut shutdown = std::pin::pin!(shutdown);
     loop {
@@ -69,7 +82,7 @@ pub async fn serve(
             permit = permits.clone().acquire_owned() => permit.expect("the semaphore is never closed"),
             _ = &mut shutdown => break,
         };
-        let (stream, _peer) = tokio::select! {
+        let (stream, peer) = tokio::select! {
             accepted = listener.accept() => match accepted {
                 Ok(accepted) => accepted,
                 Err(e) => {
@@ -81,12 +94,19 @@ pub async fn serve(
             },
             _ = &mut shutdown => break,
         };
+        let Some(client) = clients.admit(peer.ip()) else {
+            // Best effort, without waiting: the client learns why (a TLS client sees a closed
+            // connection), and the slot is free again at once.
+            let _ = stream.try_write(OVER_SHARE);
+            drop(permit);
+            continue;
+        };
         let _ = stream.set_nodelay(true);
         let app = app.clone();
         let tls = tls.clone();
         let watcher = graceful.watcher();
         tokio::spawn(async move {
-            let _permit = permit;
+            let _permit = (permit, client);
             let io = SendTimeout::new(stream, limits.send_timeout);
             match tls {
                 None => serve_connection(io, app, watcher, limits).await,
@@ -101,6 +121,50 @@ pub async fn serve(
     drop(listener);
     if tokio::time::timeout(GRACE, graceful.shutdown()).await.is_err() {
         tracing::warn!("connections still open {} s after shutdown began; closing them", GRACE.as_secs());
+    }
+}
+
+/// The answer to a connection beyond its client's share.
+const OVER_SHARE: &[u8] = b"HTTP/1.1 429 Too Many Requests\r\nRetry-After: 1\r\nConnection: close\r\n\
+Content-Type: text/plain\r\nContent-Length: 70\r\n\r\ntoo many connections from this address (--max-connections-per-client)\n";
+
+/// Connections open per client address.
+struct PerClient {
+    /// std Mutex: map operations only.
+    open: Mutex<HashMap<IpAddr, usize>>,
+    limit: usize,
+}
+
+/// One admitted connection of a client; gives its place back when dropped.
+struct ClientSlot {
+    clients: Arc<PerClient>,
+    ip: IpAddr,
+}
+
+impl PerClient {
+    /// A place for one more connection from `ip`, if it has fewer than its share open. IPv4 seen
+    /// as IPv6 (`::ffff:a.b.c.d`) counts as the IPv4 address.
+    fn admit(self: &Arc<Self>, ip: IpAddr) -> Option<ClientSlot> {
+        let ip = ip.to_canonical();
+        let mut open = self.open.lock().expect("per-client counts");
+        let n = open.entry(ip).or_insert(0);
+        if *n >= self.limit {
+            return None;
+        }
+        *n += 1;
+        Some(ClientSlot { clients: self.clone(), ip })
+    }
+}
+
+impl Drop for ClientSlot {
+    fn drop(&mut self) {
+        let mut open = self.clients.open.lock().expect("per-client counts");
+        if let Some(n) = open.get_mut(&self.ip) {
+            *n -= 1;
+            if *n == 0 {
+                open.remove(&self.ip);
+            }
+        }
     }
 }
 

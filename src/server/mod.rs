@@ -16,7 +16,9 @@ use tokio::net::TcpListener;
 
 use crate::api::guard::Guard;
 use crate::api::{BearerToken, HttpLimits};
+use crate::jobs::compute::Pools;
 use crate::jobs::peers::{Peer, PeerConfigError, Peers};
+use crate::jobs::signing::{KeyError, Provenance};
 use crate::jobs::{JobManager, RunPolicy};
 use crate::store::{Store, StoreError};
 pub use listener::ConnectionLimits;
@@ -42,8 +44,13 @@ pub struct ServerConfig {
     pub tls: Option<TlsFiles>,
     /// The servers merges and studies may pull statistics from (nothing else is ever contacted).
     pub peers: Vec<Peer>,
-    /// Extra roots (PEM) trusted for https peers, besides the system's.
+    /// Extra roots (PEM) trusted for https peers, besides the system's; each also pinned.
     pub peer_ca: Option<PathBuf>,
+    /// Sign exported moments documents with this Ed25519 private key (PKCS#8 PEM).
+    pub signing_key: Option<PathBuf>,
+    /// Merges and studies accept only documents signed by one of these Ed25519 public keys (PEM);
+    /// none: signatures are neither required nor checked.
+    pub trust: Vec<PathBuf>,
     /// Host names this server also answers to, besides loopback ones (a proxy's public name).
     pub allowed_hosts: Vec<String>,
 }
@@ -68,6 +75,8 @@ pub enum ServerError {
     Peers(#[from] PeerConfigError),
     #[error(transparent)]
     Tls(#[from] tls::TlsError),
+    #[error(transparent)]
+    Keys(#[from] KeyError),
     #[error("server error: {0}")]
     Io(#[from] std::io::Error),
 }
@@ -115,6 +124,7 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
     // Everything that can be refused is checked before the database is touched.
     let tls = config.tls.as_ref().map(|f| tls::acceptor(&f.cert, &f.key)).transpose()?;
     let peers = Peers::new(config.peers.clone(), config.peer_ca.as_deref(), config.http.document_bytes)?;
+    let provenance = Provenance::load(config.signing_key.as_deref(), &config.trust)?;
     let store = Store::open(&config.database).await?;
     let pool = Arc::new(
         rayon::ThreadPoolBuilder::new()
@@ -122,12 +132,11 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
             .thread_name(|i| format!("optimis-sim-{i}"))
             .build()?,
     );
-    // Requests that compute (validation, references, documents, re-solves) get their own two
-    // threads, so they never wait behind a running job's chunks.
-    let requests =
-        rayon::ThreadPoolBuilder::new().num_threads(2).thread_name(|i| format!("optimis-requests-{i}")).build()?;
+    // Requests that compute get pools of their own (jobs::compute), so they never wait behind a
+    // running job's chunks, and their light work never waits behind their heavy work.
+    let pools = Pools::new()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
-    let jobs = JobManager::start(store, config.policy.clone(), pool, requests, metrics, peers).await?;
+    let jobs = JobManager::start(store, config.policy.clone(), pool, pools, metrics, peers, provenance).await?;
     let guard = Guard {
         loopback: bound.ip().is_loopback(),
         allowed_hosts: config.allowed_hosts.iter().map(|h| h.to_ascii_lowercase()).collect::<Vec<_>>().into(),

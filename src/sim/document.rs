@@ -54,8 +54,27 @@ pub struct MomentsDocument {
     /// with `iterations` set to the total covered and no shard).
     pub spec: JobSpec,
     pub moments: Moments,
-    /// SHA-256 (hex) of the canonical JSON of all other fields: detects corruption, not forgery.
+    /// SHA-256 (hex) of the canonical JSON of the fields above: detects corruption, not forgery.
     pub checksum: String,
+    /// Who vouches for the document: a signature over its checksum by a server's signing key
+    /// (`--signing-key`), if the server that exported it has one. Outside the checksummed body by
+    /// construction; it binds the content through the checksum, which a reader recomputes from the
+    /// content before it checks the signature.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub signature: Option<DocumentSignature>,
+}
+
+/// A detached signature of a document's checksum ([`MomentsDocument::signed_message`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct DocumentSignature {
+    /// Always `ed25519`.
+    pub algorithm: String,
+    /// The signing key's id: the first 16 hex digits of the SHA-256 of its raw public key.
+    pub key_id: String,
+    /// The 64-byte signature, hex.
+    pub value: String,
 }
 
 /// The checksummed part, in document order.
@@ -68,6 +87,10 @@ struct Body<'a> {
     spec: &'a JobSpec,
     moments: &'a Moments,
 }
+
+/// What a signature's message starts with, so that it cannot be taken for a signature of anything
+/// else made with the same key.
+pub const SIGNATURE_DOMAIN: &[u8] = b"optimis-moments-signature-v1\n";
 
 /// Why a document cannot be used.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -115,9 +138,17 @@ impl MomentsDocument {
             spec,
             moments,
             checksum: String::new(),
+            signature: None,
         };
         doc.checksum = checksum_of(&doc.body());
         doc
+    }
+
+    /// The bytes a signature covers: a domain tag and the checksum. The checksum is recomputed
+    /// from the content whenever a document is read ([`MomentsDocument::verify`]), so a signature
+    /// over it vouches for the content, and any edit — re-sealed or not — breaks it.
+    pub fn signed_message(&self) -> Vec<u8> {
+        [SIGNATURE_DOMAIN, self.checksum.as_bytes()].concat()
     }
 
     fn body(&self) -> Body<'_> {

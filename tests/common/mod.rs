@@ -43,6 +43,8 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
         tls: None,
         peers: Vec::new(),
         peer_ca: None,
+        signing_key: None,
+        trust: Vec::new(),
         allowed_hosts: Vec::new(),
     }
 }

@@ -1,0 +1,257 @@
+//! Provenance of moments documents: this server's signature on what it exports
+//! (`--signing-key`), and the keys whose signatures it requires of what it merges (`--trust`).
+//!
+//! A document's checksum is integrity only — anyone can recompute it — so without signatures a
+//! server trusts a document's origin only through the transport (an allowed peer, its token,
+//! https). With `--trust`, a merge or a study accepts only documents signed by one of the trusted
+//! keys; with none given, nothing changes. Keys are Ed25519 (ring, the crypto library already in
+//! the tree through rustls) in the PEM files OpenSSL writes:
+//!
+//! ```text
+//! openssl genpkey -algorithm ed25519 -out signing.pem        # --signing-key signing.pem
+//! openssl pkey -in signing.pem -pubout -out signing.pub.pem  # --trust signing.pub.pem
+//! ```
+//!
+//! The signature covers the document's checksum behind a domain tag
+//! ([`MomentsDocument::signed_message`]); a reader recomputes the checksum from the content
+//! before it checks the signature, so the signature vouches for the content.
+
+use std::path::{Path, PathBuf};
+
+use ring::signature::{ED25519, Ed25519KeyPair, KeyPair, UnparsedPublicKey};
+use rustls::pki_types::pem::PemObject;
+use rustls::pki_types::{PrivatePkcs8KeyDer, SubjectPublicKeyInfoDer};
+
+use super::error::JobError;
+use crate::sim::document::{DocumentSignature, MomentsDocument};
+use crate::sim::math::digest::sha256_hex;
+use crate::sim::spec::SpecError;
+
+/// The DER prefix of an Ed25519 SubjectPublicKeyInfo (RFC 8410): the raw 32-byte key follows.
+const ED25519_SPKI_PREFIX: [u8; 12] = [0x30, 0x2a, 0x30, 0x05, 0x06, 0x03, 0x2b, 0x65, 0x70, 0x03, 0x21, 0x00];
+
+/// Why a key file cannot be used (reported at start).
+#[derive(Debug, thiserror::Error)]
+pub enum KeyError {
+    #[error("--signing-key {path}: {message}")]
+    Signing { path: PathBuf, message: String },
+    #[error("--trust {path}: {message}")]
+    Trust { path: PathBuf, message: String },
+}
+
+/// What this server signs with and whose signatures it requires.
+#[derive(Debug, Default)]
+pub struct Provenance {
+    pub key: Option<SigningKey>,
+    pub trust: TrustedKeys,
+}
+
+impl Provenance {
+    /// Reads `--signing-key` and every `--trust` file.
+    pub fn load(key: Option<&Path>, trust: &[PathBuf]) -> Result<Self, KeyError> {
+        Ok(Self { key: key.map(SigningKey::load).transpose()?, trust: TrustedKeys::load(trust)? })
+    }
+
+    /// `doc` signed with this server's key, if it has one.
+    pub fn sign(&self, doc: MomentsDocument) -> MomentsDocument {
+        match &self.key {
+            Some(key) => key.sign(doc),
+            None => doc,
+        }
+    }
+}
+
+/// This server's signing key.
+pub struct SigningKey {
+    pair: Ed25519KeyPair,
+    key_id: String,
+}
+
+impl std::fmt::Debug for SigningKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SigningKey").field("key_id", &self.key_id).finish()
+    }
+}
+
+/// The id of a raw Ed25519 public key: 16 hex digits of its SHA-256.
+pub fn key_id(public: &[u8]) -> String {
+    sha256_hex(public)[..16].to_string()
+}
+
+impl SigningKey {
+    /// Reads an Ed25519 private key (PKCS#8 PEM, `-----BEGIN PRIVATE KEY-----`).
+    pub fn load(path: &Path) -> Result<Self, KeyError> {
+        let err = |message: String| KeyError::Signing { path: path.to_path_buf(), message };
+        let der = PrivatePkcs8KeyDer::from_pem_file(path).map_err(|e| {
+            err(format!("not a PKCS#8 PEM private key ({e}); make one with `openssl genpkey -algorithm ed25519`"))
+        })?;
+        let pair = Ed25519KeyPair::from_pkcs8_maybe_unchecked(der.secret_pkcs8_der())
+            .map_err(|e| err(format!("not an Ed25519 private key: {e}")))?;
+        let key_id = key_id(pair.public_key().as_ref());
+        Ok(Self { pair, key_id })
+    }
+
+    pub fn key_id(&self) -> &str {
+        &self.key_id
+    }
+
+    /// `doc` signed with this key (any earlier signature replaced).
+    pub fn sign(&self, mut doc: MomentsDocument) -> MomentsDocument {
+        let signature = self.pair.sign(&doc.signed_message());
+        doc.signature = Some(DocumentSignature {
+            algorithm: "ed25519".into(),
+            key_id: self.key_id.clone(),
+            value: hex(signature.as_ref()),
+        });
+        doc
+    }
+}
+
+/// The public keys whose signatures merges and studies require (none: signatures are not
+/// required, and not checked).
+#[derive(Debug, Default, Clone)]
+pub struct TrustedKeys {
+    keys: Vec<(String, Vec<u8>)>,
+}
+
+impl TrustedKeys {
+    /// Reads Ed25519 public keys (SubjectPublicKeyInfo PEM, `-----BEGIN PUBLIC KEY-----`).
+    pub fn load(paths: &[PathBuf]) -> Result<Self, KeyError> {
+        let mut keys = Vec::with_capacity(paths.len());
+        for path in paths {
+            let err = |message: String| KeyError::Trust { path: path.to_path_buf(), message };
+            let der = SubjectPublicKeyInfoDer::from_pem_file(path).map_err(|e| {
+                err(format!("not a PEM public key ({e}); make one with `openssl pkey -in KEY -pubout`"))
+            })?;
+            let raw = der
+                .as_ref()
+                .strip_prefix(&ED25519_SPKI_PREFIX[..])
+                .filter(|raw| raw.len() == 32)
+                .ok_or_else(|| err("not an Ed25519 public key".into()))?;
+            keys.push((key_id(raw), raw.to_vec()));
+        }
+        Ok(Self { keys })
+    }
+
+    /// Whether signatures are required.
+    pub fn required(&self) -> bool {
+        !self.keys.is_empty()
+    }
+
+    /// The ids of the trusted keys.
+    pub fn ids(&self) -> Vec<&str> {
+        self.keys.iter().map(|(id, _)| id.as_str()).collect()
+    }
+
+    /// Checks that `doc` (already verified: its checksum matches its content) is signed by a
+    /// trusted key, when keys are trusted; `at` is the JSON path of the document in the request
+    /// (a peer's URL field for a pulled one), named in the error with `.signature`.
+    pub fn check(&self, doc: &MomentsDocument, at: &str) -> Result<(), JobError> {
+        if !self.required() {
+            return Ok(());
+        }
+        let field = if at.is_empty() { "signature".to_string() } else { format!("{at}.signature") };
+        let refuse = |message: String| -> JobError { SpecError::new(field.clone(), message).into() };
+        let Some(signature) = &doc.signature else {
+            return Err(refuse(format!(
+                "this server accepts only documents signed by a trusted key ({}); the document is unsigned — export it \
+                 from a server started with --signing-key, and trust that key here with --trust PUBLIC_KEY_FILE",
+                self.ids().join(", ")
+            )));
+        };
+        if signature.algorithm != "ed25519" {
+            return Err(refuse(format!("unsupported algorithm {:?}; expected \"ed25519\"", signature.algorithm)));
+        }
+        let Some((_, public)) = self.keys.iter().find(|(id, _)| *id == signature.key_id) else {
+            return Err(refuse(format!(
+                "signed by key {:?}, which this server does not trust (it trusts {}); to trust it, start this server \
+                 with --trust and that key's public key file",
+                signature.key_id,
+                self.ids().join(", ")
+            )));
+        };
+        let value = unhex(&signature.value)
+            .filter(|v| v.len() == 64)
+            .ok_or_else(|| refuse("the signature value is not 128 hex digits".into()))?;
+        UnparsedPublicKey::new(&ED25519, public).verify(&doc.signed_message(), &value).map_err(|_| {
+            refuse(format!(
+                "the signature of key {} does not match the document: it was edited after it was signed",
+                signature.key_id
+            ))
+        })
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn unhex(text: &str) -> Option<Vec<u8>> {
+    if text.len() % 2 != 0 || text.len() > 256 {
+        return None;
+    }
+    (0..text.len()).step_by(2).map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An Ed25519 key pair in the PEM files OpenSSL writes (made by rcgen).
+    fn keypair(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        let pair = rcgen::KeyPair::generate_for(&rcgen::PKCS_ED25519).unwrap();
+        let (private, public) = (dir.join(format!("{name}.pem")), dir.join(format!("{name}.pub.pem")));
+        std::fs::write(&private, pair.serialize_pem()).unwrap();
+        std::fs::write(&public, pair.public_key_pem()).unwrap();
+        (private, public)
+    }
+
+    fn document() -> MomentsDocument {
+        let doc = serde_json::json!({ "iterations": 3, "light_paths": 1000, "camera_paths": 10 });
+        let job = crate::sim::spec::parse_job_spec(&doc).unwrap().validate().unwrap();
+        let moments = crate::sim::runner::run(&job.config, job.spec.seed, 0..3);
+        MomentsDocument::new(job.spec.clone(), moments)
+    }
+
+    #[test]
+    fn signed_documents_verify_and_edits_unsigned_or_unknown_keys_are_refused_naming_the_signature() {
+        let dir = tempfile::tempdir().unwrap();
+        let (private, public) = keypair(dir.path(), "a");
+        let (other, _) = keypair(dir.path(), "b");
+        let key = SigningKey::load(&private).unwrap();
+        let trust = TrustedKeys::load(&[public]).unwrap();
+        assert_eq!(trust.ids(), [key.key_id()]);
+        let signed = key.sign(document());
+        trust.check(&signed, "sources[0]").unwrap();
+        // Through JSON and back: the signature survives (it is outside the checksummed body).
+        let read = MomentsDocument::from_json(&signed.to_json()).unwrap();
+        trust.check(&read, "").unwrap();
+
+        let field = |e: JobError| match e {
+            JobError::Invalid(e) => (e.field, e.message),
+            other => panic!("{other:?}"),
+        };
+        // Edited and re-sealed (a valid checksum): the signature no longer matches.
+        let mut edited = signed.clone();
+        edited.spec.seed += 1;
+        let (f, m) = field(trust.check(&edited.sealed(), "sources[1]").unwrap_err());
+        assert_eq!(f, "sources[1].signature");
+        assert!(m.contains("edited after it was signed"), "{m}");
+        let (f, m) = field(trust.check(&document(), "").unwrap_err());
+        assert_eq!(f, "signature");
+        assert!(m.contains("unsigned") && m.contains("--trust"), "{m}");
+        let stranger = SigningKey::load(&other).unwrap().sign(document());
+        let (_, m) = field(trust.check(&stranger, "").unwrap_err());
+        assert!(m.contains("does not trust"), "{m}");
+        // Without trusted keys nothing is required.
+        TrustedKeys::default().check(&document(), "").unwrap();
+    }
+
+    #[test]
+    fn key_files_of_the_wrong_kind_are_refused_at_start() {
+        let dir = tempfile::tempdir().unwrap();
+        let (private, public) = keypair(dir.path(), "a");
+        assert!(matches!(SigningKey::load(&public), Err(KeyError::Signing { .. })));
+        assert!(matches!(TrustedKeys::load(&[private]), Err(KeyError::Trust { .. })));
+    }
+}
