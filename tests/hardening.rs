@@ -452,6 +452,11 @@ async fn histories_stay_bounded() {
     db.close().await;
     let server = TestServer::start_in(dir, |_| {}).await;
     let url = format!("sqlite://{}", server.dir.path().join("optimis.db").display());
+    // Issue 22, item 11: the read path thins as it reads (20,000 injected rows, 1,000 read).
+    let history = server.history(id).await;
+    let points = history["points"].as_array().unwrap();
+    assert_eq!(points.len(), 1000);
+    assert_eq!(points.last().unwrap()["iterations"], 20_099, "the latest point is kept");
     // One more checkpoint thins the job's history.
     assert_eq!(server.extend(id, &json!({ "iterations": 1 })).await.status, 202);
     server.wait_for_state(id, "succeeded").await;

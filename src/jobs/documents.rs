@@ -68,33 +68,3 @@ impl JobHistory {
 
 /// Most points a history returns.
 pub const MAX_HISTORY_POINTS: usize = 1000;
-
-/// Keeps at most `max` points, evenly spaced, always the first and the last.
-pub fn thin<T>(mut points: Vec<T>, max: usize) -> Vec<T> {
-    let n = points.len();
-    if n <= max || max < 2 {
-        return points;
-    }
-    let keep: Vec<usize> = (0..max).map(|k| k * (n - 1) / (max - 1)).collect();
-    let mut out = Vec::with_capacity(max);
-    for (i, p) in points.drain(..).enumerate() {
-        if keep.binary_search(&i).is_ok() {
-            out.push(p);
-        }
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::thin;
-
-    #[test]
-    fn thinning_keeps_the_ends_and_spaces_evenly() {
-        assert_eq!(thin((0..5).collect(), 10), vec![0, 1, 2, 3, 4]);
-        let t = thin((0..10_001).collect::<Vec<u32>>(), 1000);
-        assert_eq!(t.len(), 1000);
-        assert_eq!((t[0], *t.last().unwrap()), (0, 10_000));
-        assert!(t.windows(2).all(|w| (10..=11).contains(&(w[1] - w[0]))));
-    }
-}

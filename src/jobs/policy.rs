@@ -101,9 +101,13 @@ pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result
         field,
         format!(
             "one iteration is expected to cost {total:.3e} light-path equivalents ({:.3e} light paths drawn, {:.3e} \
-             merges) — beyond this server's per-iteration limit of {:.3e} (--max-iteration-work); reduce merge_radius, \
-             light_paths or camera_paths",
-            work.light_paths, work.merges, policy.max_iteration_work
+             merges{}) — beyond this server's per-iteration limit of {:.3e} (--max-iteration-work); reduce merge_radius, \
+             light_paths or camera_paths{}",
+            work.light_paths,
+            work.merges,
+            if work.components > 1.0 { format!(", ×{} for the noise components", work.components) } else { String::new() },
+            policy.max_iteration_work,
+            if work.components > 1.0 { ", or run without noise_components" } else { "" }
         ),
     )
     .into())

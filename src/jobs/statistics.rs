@@ -14,7 +14,7 @@ use serde::Deserialize;
 use serde_json::Value;
 
 use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
-use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS, thin};
+use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS};
 use super::error::JobError;
 use super::manager::JobManager;
 use super::peers::CONCURRENT_PULLS;
@@ -203,11 +203,10 @@ impl JobManager {
     /// keeps at most ~2,000 per job).
     pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
         self.get(id).await?;
-        let rows = self.inner.store.load_history(id).await?;
+        let rows = self.inner.store.load_history(id, MAX_HISTORY_POINTS).await?;
         let points = self
             .compute(move || {
-                thin(rows, MAX_HISTORY_POINTS)
-                    .into_iter()
+                rows.into_iter()
                     .map(|(iterations, json)| {
                         serde_json::from_str(&json)
                             .map(|strategies| HistoryPoint { iterations, strategies })

@@ -26,7 +26,7 @@ use sqlx::SqlitePool;
 use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
-pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
+pub use jobs::{Checkpoint, Inserted, JobRow, NewJob, evenly_kept};
 pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;

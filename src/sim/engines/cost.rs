@@ -8,7 +8,12 @@
 //! traced light paths (the brute force traces 2.2·10⁸ paths/s on 2 cores, and an iteration with
 //! R = 0.99 records ~5·10⁶ merges in ~18 s), so the work is counted in light-path equivalents:
 //!
-//!   W = traced light paths + [`MERGE_WEIGHT`]·E[merge events] + N_B.
+//!   W = traced light paths + c·([`MERGE_WEIGHT`]·E[merge events] + N_B),
+//!
+//! with c = 1, or c = [`COMPONENTS_FACTOR`] when the job keeps noise components: each merge and
+//! each iteration's sums then also go into the components' blocks (`stats::components`), which
+//! made the restricted engine's iterations 2.2× as long (issue 22's review, paper parameters);
+//! tracing is not repeated, so the traced paths keep their weight.
 //!
 //! E[merge events] is N_F·Σ_j P(the light vertex falls within R of camera vertex j) at planes 2 and
 //! 3 (the closed forms of [`crate::sim::checks::expectation`]; both engines share it by Campbell's theorem). It
@@ -27,6 +32,10 @@ use crate::sim::model::densities::start_probability_in_disc;
 /// Light-path equivalents of one merge event (see the module documentation).
 pub const MERGE_WEIGHT: f64 = 50.0;
 
+/// How much longer the per-merge and per-iteration work is when the noise components are kept
+/// (measured on the restricted engine at the paper's parameters, module docs).
+pub const COMPONENTS_FACTOR: f64 = 2.2;
+
 /// Camera paths of the pilot.
 pub const PILOT_CAMERAS: u64 = 4096;
 
@@ -42,12 +51,14 @@ pub struct IterationWork {
     pub merges: f64,
     /// N_B.
     pub camera_paths: f64,
+    /// 1, or [`COMPONENTS_FACTOR`] with noise components.
+    pub components: f64,
 }
 
 impl IterationWork {
     /// W in light-path equivalents.
     pub fn total(&self) -> f64 {
-        self.light_paths + MERGE_WEIGHT * self.merges + self.camera_paths
+        self.light_paths + self.components * (MERGE_WEIGHT * self.merges + self.camera_paths)
     }
 }
 
@@ -93,7 +104,12 @@ pub fn iteration_work(config: &SimConfig) -> IterationWork {
         Some(plan) => plan.plane1_mass() + per_camera_candidates / cameras * n_b as f64,
         None => n_f,
     };
-    IterationWork { light_paths, merges: n_f * per_camera_merges / cameras * n_b as f64, camera_paths: n_b as f64 }
+    IterationWork {
+        light_paths,
+        merges: n_f * per_camera_merges / cameras * n_b as f64,
+        camera_paths: n_b as f64,
+        components: if config.noise_components { COMPONENTS_FACTOR } else { 1.0 },
+    }
 }
 
 #[cfg(test)]
@@ -135,5 +151,17 @@ mod tests {
         assert!(huge.total() > 1e13, "{huge:?}");
         let wide = iteration_work(&config(json!({ "merge_radius": 0.99 })));
         assert!(wide.total() > 1e8 && wide.total() < 1e10, "{wide:?}");
+    }
+
+    /// Issue 22, item 11: noise components make the merges' and iterations' work 2.2× as large
+    /// (the traced paths are not traced again), so the work limit sees them.
+    #[test]
+    fn noise_components_count_in_the_work() {
+        let plain = iteration_work(&config(json!({ "merge_radius": 0.5 })));
+        let with = iteration_work(&config(json!({ "merge_radius": 0.5, "noise_components": true })));
+        assert_eq!((plain.light_paths, plain.merges), (with.light_paths, with.merges));
+        let per_merge = MERGE_WEIGHT * plain.merges + plain.camera_paths;
+        assert_eq!(with.total(), plain.light_paths + COMPONENTS_FACTOR * per_merge);
+        assert!(with.total() > 2.0 * plain.total(), "merges dominate at R = 0.5: {plain:?}");
     }
 }
