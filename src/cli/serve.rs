@@ -72,7 +72,7 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_connections: u64,
     /// Most connections open at once from one client address (further ones: 429, closed).
-    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_connections_per_client: u64,
     /// Seconds for a request head (or a TLS handshake) to arrive; also how long a keep-alive
     /// connection may sit idle between requests.

@@ -57,7 +57,9 @@ impl Default for ConnectionLimits {
     fn default() -> Self {
         Self {
             max_connections: 512,
-            max_per_client: 128,
+            // Half: another client always finds half the slots; 100 keep-alive clients behind one
+            // address (a load test, a small proxy) stay within it.
+            max_per_client: 256,
             header_timeout: Duration::from_secs(10),
             send_timeout: Duration::from_secs(60),
         }
