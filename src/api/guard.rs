@@ -7,7 +7,8 @@
 //!
 //! * a request that carries a body must say `Content-Type: application/json` (or `…+json`), else
 //!   415: a page can only send JSON cross-site after a CORS preflight, which this server never
-//!   grants (body-less POSTs such as cancel are covered by the next rule);
+//!   grants (body-less POSTs such as cancel are covered by the next rule); a body with a
+//!   `Content-Encoding` other than `identity` is 415 too (bodies are not decoded);
 //! * a request with an `Origin` header must come from this server's own origin (the `Origin`'s
 //!   host and port equal the `Host` header) or a host named with `--allowed-host`, else 403 —
 //!   browsers send `Origin` on every cross-origin request and on every POST;
@@ -113,6 +114,16 @@ impl Guard {
                 "a request body must be JSON: send `Content-Type: application/json`".into(),
             ));
         }
+        // Request bodies are not decoded: an encoded one would be read as if it were plain JSON.
+        if let Some(encoding) = headers.get(header::CONTENT_ENCODING) {
+            let encoding = encoding.to_str().unwrap_or("?").trim();
+            if writes && has_body(headers) && !encoding.eq_ignore_ascii_case("identity") {
+                return Err(ApiError::UnsupportedMediaType(format!(
+                    "this server does not decode request bodies (Content-Encoding: {encoding}); send the body \
+                     uncompressed"
+                )));
+            }
+        }
         Ok(())
     }
 }
@@ -181,6 +192,23 @@ mod tests {
             assert!(matches!(guard.check(&Method::POST, &headers(&h)), Err(ApiError::UnsupportedMediaType(_))), "{ct}");
         }
         assert!(!ok(Method::POST, &[("host", "127.0.0.1:8080"), ("content-length", "5")]), "a body without a type");
+        // Issue 22, item 10: an encoded body is refused (415), not read as if it were plain.
+        for encoding in ["br", "gzip", "deflate"] {
+            let h = [
+                ("host", "127.0.0.1:8080"),
+                ("content-type", "application/json"),
+                ("content-length", "9"),
+                ("content-encoding", encoding),
+            ];
+            assert!(matches!(guard.check(&Method::POST, &headers(&h)), Err(ApiError::UnsupportedMediaType(_))));
+        }
+        let identity = [
+            ("host", "127.0.0.1:8080"),
+            ("content-type", "application/json"),
+            ("content-length", "2"),
+            ("content-encoding", "identity"),
+        ];
+        assert!(ok(Method::POST, &identity));
         assert!(ok(
             Method::POST,
             &[("host", "127.0.0.1:8080"), ("content-type", "application/merge-patch+json"), ("content-length", "2")]
