@@ -1,4 +1,5 @@
-//! Queries on the `jobs`, `checkpoints` and `checkpoint_history` tables.
+//! Queries on the `jobs` and `checkpoints` tables (a checkpoint's history row is appended with it:
+//! `history`).
 //!
 //! Every write runs in a transaction whose commit is awaited, and goes through [`Store::track`]:
 //! an insert with `RETURNING` in autocommit mode once handed back a row whose commit had failed on
@@ -7,19 +8,8 @@
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
+use super::history::thin_history;
 use super::{JobState, Store, StoreError};
-
-/// The indices of at most `max` of `n` items, evenly spaced, the first and the last included (all
-/// of them when `n ≤ max`).
-pub fn evenly_kept(n: usize, max: usize) -> Vec<usize> {
-    if n <= max || max < 2 {
-        return (0..n).collect();
-    }
-    (0..max).map(|k| k * (n - 1) / (max - 1)).collect()
-}
-
-/// Rows a job's history may reach before it is thinned (to ~1,000, evenly spaced in iterations).
-pub const MAX_HISTORY_ROWS: i64 = 2000;
 
 /// Unix milliseconds now.
 pub(crate) fn now_ms() -> i64 {
@@ -163,31 +153,6 @@ async fn upsert_checkpoint(
     .execute(&mut *tx)
     .await?;
     thin_history(tx, id).await
-}
-
-/// Keeps a job's history bounded: past [`MAX_HISTORY_ROWS`] rows, only the first row of each of
-/// ~1,000 equal buckets of iterations (and the latest row) stay. A job checkpointed every
-/// iteration for 10⁶ iterations once kept 10⁶ rows that every history request loaded.
-async fn thin_history(tx: &mut sqlx::SqliteConnection, id: i64) -> Result<(), StoreError> {
-    let rows: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
-        .bind(id)
-        .fetch_one(&mut *tx)
-        .await?;
-    if rows <= MAX_HISTORY_ROWS {
-        return Ok(());
-    }
-    sqlx::query(
-        "DELETE FROM checkpoint_history WHERE job_id = ?1 AND iterations IN ( \
-             SELECT iterations FROM ( \
-                 SELECT iterations, last, \
-                        ROW_NUMBER() OVER (PARTITION BY iterations / ((last + 999) / 1000) ORDER BY iterations) AS r \
-                 FROM (SELECT iterations, MAX(iterations) OVER () AS last FROM checkpoint_history WHERE job_id = ?1)) \
-             WHERE r > 1 AND iterations < last)",
-    )
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
-    Ok(())
 }
 
 /// Inserts a queued job (a run of sweep `sweep.0`, number `sweep.1`, if given) in `tx`.
@@ -475,36 +440,6 @@ impl Store {
         Ok(counts)
     }
 
-    /// A job's checkpoint history: (iterations, strategies JSON), oldest first.
-    ///
-    /// At most `max` rows, evenly spaced and with the first and the last ([`evenly_kept`]),
-    /// streamed and thinned as they are read: memory holds `max` rows whatever the table holds
-    /// (the writer keeps ~2,000 per job, but the table is only a file).
-    pub async fn load_history(&self, id: i64, max: usize) -> Result<Vec<(u64, String)>, StoreError> {
-        use futures_util::TryStreamExt;
-        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
-            .bind(id)
-            .fetch_one(self.pool())
-            .await?;
-        let keep = evenly_kept(n.max(0) as usize, max);
-        let mut rows =
-            sqlx::query("SELECT iterations, strategies FROM checkpoint_history WHERE job_id = ? ORDER BY iterations")
-                .bind(id)
-                .fetch(self.pool());
-        let (mut out, mut i) = (Vec::with_capacity(keep.len()), 0usize);
-        while let Some(row) = rows.try_next().await? {
-            // Rows appended since the count are past the last kept index: stop there.
-            if i > *keep.last().unwrap_or(&0) {
-                break;
-            }
-            if keep.binary_search(&i).is_ok() {
-                out.push((row.try_get::<i64, _>("iterations")? as u64, row.try_get("strategies")?));
-            }
-            i += 1;
-        }
-        Ok(out)
-    }
-
     /// A job's latest result document, without the moments.
     /// (iterations done, result JSON, the moments' checksum) of a job's latest checkpoint.
     pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String, String)>, StoreError> {
@@ -517,19 +452,5 @@ impl Store {
         })
         .transpose()
         .map_err(|e: sqlx::Error| e.into())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::evenly_kept;
-
-    #[test]
-    fn thinning_keeps_the_ends_and_spaces_evenly() {
-        assert_eq!(evenly_kept(5, 10), vec![0, 1, 2, 3, 4]);
-        let t = evenly_kept(10_001, 1000);
-        assert_eq!(t.len(), 1000);
-        assert_eq!((t[0], *t.last().unwrap()), (0, 10_000));
-        assert!(t.windows(2).all(|w| (10..=11).contains(&(w[1] - w[0]))));
     }
 }

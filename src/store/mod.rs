@@ -12,6 +12,7 @@
 //! (disk full, I/O error) is an error, never a success that was not kept. The store remembers the
 //! last such failure for a while so that `/readyz` reports it.
 
+mod history;
 mod jobs;
 mod solves;
 mod state;
@@ -26,7 +27,8 @@ use sqlx::SqlitePool;
 use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
-pub use jobs::{Checkpoint, Inserted, JobRow, NewJob, evenly_kept};
+pub use history::{MAX_HISTORY_ROWS, evenly_kept};
+pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
 pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;
