@@ -91,7 +91,7 @@ fn predictions_match_direct_runs_at_other_budgets() {
         let (a, b) = (optimum.rms_percent.unwrap(), row(&direct, "optimal_cv").rms_percent.unwrap());
         eprintln!("({light_paths}, {camera_paths}) optimal_cv: predicted {a:.1}, direct {b:.1}");
         // The re-fitted table of the recommended row, for every cell — or none when the guard
-        // recommends a per-path strategy at that budget (no fitted row beat it beyond two SE).
+        // recommends a per-path strategy at that budget (no fitted row beat it beyond 1.645 SE).
         let recommended = p.recommended.as_ref().expect("a recommendation");
         let expected = if recommended.lambda.is_some() { source.config.cells.len() } else { 0 };
         eprintln!("({light_paths}, {camera_paths}) recommended {}", recommended.strategy);

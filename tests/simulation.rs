@@ -217,7 +217,7 @@ fn fitted_weights_minimise_the_sample_variance() {
 
 /// Issues 13 and 21 at 10⁴ iterations of the paper's run (seed 1): within the paper's fixed
 /// weights (w0 = 0) the recommended row keeps them and is the guard's choice — a fitted row only if
-/// it beats the best per-path row beyond two paired SEs — and it is measurably better than `switch`;
+/// it beats the best per-path row beyond 1.645 paired SEs (one-sided 95%) — and it is measurably better than `switch`;
 /// the heuristics that merge at the pixel are shown beside it but stay outside the comparison, and
 /// a warning reports what the constraint costs when one of them is less noisy. The table optimum
 /// (`optimal_cv`) still follows Fig. 2. Every comparison is a variance ratio with its paired

@@ -9,9 +9,9 @@
 //!   [`super::crossfit::select_lambda`]);
 //! * the best fitted row (lowest cross-fitted RMS) is recommended only if it beats the best
 //!   per-path row *beyond [`GUARD_SE`] standard errors*: the paired variance ratio
-//!   Var(per-path)/Var(fitted), both on the same iterations, must exceed 1 by more than twice its
-//!   jackknife SE over the folds; otherwise the per-path row is recommended — its figures involve
-//!   no fit at all.
+//!   Var(per-path)/Var(fitted), both on the same iterations, must exceed 1 by more than 1.645 times
+//!   its jackknife SE over the folds (a one-sided test at the 5% level); otherwise the per-path row
+//!   is recommended — its figures involve no fit at all.
 //!
 //! **The gain** compares the recommended row with the best per-path strategy other than itself that
 //! keeps the fixed weights (the paper's reference is the switch, case 4), as a variance ratio with
@@ -22,14 +22,16 @@
 use serde::{Deserialize, Serialize};
 
 /// Standard errors by which a fitted row's paired variance ratio must exceed 1 for it to be
-/// recommended over the best per-path row. Two, not one: the jackknife SE over K = 10 folds is
-/// itself uncertain (~25% relative) and, with the heavy-tailed contributions of short runs,
-/// optimistic — where one rare event is in all folds' training data or none, every fitted row
-/// looks better than it is together. At one SE, 1 of 8 seeds of 2000 paper iterations recommended
-/// `switch_corrected` (ratio 1.52 ± 0.41 over correlation_aware_planes23) whose weights delivered
-/// 105% RMS on an independent run against the heuristic's 56.5% (tests/recommendation.rs); a
-/// fitted row that is really better by a few SE still passes.
-pub const GUARD_SE: f64 = 2.0;
+/// recommended over the best per-path row: the one-sided 95% point of the normal, so a fitted row
+/// is recommended when the run gives 95% confidence that it is better. Not one SE (the issue's
+/// first proposal): at one SE, 1 of 8 seeds of 2000 paper iterations recommended `switch_corrected`
+/// (ratio 1.52 ± 0.41 over correlation_aware_planes23, 1.26 SE) whose weights delivered 105% RMS
+/// on an independent run against the heuristic's 56.5% (tests/recommendation.rs) — where one rare
+/// event is in all folds' training data or none, every fitted row looks better than it is
+/// together. Not two either: over 60 seeds of 2000 iterations and 30 of 10⁴ no fitted row lies
+/// between 1.26 and 2.26 SE, while at 10⁵ iterations, where the jackknife SE is reliable, two SE
+/// turned away stacked optima 1.8–2.0 SE better than the heuristic (docs/results.md §10).
+pub const GUARD_SE: f64 = 1.645;
 
 use super::crossfit::{Scored, jackknife_se};
 use super::fitted::Fitted;
@@ -128,7 +130,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
                 Some((g, Some(se))) if g - 1.0 > GUARD_SE * se => Ok((
                     f,
                     format!(
-                        "the lowest honest RMS ({:.1}%); it beats {p} ({:.1}%) by a variance ratio of {g:.3} ± {se:.3}, more than two standard errors",
+                        "the lowest honest RMS ({:.1}%); it beats {p} ({:.1}%) by a variance ratio of {g:.3} ± {se:.3}, more than {GUARD_SE} standard errors (one-sided 95%)",
                         rms(f),
                         rms(p)
                     ),
@@ -140,7 +142,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
                     Ok((
                         p,
                         format!(
-                            "no fitted row beats it beyond two standard errors: the best, {f} ({:.1}%), is within noise of {p} ({:.1}%){by}",
+                            "no fitted row beats it beyond {GUARD_SE} standard errors (one-sided 95%): the best, {f} ({:.1}%), is within noise of {p} ({:.1}%){by}",
                             rms(f),
                             rms(p)
                         ),

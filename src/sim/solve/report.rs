@@ -95,7 +95,7 @@ pub struct RunReport {
     pub reference_luminance: Option<f64>,
     pub noise_table: Vec<NoiseRow>,
     /// The recommended row (the honest row with the lowest RMS that keeps the fixed weights, a
-    /// fitted one only if it beats the best per-path strategy beyond two standard errors); null
+    /// fitted one only if it beats the best per-path strategy beyond 1.645 standard errors, one-sided 95%); null
     /// when no row could be computed (see `solve_error`).
     pub recommended: Option<RecommendedWeights>,
     /// The weights table: the recommended fitted row's table (fitted on all iterations at its λ),

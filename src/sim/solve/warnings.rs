@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::UNSTABLE_STDERR;
+use super::recommend::GUARD_SE;
 use super::noise::{NoiseRow, NoiseTable, central_3_4, power_sums};
 use super::solver::{CellStatus, Fit, MIN_CELL_EVENTS};
 use super::strategy::Strategy;
@@ -123,13 +124,13 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
     }
     if let Some(g) = table.gain
         && table.recommended.as_ref().is_ok_and(|r| r.fitted.is_some())
-        && g.value - 1.0 < 2.0 * g.stderr.unwrap_or(f64::INFINITY)
+        && g.value - 1.0 < GUARD_SE * g.stderr.unwrap_or(f64::INFINITY)
     {
         let se = g.stderr.map_or("unknown".to_string(), |s| format!("{s:.2}"));
         out.push(Warning {
             code: WarningCode::NoGain,
             message: format!(
-                "the recommended weights ({}) are not measurably better than {}: variance ratio {:.2} ± {se}, not 2 standard errors above 1",
+                "the recommended weights ({}) are not measurably better than {}: variance ratio {:.2} ± {se}, not {GUARD_SE} standard errors above 1",
                 g.strategy, g.versus, g.value
             ),
             strategy: Some(g.strategy),
