@@ -473,14 +473,10 @@ async fn histories_stay_bounded() {
     server.stop().await;
 }
 
-/// Item 14: a corrupted checkpoint still served its stored result, and `extend` turned the
-/// succeeded job into a failed one.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_corrupted_checkpoint_is_reported_not_served() {
-    let server = TestServer::start().await;
-    let (id, _) = finished(&server, 1).await;
-    let dir = server.stop().await;
-    let url = format!("sqlite://{}", dir.path().join("optimis.db").display());
+/// Changes one digit of a job's stored moments (inside `sum_yy`, past its first entries) directly
+/// in the database under `dir`, so that the checkpoint no longer matches its checksum.
+async fn corrupt_checkpoint(dir: &std::path::Path, id: i64) {
+    let url = format!("sqlite://{}", dir.join("optimis.db").display());
     let db = sqlx::SqlitePool::connect(&url).await.unwrap();
     let mut moments: Vec<u8> =
         sqlx::query_scalar("SELECT moments FROM checkpoints WHERE job_id = ?").bind(id).fetch_one(&db).await.unwrap();
@@ -494,6 +490,16 @@ async fn a_corrupted_checkpoint_is_reported_not_served() {
         .await
         .unwrap();
     db.close().await;
+}
+
+/// Item 14: a corrupted checkpoint still served its stored result, and `extend` turned the
+/// succeeded job into a failed one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_corrupted_checkpoint_is_reported_not_served() {
+    let server = TestServer::start().await;
+    let (id, _) = finished(&server, 1).await;
+    let dir = server.stop().await;
+    corrupt_checkpoint(dir.path(), id).await;
     let server = TestServer::start_in(dir, |_| {}).await;
     let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
@@ -510,20 +516,7 @@ async fn a_checkpoint_corrupted_under_a_running_server_is_reported() {
     let server = TestServer::start().await;
     let (id, _) = finished(&server, 2).await;
     assert_eq!(server.get(&format!("/v1/jobs/{id}/result")).await.status, 200);
-    let url = format!("sqlite://{}", server.dir.path().join("optimis.db").display());
-    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
-    let mut moments: Vec<u8> =
-        sqlx::query_scalar("SELECT moments FROM checkpoints WHERE job_id = ?").bind(id).fetch_one(&db).await.unwrap();
-    let at = moments.windows(9).position(|w| w == b"\"sum_yy\":").unwrap() + 40;
-    let pos = at + moments[at..].iter().position(|b| (b'1'..=b'8').contains(b)).unwrap();
-    moments[pos] += 1;
-    sqlx::query("UPDATE checkpoints SET moments = ? WHERE job_id = ?")
-        .bind(&moments)
-        .bind(id)
-        .execute(&db)
-        .await
-        .unwrap();
-    db.close().await;
+    corrupt_checkpoint(server.dir.path(), id).await;
     // Past the verification's age (an ordering, not a limit on how fast the server is).
     tokio::time::sleep(Duration::from_millis(1200)).await;
     let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
