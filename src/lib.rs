@@ -20,6 +20,18 @@
 //!
 //! `main.rs` only parses the command line and calls into this library. Without the default
 //! `server` feature only the core and the local CLI build: the core depends on no server crate.
+//!
+//! Unit tests live at the end of the file they test, in `#[cfg(test)] mod tests { … }`; a file
+//! that would pass 500 lines with them declares `#[cfg(test)] mod tests;` and keeps them in
+//! `<file>/tests.rs` (where Rust looks for it: no `#[path]`). Tests through the public interfaces
+//! — the HTTP API, the command line, whole runs — are the integration tests in `tests/`.
+//!
+//! Every folder's module file (its `mod.rs`) ends its description with the crate modules the
+//! folder may import besides its own files, in one line that `tests/architecture.rs` checks:
+//! `Imports: crate::sim, crate::store` or `Imports: nothing from the crate`. Here it is that of the
+//! files at the top of `src/` (this one, `main.rs`, `metrics.rs` and `process_metrics.rs`):
+//!
+//! Imports: crate::store
 
 #[cfg(feature = "server")]
 pub mod api;

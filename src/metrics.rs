@@ -103,12 +103,17 @@ impl Default for Metrics {
 
 /// A running job's figures for the gauges.
 pub struct JobSample {
+    /// The job's id (the `job_id` label).
     pub id: i64,
+    /// Iterations computed so far (in memory: ahead of the latest checkpoint between writes).
     pub iterations_done: u64,
+    /// Light paths traced per second since the job last started running (0 before its first
+    /// batch).
     pub light_paths_per_second: f64,
 }
 
 impl Metrics {
+    /// A registry with every metric registered (prefixed `optimis_`) and the process collector.
     pub fn new() -> Self {
         let mut root = Registry::default();
         crate::process_metrics::ProcessCollector::started();

@@ -1,17 +1,47 @@
-//! The layout as a test: the import graph of `src/` read from the sources.
+//! The layout as a test: the import graph of `src/` read from the sources, and the promises the
+//! folders make about it.
 //!
-//! Every `use crate::…`, `use super::…` and inline `crate::…` path is resolved to the file of the
-//! longest module prefix that exists, which gives a graph of files. The test then checks what
-//! `src/sim/mod.rs`, `src/jobs/mod.rs` and `src/lib.rs` promise:
-//! * no import cycle between the files of `src/sim/` or of `src/jobs/`;
-//! * inside `src/sim/`, imports point down the layers math → model → engines → stats → solve →
-//!   the root files (spec, document, runner, sweep) → checks;
-//! * the core imports nothing outside `sim`, and the top-level modules form no cycle (in particular
-//!   `api` and `server` do not import each other both ways);
+//! # The graph
+//!
+//! One node per file, an edge A → B when A's code names something of B. The sources are read
+//! without comments (doc comments and their intra-doc links included), with every string and
+//! character literal emptied and without their `#[cfg(test)]` items (tests may build fixtures from
+//! any layer; they are not part of the layout). Then:
+//! * **paths**: every path that starts with `crate::`, `super::` or `self::` — in a `use` tree or
+//!   inline in code, such as `super::illumination::Illumination::from_spec(..)` in a function body —
+//!   is resolved to the file of the longest module prefix that exists;
+//! * **re-exports**: a path through a module file to a name that file imports leads on to where
+//!   the name comes from (`crate::jobs::JobManager` reaches `jobs/manager.rs`, which `jobs/mod.rs`
+//!   re-exports it from). A module file's own `use child::…` paths (without `self::`) are read for
+//!   that only: a module file declares its children, so they are not edges of their own;
+//! * **methods, by type name**: a type's inherent `impl` blocks may be spread over several files,
+//!   so a call does not always name the file it needs. When A knows a type `X` (defines it, has an
+//!   `impl X` block, or names it in a path) and calls `.m(` or `::m(`, and `fn m` is in an
+//!   inherent `impl X` block of a file C that does not define `X` (paths to the file that does
+//!   already lead there), then A → C. This is how `self.verified_checkpoint(..)` in one
+//!   `impl JobManager` block reaches the file whose `impl JobManager` defines it. It is a heuristic
+//!   on names: a method of `X` called on another value of A that has a method of the same name
+//!   counts too, which can only add edges, never hide one.
+//!
+//! # What it checks
+//! * no import cycle among the files of `src/` (the failure lists every cycle with its files);
+//! * every folder keeps the promise of its module file (`mod.rs`, or `lib.rs` for the files at the
+//!   top of `src/`): a line `//! Imports: crate::sim, crate::store` — or `//! Imports: nothing from
+//!   the crate` — lists the crate modules the folder's files (subfolders included) may import
+//!   besides the folder's own files;
+//! * the core imports nothing outside `src/sim/`, and inside it imports point down the layers
+//!   math → model → engines → stats → solve → the root files (spec, document, runner, sweep) →
+//!   checks;
+//! * the top-level modules form no cycle (in particular `api` and `server` do not import each
+//!   other both ways);
 //! * no file under `src/` is longer than 500 lines (the dashboard's vendored library excepted).
+
+mod graph;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+
+use graph::{Edges, Source, cycles, edges_of, expand, graph, referenced_paths, source, strip_code};
 
 const MAX_LINES: usize = 500;
 
@@ -26,190 +56,100 @@ const SIM_LAYERS: &[&[&str]] = &[
     &["checks"],
 ];
 
-/// A source file and its module path (`["sim", "engines", "pixel"]`; `mod.rs` is its folder).
-struct Source {
-    module: Vec<String>,
-    text: String,
-}
-
-fn sources() -> BTreeMap<PathBuf, Source> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut out = BTreeMap::new();
-    let mut stack = vec![root.clone()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "rs") && !path.to_string_lossy().ends_with("tests.rs") {
-                let rel = path.strip_prefix(&root).unwrap().with_extension("");
-                let mut module: Vec<String> = rel.iter().map(|c| c.to_string_lossy().into_owned()).collect();
-                if module.last().is_some_and(|m| m == "mod" || m == "lib" || m == "main") {
-                    module.pop();
-                }
-                let text = strip_comments(&std::fs::read_to_string(&path).unwrap());
-                out.insert(rel, Source { module, text });
-            }
-        }
-    }
-    out
-}
-
-/// The source without line comments (doc comments mention paths that are not imports) and without
-/// its test module (tests may build fixtures from any layer; they are not part of the layout).
-fn strip_comments(text: &str) -> String {
-    let text = text.find("#[cfg(test)]").map_or(text, |i| &text[..i]);
-    text.lines()
-        .map(|line| match line.find("//") {
-            // Keep "//" inside string literals such as URLs: only cut a comment outside quotes.
-            Some(i) if line[..i].matches('"').count() % 2 == 0 => &line[..i],
-            _ => line,
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// Expands one `use` tree (`a::{b, c::{d, e}}`) into its paths.
-fn expand(tree: &str) -> Vec<String> {
-    let tree = tree.trim();
-    let Some(open) = tree.find('{') else {
-        let path = tree.split(" as ").next().unwrap().trim();
-        return vec![path.trim_end_matches("::*").to_string()];
-    };
-    let prefix = &tree[..open];
-    let inner = &tree[open + 1..tree.rfind('}').unwrap()];
-    let mut parts = Vec::new();
-    let (mut depth, mut start) = (0, 0);
-    for (i, c) in inner.char_indices() {
-        match c {
-            '{' => depth += 1,
-            '}' => depth -= 1,
-            ',' if depth == 0 => {
-                parts.push(&inner[start..i]);
-                start = i + 1;
-            }
-            _ => {}
-        }
-    }
-    parts.push(&inner[start..]);
-    parts
-        .into_iter()
-        .filter(|p| !p.trim().is_empty())
-        .flat_map(expand)
-        .map(|p| if p == "self" { prefix.trim_end_matches("::").to_string() } else { format!("{prefix}{p}") })
-        .collect()
-}
-
-/// Every module path `text` refers to, absolute from the crate root.
-fn referenced_paths(module: &[String], text: &str) -> Vec<Vec<String>> {
-    let mut raw = Vec::new();
-    let mut offset = 0;
-    for line in text.split_inclusive('\n') {
-        let s = line.trim_start();
-        let s = s.strip_prefix("pub(crate) ").or_else(|| s.strip_prefix("pub(super) ")).unwrap_or(s);
-        let s = s.strip_prefix("pub ").unwrap_or(s);
-        if s.starts_with("use ") {
-            // The statement runs from here to its `;`, over as many lines as it takes.
-            let start = offset + line.len() - s.len() + "use ".len();
-            let end = start + text[start..].find(';').expect("a use statement ends with ;");
-            raw.extend(expand(&text[start..end]));
-        }
-        offset += line.len();
-    }
-    // Inline paths, e.g. `crate::sim::engines::cost::MERGE_WEIGHT` inside an expression.
-    for (i, _) in text.match_indices("crate::") {
-        let rest = &text[i..];
-        let end = rest.find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':')).unwrap_or(rest.len());
-        raw.push(rest[..end].trim_end_matches(':').to_string());
-    }
-    raw.into_iter()
-        .filter_map(|path| {
-            let segments: Vec<&str> = path.split("::").map(str::trim).collect();
-            let mut base: Vec<String> = match segments[0] {
-                "crate" => Vec::new(),
-                // A `mod.rs` file's module is its folder, so `super` is one level up either way.
-                "super" => module[..module.len().saturating_sub(1)].to_vec(),
-                "self" => module.to_vec(),
-                _ => return None,
-            };
-            let mut rest = &segments[1..];
-            while rest.first() == Some(&"super") {
-                base.pop();
-                rest = &rest[1..];
-            }
-            base.extend(rest.iter().map(|s| s.to_string()));
-            Some(base)
-        })
-        .collect()
-}
-
-/// The file a path refers to: the longest prefix of it that is a module.
-fn resolve(path: &[String], modules: &BTreeMap<Vec<String>, PathBuf>) -> Option<PathBuf> {
-    (0..=path.len()).rev().find_map(|n| modules.get(&path[..n]).cloned())
-}
-
-fn graph() -> (BTreeMap<PathBuf, Source>, BTreeMap<PathBuf, BTreeSet<PathBuf>>) {
-    let sources = sources();
-    let modules: BTreeMap<Vec<String>, PathBuf> =
-        sources.iter().filter(|(p, _)| !p.ends_with("main")).map(|(p, s)| (s.module.clone(), p.clone())).collect();
-    let mut edges: BTreeMap<PathBuf, BTreeSet<PathBuf>> = BTreeMap::new();
-    for (path, source) in &sources {
-        let targets = edges.entry(path.clone()).or_default();
-        for referenced in referenced_paths(&source.module, &source.text) {
-            if let Some(target) = resolve(&referenced, &modules)
-                && target != *path
-            {
-                targets.insert(target);
-            }
-        }
-    }
-    (sources, edges)
-}
-
-/// The cycles (strongly connected components of more than one file) among `files`.
-fn cycles(edges: &BTreeMap<PathBuf, BTreeSet<PathBuf>>, files: &BTreeSet<PathBuf>) -> Vec<Vec<PathBuf>> {
-    // Two files are in one cycle when each reaches the other.
-    let reach = |from: &PathBuf| -> BTreeSet<PathBuf> {
-        let mut seen = BTreeSet::new();
-        let mut stack = vec![from.clone()];
-        while let Some(f) = stack.pop() {
-            for t in edges.get(&f).into_iter().flatten().filter(|t| files.contains(*t)) {
-                if seen.insert(t.clone()) {
-                    stack.push(t.clone());
-                }
-            }
-        }
-        seen
-    };
-    let reaches: BTreeMap<&PathBuf, BTreeSet<PathBuf>> = files.iter().map(|f| (f, reach(f))).collect();
-    let mut found: Vec<Vec<PathBuf>> = Vec::new();
-    for f in files {
-        let component: Vec<PathBuf> =
-            files.iter().filter(|g| reaches[f].contains(*g) && reaches[*g].contains(f)).cloned().collect();
-        if component.len() > 1 && !found.contains(&component) {
-            found.push(component);
-        }
-    }
-    found
-}
+/// How a folder's module file states what the folder may import (one line of its module doc).
+const PROMISE: &str = "//! Imports: ";
+/// The promise of a folder that imports nothing from the crate outside itself.
+const NOTHING: &str = "nothing from the crate";
 
 fn under(sources: &BTreeMap<PathBuf, Source>, folder: &str) -> BTreeSet<PathBuf> {
     sources.iter().filter(|(_, s)| s.module.first().is_some_and(|m| m == folder)).map(|(p, _)| p.clone()).collect()
 }
 
+/// A cycle as the failure shows it: its files, and the edges that close it.
+fn describe(cycle: &[PathBuf], edges: &Edges) -> String {
+    let mut out = format!("{} files:", cycle.len());
+    for from in cycle {
+        let to: Vec<String> =
+            edges[from].iter().filter(|t| cycle.contains(t)).map(|t| format!("src/{}.rs", t.display())).collect();
+        out += &format!("\n    src/{}.rs → {}", from.display(), to.join(", "));
+    }
+    out
+}
+
 #[test]
-fn the_files_of_the_core_and_of_the_job_runner_import_each_other_in_no_cycle() {
+fn no_files_of_the_crate_import_each_other_in_a_cycle() {
     let (sources, edges) = graph();
     for folder in ["sim", "jobs", "api", "server", "store", "cli"] {
-        let files = under(&sources, folder);
-        assert!(!files.is_empty(), "no files under src/{folder}");
-        let found = cycles(&edges, &files);
-        assert!(found.is_empty(), "import cycles in src/{folder}: {found:#?}");
+        assert!(!under(&sources, folder).is_empty(), "no files under src/{folder}");
     }
+    let found = cycles(&edges, &sources.keys().cloned().collect());
+    let listed: Vec<String> = found.iter().map(|c| describe(c, &edges)).collect();
+    assert!(found.is_empty(), "{} import cycles in src/:\n  {}", found.len(), listed.join("\n  "));
     // The check itself sees edges: the driver imports the job state, the runner the engines.
     assert!(edges[Path::new("jobs/driver")].contains(Path::new("jobs/state")));
     assert!(!edges[Path::new("jobs/driver")].contains(Path::new("jobs/manager")));
     assert!(edges[Path::new("sim/runner")].iter().any(|t| t.starts_with("sim/engines")));
+}
+
+/// The promise in a module file's doc: `None` without the line, else the crate modules it lists.
+fn promise(raw: &str) -> Option<Result<Vec<Vec<String>>, String>> {
+    let line = raw.lines().find_map(|l| l.strip_prefix(PROMISE))?.trim();
+    if line == NOTHING {
+        return Some(Ok(Vec::new()));
+    }
+    let parse = |p: &str| match p.trim().strip_prefix("crate::") {
+        Some(module) => Ok(module.split("::").map(String::from).collect()),
+        None => Err(format!("`{}` is not a crate module (`crate::…`, or the line says `{NOTHING}`)", p.trim())),
+    };
+    Some(line.split(',').map(parse).collect())
+}
+
+#[test]
+fn every_folder_keeps_the_import_promise_of_its_module_file() {
+    let (sources, edges) = graph();
+    let folders: BTreeSet<&Path> = sources.keys().filter_map(|p| p.parent()).collect();
+    let mut broken = Vec::new();
+    for folder in folders {
+        // The root's files are `lib.rs` and its neighbours; every other folder is a module with
+        // its subfolders, whose module file is its `mod.rs` (or the `.rs` file beside it).
+        let root = folder.as_os_str().is_empty();
+        let module_file = match folder.join("mod") {
+            _ if root => PathBuf::from("lib"),
+            mod_rs if sources.contains_key(&mod_rs) => mod_rs,
+            _ => folder.to_path_buf(),
+        };
+        assert!(sources.contains_key(&module_file), "src/{}/ has no module file", folder.display());
+        let shown = format!("src/{}.rs", module_file.display());
+        let allowed = match promise(&sources[&module_file].raw) {
+            None => {
+                let files =
+                    if root { "the files at the top of src/".into() } else { format!("src/{}/", folder.display()) };
+                broken.push(format!(
+                    "{shown} has no `{PROMISE}…` line saying which crate modules {files} may import (e.g. \
+                     `{PROMISE}crate::sim, crate::store` or `{PROMISE}{NOTHING}`)"
+                ));
+                continue;
+            }
+            Some(Err(e)) => {
+                broken.push(format!("{shown}: {e}"));
+                continue;
+            }
+            Some(Ok(allowed)) => allowed,
+        };
+        let inside = |p: &Path| if root { p.parent() == Some(folder) } else { p.starts_with(folder) };
+        for (from, targets) in edges.iter().filter(|(p, _)| inside(p)) {
+            for to in targets.iter().filter(|t| !inside(t)) {
+                if !allowed.iter().any(|m| sources[to].module.starts_with(m)) {
+                    broken.push(format!(
+                        "src/{}.rs imports src/{}.rs: not promised by {shown}",
+                        from.display(),
+                        to.display()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(broken.is_empty(), "folders breaking their import promise:\n{}", broken.join("\n"));
 }
 
 #[test]
@@ -246,7 +186,7 @@ fn the_top_level_modules_form_no_cycle() {
             }
         }
     }
-    let as_paths: BTreeMap<PathBuf, BTreeSet<PathBuf>> =
+    let as_paths: Edges =
         modules.iter().map(|(a, bs)| (PathBuf::from(a), bs.iter().map(PathBuf::from).collect())).collect();
     let names: BTreeSet<PathBuf> = as_paths.keys().cloned().chain(as_paths.values().flatten().cloned()).collect();
     let found = cycles(&as_paths, &names);
@@ -292,4 +232,51 @@ fn use_trees_expand_to_every_path() {
             "crate::sim::model::scene::Scene"
         ]
     );
+}
+
+#[test]
+fn inline_paths_count_and_comments_and_literals_do_not() {
+    let text = r##"//! See [`super::a`].
+/// Calls [`super::b::f`] /* and super::c */ too.
+pub(crate) use super::d::{self, D};
+fn f<'a>(x: &'a str) -> char {
+    let _ = ("super::e", r#"crate::f "x""#, '"', '\'', super::g::G::new(x));
+    crate::h::H::run(); /* nested /* super::i */ super::j */ 'k'
+}
+pub(in crate::m) fn g() {}
+#[cfg(test)]
+mod tests { use super::l; }
+"##;
+    let module = ["m".to_string(), "n".to_string()];
+    let mut read: Vec<String> = referenced_paths(&module, &strip_code(text)).iter().map(|p| p.join("::")).collect();
+    read.sort();
+    assert_eq!(read, ["h::H::run", "m::d", "m::d::D", "m::g::G::new"]);
+}
+
+#[test]
+fn a_method_called_on_a_type_reaches_the_file_of_its_impl_block() {
+    let files = [
+        ("a/mod", "pub struct Hub;\nimpl Hub {\n    fn run(&self) { self.check(); }\n}\n"),
+        ("a/check", "use super::Hub;\nimpl Hub {\n    pub fn check(&self) {}\n}\n"),
+        ("a/user", "use super::Hub;\nfn go(h: &Hub) { h.run(); }\n"),
+    ];
+    let sources = files.iter().map(|(p, t)| (PathBuf::from(p), source(Path::new(p), t.to_string()))).collect();
+    let edges = edges_of(&sources);
+    assert!(edges[Path::new("a/mod")].contains(Path::new("a/check")), "{edges:?}");
+    assert_eq!(edges[Path::new("a/user")], BTreeSet::from([PathBuf::from("a/mod")]), "{edges:?}");
+    let found = cycles(&edges, &sources.keys().cloned().collect());
+    assert_eq!(found, [vec![PathBuf::from("a/check"), PathBuf::from("a/mod")]]);
+}
+
+#[test]
+fn a_path_through_a_re_export_reaches_the_file_that_defines_the_name() {
+    let files = [
+        ("a/mod", "mod inner;\npub use inner::Thing;\n"),
+        ("a/inner", "pub struct Thing;\n"),
+        ("b/user", "fn go() -> crate::a::Thing { crate::a::Thing }\n"),
+    ];
+    let sources = files.iter().map(|(p, t)| (PathBuf::from(p), source(Path::new(p), t.to_string()))).collect();
+    let edges = edges_of(&sources);
+    assert_eq!(edges[Path::new("b/user")], BTreeSet::from([PathBuf::from("a/inner")]), "{edges:?}");
+    assert!(edges[Path::new("a/mod")].is_empty(), "a module file's children are not its imports: {edges:?}");
 }

@@ -43,7 +43,13 @@ pub enum ApiError {
     MalformedJson(String),
     /// 422: a field or parameter is invalid; `field` names it.
     #[error("{field}: {message}")]
-    Invalid { field: String, message: String },
+    Invalid {
+        /// JSON path of the offending field or parameter (`scene.l3`, `axes[1].values[2]`); empty
+        /// when the problem is the body as a whole (the problem then has no `field`).
+        field: String,
+        /// What is wrong with the value; the problem's `detail` is `field: message`.
+        message: String,
+    },
     /// 404: no such job or route.
     #[error("{0}")]
     NotFound(String),
@@ -71,14 +77,26 @@ pub enum ApiError {
     UnsupportedMediaType(String),
     /// 429: a limit is reached (queue, event streams); retry after the given seconds.
     #[error("{detail}")]
-    TooManyRequests { detail: String, retry_after_seconds: u64 },
+    TooManyRequests {
+        /// Which limit was reached (the queue, the heavy computations, the pulls from peers); the
+        /// problem's `detail`.
+        detail: String,
+        /// Seconds to wait before retrying, sent as the `Retry-After` header.
+        retry_after_seconds: u64,
+    },
     /// 503: shutting down, or the database is busy; retry later.
     #[error("{0}")]
     Unavailable(String),
     /// 503 with Retry-After: the database cannot store anything right now (disk full, I/O error);
     /// nothing was acknowledged.
     #[error("{detail}")]
-    StorageUnavailable { detail: String, retry_after_seconds: u64 },
+    StorageUnavailable {
+        /// What failed, in general terms (never the database's own message); the problem's
+        /// `detail`.
+        detail: String,
+        /// Seconds to wait before retrying, sent as the `Retry-After` header.
+        retry_after_seconds: u64,
+    },
     /// 500: a bug or an infrastructure failure; logged, never described to the client.
     #[error("internal error: {0}")]
     Internal(String),

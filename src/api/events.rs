@@ -25,6 +25,7 @@ use tokio::sync::watch;
 use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::JobId;
+use super::responses::{NoSuchJob, ServerFailure};
 use crate::jobs::resource::JobResource;
 
 /// Shortest time between two events of a stream.
@@ -55,9 +56,9 @@ enum Phase {
         (status = 200, description = "Events named `job` with the job resource as data (each with an `id:`, the first with `retry:`); a final `shutdown` event if the server stops",
             content_type = "text/event-stream", body = String),
         (status = 204, description = "The job has already ended: nothing to stream (an EventSource stops reconnecting)"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
         (status = 429, description = "Too many event streams are open; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn events(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {

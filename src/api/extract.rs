@@ -16,7 +16,7 @@
 use std::time::Duration;
 
 use axum::body::Bytes;
-use axum::extract::rejection::BytesRejection;
+use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{FromRequest, FromRequestParts, Path, Request};
 use axum::http::StatusCode;
 use axum::http::request::Parts;
@@ -226,4 +226,16 @@ pub fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, ApiErro
         };
         ApiError::Invalid { field, message }
     })
+}
+
+/// A query-string rejection as a 422 naming the parameter (axum reports `name: reason`).
+pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
+    let text = rejection.body_text();
+    let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
+    match reason.split_once(": ") {
+        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format", "table"].contains(&name) => {
+            ApiError::Invalid { field: name.into(), message: message.into() }
+        }
+        _ => ApiError::Invalid { field: "query".into(), message: reason.into() },
+    }
 }

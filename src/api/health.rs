@@ -9,6 +9,7 @@ use utoipa::ToSchema;
 
 use super::AppState;
 use super::error::{ApiError, Problem};
+use super::responses::ServerFailure;
 
 /// Health status.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
@@ -42,7 +43,7 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
     get, operation_id = "get_metrics", path = "/metrics", tag = "operations",
     responses(
         (status = 200, description = "OpenMetrics text exposition", content_type = "application/openmetrics-text", body = String),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {

@@ -1,5 +1,5 @@
-//! Handlers of `/v1/jobs`: submit, list, inspect, results, re-solve, cancel, extend, delete, and
-//! the moments export. Each only translates between HTTP and the job manager.
+//! Handlers of the jobs' lifecycle under `/v1/jobs`: submit, list, inspect, cancel, extend,
+//! delete. Each only translates between HTTP and the job manager (`AppState::jobs`).
 
 use axum::Json;
 use axum::extract::rejection::QueryRejection;
@@ -10,17 +10,12 @@ use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
 
 use super::AppState;
-use super::bodies::{JobSubmission, SolverPatch};
-use super::csv::{csv_response, wants_csv};
+use super::bodies::JobSubmission;
 use super::error::{ApiError, Problem};
-use super::extract::{JobId, JsonBody, page, typed};
-use crate::jobs::documents::{JobHistory, JobList, JobResult};
-use crate::jobs::evaluation::JobEvaluation;
-use crate::jobs::prediction::{JobPrediction, PredictRequest};
+use super::extract::{JobId, JsonBody, page, query_problem, typed};
+use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
+use crate::jobs::documents::JobList;
 use crate::jobs::resource::{JobResource, JobState};
-use crate::sim::document::MomentsDocument;
-use crate::sim::solve::evaluate::GivenWeights;
-use crate::sim::solve::export::{noise_table_csv, weights_csv};
 /// Longest accepted `Idempotency-Key`.
 const MAX_KEY_LEN: usize = 255;
 
@@ -58,33 +53,6 @@ pub struct ListQuery {
     cursor: Option<String>,
 }
 
-/// Query of a job's result.
-#[derive(Debug, Deserialize, IntoParams)]
-#[serde(deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
-pub struct ResultQuery {
-    /// Show the weights fitted in-sample on all iterations at this λ (e.g. `0`, the paper's
-    /// procedure) instead of the recommended weights; the noise table is the same.
-    #[param(minimum = 0.0, maximum = 1e12)]
-    lambda: Option<f64>,
-    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
-    #[param(pattern = "^(csv|json)$")]
-    format: Option<String>,
-    /// With CSV: `noise` (default; one row per strategy) or `weights` (one row per cell).
-    #[param(pattern = "^(noise|weights)$")]
-    table: Option<String>,
-}
-
-/// Query of a job's history.
-#[derive(Debug, Deserialize, IntoParams)]
-#[serde(deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
-pub struct HistoryQuery {
-    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
-    #[param(pattern = "^(csv|json)$")]
-    format: Option<String>,
-}
-
 fn location(id: i64) -> HeaderValue {
     HeaderValue::from_str(&format!("/v1/jobs/{id}")).expect("an ASCII path")
 }
@@ -104,11 +72,11 @@ fn accepted(resource: &JobResource) -> Response {
     responses(
         (status = 202, description = "Queued", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        NotJson,
+        TooLarge,
         (status = 422, description = "A field is invalid, or the job exceeds a limit of this server (job budget, cells, the expected work of one iteration); the detail states the limit", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down, or the database cannot store the job (disk full; nothing was created; retry after Retry-After seconds)", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn submit(
@@ -140,25 +108,13 @@ pub async fn submit(
     Ok(response)
 }
 
-/// A query-string rejection as a 422 naming the parameter (axum reports `name: reason`).
-pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
-    let text = rejection.body_text();
-    let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
-    match reason.split_once(": ") {
-        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format", "table"].contains(&name) => {
-            ApiError::Invalid { field: name.into(), message: message.into() }
-        }
-        _ => ApiError::Invalid { field: "query".into(), message: reason.into() },
-    }
-}
-
 /// List jobs, newest first.
 #[utoipa::path(
     get, operation_id = "list_jobs", path = "/v1/jobs", tag = "jobs", params(ListQuery),
     responses(
         (status = 200, description = "A page of jobs", body = JobList),
         (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn list(
@@ -175,128 +131,12 @@ pub async fn list(
     get, operation_id = "get_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 200, description = "The job", body = JobResource),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
+        ServerFailure,
     )
 )]
 pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobResource>, ApiError> {
     Ok(Json(state.jobs.get(id).await?))
-}
-
-/// The job's noise and weights tables from its latest checkpoint (`partial` until it succeeded).
-#[utoipa::path(
-    get, operation_id = "get_result", path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
-    responses(
-        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy, luminance in model units, rms_percent of one iteration; weights: one row per cell)", content(
-            (JobResult = "application/json"),
-            (String = "text/csv"))),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn result(
-    State(state): State<AppState>,
-    JobId(id): JobId,
-    headers: HeaderMap,
-    query: Result<Query<ResultQuery>, QueryRejection>,
-) -> Result<Response, ApiError> {
-    let Query(q) = query.map_err(query_problem)?;
-    let csv = wants_csv(&headers, q.format.as_deref())?;
-    let result = match q.lambda {
-        None => state.jobs.result(id).await?,
-        Some(lambda) => state.jobs.solve(id, &serde_json::json!({}), Some(lambda)).await?,
-    };
-    match (csv, q.table.as_deref()) {
-        (false, None) => Ok(Json(result).into_response()),
-        (false, Some(_)) => {
-            Err(ApiError::Invalid { field: "table".into(), message: "applies to CSV only (format=csv)".into() })
-        }
-        (true, None | Some("noise")) => {
-            Ok(csv_response(noise_table_csv(&result.report.noise_table), &format!("optimis-job-{id}-noise.csv")))
-        }
-        (true, Some("weights")) => {
-            Ok(csv_response(weights_csv(&result.report.weights), &format!("optimis-job-{id}-weights.csv")))
-        }
-        (true, Some(other)) => Err(ApiError::Invalid {
-            field: "table".into(),
-            message: format!("must be noise or weights, got {other:?}"),
-        }),
-    }
-}
-
-/// Re-solve the stored moments with other solver options; nothing is re-run or stored.
-#[utoipa::path(
-    post, operation_id = "solve_job", path = "/v1/jobs/{id}/solve", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
-    request_body(content = SolverPatch, description = "Solver options to change"),
-    responses(
-        (status = 200, description = "Results with these options", body = JobResult),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "An option is invalid", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn solve(
-    State(state): State<AppState>,
-    JobId(id): JobId,
-    JsonBody(patch): JsonBody,
-) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.solve(id, &patch, None).await?))
-}
-
-/// Predict the noise table at another ray budget (N_F, N_B) from the job's latest checkpoint, and
-/// re-fit the optimal weights for it; needs a job run with `"noise_components": true`. Nothing is
-/// run or stored.
-#[utoipa::path(
-    post, operation_id = "predict_job", path = "/v1/jobs/{id}/predict", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
-    request_body(content = PredictRequest, description = "The budget to predict for, and solver options to change"),
-    responses(
-        (status = 200, description = "The predicted noise table and re-fitted weights", body = JobPrediction),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No checkpoint yet, or the job keeps no noise components", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid; `field` names it", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn predict(
-    State(state): State<AppState>,
-    JobId(id): JobId,
-    JsonBody(body): JsonBody,
-) -> Result<Json<JobPrediction>, ApiError> {
-    let request: PredictRequest = typed(&body)?;
-    Ok(Json(state.jobs.predict(id, &request).await?))
-}
-
-/// Score given weights on the job's latest checkpoint: another run's `/result` (its recommended
-/// table, heuristics stacked on it included) or a table of one's own (`weights`, `heuristics`);
-/// L, RMS and their standard errors beside the job's per-path strategies, each with the paired
-/// variance ratio. Nothing is run or stored.
-#[utoipa::path(
-    post, operation_id = "evaluate_weights", path = "/v1/jobs/{id}/evaluate", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
-    request_body(content = GivenWeights, description = "The weights: a result document, or `weights` (one entry per cell of the job's grid) and `heuristics`"),
-    responses(
-        (status = 200, description = "The weights' figures on this job's iterations", body = JobEvaluation),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "The weights do not fit this job (another grid, a heuristic without a column, cells that do not sum to 1 − Σβ); `field` names the part", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn evaluate(
-    State(state): State<AppState>,
-    JobId(id): JobId,
-    JsonBody(body): JsonBody,
-) -> Result<Json<JobEvaluation>, ApiError> {
-    let given: GivenWeights = typed(&body)?;
-    Ok(Json(state.jobs.evaluate(id, given).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.
@@ -305,9 +145,9 @@ pub async fn evaluate(
     responses(
         (status = 202, description = "Cancelled, or stopping", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
         (status = 409, description = "Already finished", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
@@ -321,12 +161,12 @@ pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<R
     responses(
         (status = 202, description = "Extended (and queued again if it had finished)", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NotJson,
+        NoSuchJob,
         (status = 409, description = "The job failed", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        TooLarge,
         (status = 422, description = "Invalid iteration count", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn extend(
@@ -343,65 +183,12 @@ pub async fn extend(
     delete, operation_id = "delete_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
         (status = 409, description = "The job is running", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<StatusCode, ApiError> {
     state.jobs.delete(id).await?;
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// The job's moments (additive statistics) from its latest checkpoint, as a checksummed document.
-#[utoipa::path(
-    get, operation_id = "get_moments", path = "/v1/jobs/{id}/moments", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
-    responses(
-        (status = 200, description = "The moments document (with a Content-Disposition naming the file)", body = MomentsDocument,
-            headers(("Content-Disposition" = String, description = "attachment; filename=\"optimis-job-ID-moments.json\""))),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
-    // Serialised on the job layer's request pool (a document can be megabytes), sent as is.
-    let bytes = state.jobs.moments_json(id).await?;
-    let disposition = HeaderValue::from_str(&format!("attachment; filename=\"optimis-job-{id}-moments.json\""))
-        .expect("an ASCII header");
-    Ok((
-        [
-            (header::CONTENT_TYPE, HeaderValue::from_static("application/json")),
-            (header::CONTENT_DISPOSITION, disposition),
-        ],
-        bytes,
-    )
-        .into_response())
-}
-
-/// Each strategy's luminance and RMS at every checkpoint (at most 1,000 points, evenly thinned).
-#[utoipa::path(
-    get, operation_id = "get_history", path = "/v1/jobs/{id}/history", tag = "jobs", params(("id" = i64, Path, description = "Job id"), HistoryQuery),
-    responses(
-        (status = 200, description = "The history, oldest checkpoint first (CSV with format=csv: iterations, strategy, luminance, rms_percent)", content(
-            (JobHistory = "application/json"),
-            (String = "text/csv"))),
-        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
-    )
-)]
-pub async fn history(
-    State(state): State<AppState>,
-    JobId(id): JobId,
-    headers: HeaderMap,
-    query: Result<Query<HistoryQuery>, QueryRejection>,
-) -> Result<Response, ApiError> {
-    let Query(q) = query.map_err(query_problem)?;
-    let csv = wants_csv(&headers, q.format.as_deref())?;
-    let history = state.jobs.history(id).await?;
-    if csv {
-        return Ok(csv_response(history.to_csv(), &format!("optimis-job-{id}-history.csv")));
-    }
-    Ok(Json(history).into_response())
 }

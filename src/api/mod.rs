@@ -3,7 +3,10 @@
 //!
 //! Every route is registered through utoipa's `OpenApiRouter` from handlers annotated with their
 //! OpenAPI operation, so the served router and `openapi.yaml` come from the same code; a test
-//! checks that the committed `openapi.yaml` equals [`openapi_yaml`].
+//! checks that the committed `openapi.yaml` equals [`openapi_yaml`]. Each route file translates
+//! between HTTP and one handle of the job layer (`jobs::Services`).
+//!
+//! Imports: crate::jobs, crate::metrics, crate::sim, crate::store
 
 mod auth;
 mod bodies;
@@ -17,7 +20,10 @@ mod health;
 mod jobs;
 pub mod limits;
 mod openapi;
+mod predictions;
+mod responses;
 mod solves;
+mod statistics;
 mod studies;
 mod sweeps;
 
@@ -34,7 +40,11 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-use crate::jobs::JobManager;
+use crate::jobs::prediction::Predictions;
+use crate::jobs::solves::Solves;
+use crate::jobs::statistics::Statistics;
+use crate::jobs::sweeps::Sweeps;
+use crate::jobs::{JobManager, Services};
 use error::ApiError;
 use guard::Guard;
 pub use limits::{BearerToken, DEFAULT_DOCUMENT_LIMIT, HttpLimits};
@@ -42,7 +52,16 @@ pub use limits::{BearerToken, DEFAULT_DOCUMENT_LIMIT, HttpLimits};
 /// What every handler can reach; cheap to clone.
 #[derive(Clone)]
 pub struct AppState {
+    /// The lifecycle (`jobs.rs`, `events.rs`, `health.rs`).
     pub jobs: JobManager,
+    /// Results, re-solves, moments, evaluations, merges and studies (`statistics.rs`, `studies.rs`).
+    pub statistics: Statistics,
+    /// Named solves (`solves.rs`).
+    pub solves: Solves,
+    /// Predictions at other ray budgets (`predictions.rs`).
+    pub predictions: Predictions,
+    /// Sweeps (`sweeps.rs`).
+    pub sweeps: Sweeps,
     /// The OpenAPI document, rendered once.
     pub openapi_yaml: Arc<str>,
     /// SHA-256 of the bearer token, when the server requires one.
@@ -95,16 +114,16 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
     OpenApiRouter::with_openapi(ApiDoc::openapi())
         .routes(routes!(jobs::submit, jobs::list))
         .routes(routes!(jobs::get, jobs::delete))
-        .routes(routes!(jobs::result))
-        .routes(routes!(jobs::solve))
-        .routes(routes!(jobs::predict))
-        .routes(routes!(jobs::evaluate))
+        .routes(routes!(statistics::result))
+        .routes(routes!(statistics::solve))
+        .routes(routes!(predictions::predict))
+        .routes(routes!(statistics::evaluate))
         .routes(routes!(solves::list))
         .routes(routes!(solves::save, solves::get, solves::delete))
         .routes(routes!(jobs::cancel))
         .routes(routes!(jobs::extend))
-        .routes(routes!(jobs::moments))
-        .routes(routes!(jobs::history))
+        .routes(routes!(statistics::moments))
+        .routes(routes!(statistics::history))
         .routes(with_limit(routes!(studies::merge)))
         .routes(with_limit(routes!(studies::create)))
         .routes(routes!(sweeps::create, sweeps::list))
@@ -169,10 +188,15 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
 /// that accept it, and panics answered as problem documents. Layers run outside in: trace →
 /// metrics → guard → auth → panics → compression → the route (whose body limit applies as its body
 /// is read).
-pub fn router(jobs: JobManager, limits: &HttpLimits, token: Option<BearerToken>, guard: Guard) -> Router {
+pub fn router(services: Services, limits: &HttpLimits, token: Option<BearerToken>, guard: Guard) -> Router {
     let (router, api) = routes_and_document(limits.document_bytes);
+    let Services { jobs, statistics, solves, predictions, sweeps } = services;
     let state = AppState {
         jobs,
+        statistics,
+        solves,
+        predictions,
+        sweeps,
         openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into(),
         token_digest: token.map(|t| auth::digest(&t.0)),
         streams: auth::StreamSlots::new(limits.max_event_streams),

@@ -10,6 +10,7 @@ use super::AppState;
 use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody};
+use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
 use crate::jobs::documents::JobResult;
 use crate::jobs::solves::SolveList;
 
@@ -38,12 +39,12 @@ impl<S: Send + Sync> FromRequestParts<S> for SolvePath {
     params(("id" = i64, Path, description = "Job id")),
     responses(
         (status = 200, description = "The solves, default first", body = SolveList),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
+        ServerFailure,
     )
 )]
 pub async fn list(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<SolveList>, ApiError> {
-    Ok(Json(state.jobs.list_solves(id).await?))
+    Ok(Json(state.solves.list_solves(id).await?))
 }
 
 /// Keep solver options under a name (replacing any of that name; at most 32 per job) and answer
@@ -55,12 +56,12 @@ pub async fn list(State(state): State<AppState>, JobId(id): JobId) -> Result<Jso
     request_body(content = SolverPatch, description = "Solver options to change from the job's"),
     responses(
         (status = 200, description = "Kept; the results with these options", body = JobResult),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NotJson,
+        NoSuchJob,
         (status = 409, description = "No checkpoint yet, or the job keeps 32 named solves already", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        TooLarge,
         (status = 422, description = "The name or an option is invalid; `field` names it", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn save(
@@ -68,7 +69,7 @@ pub async fn save(
     SolvePath(id, name): SolvePath,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.save_solve(id, &name, &patch).await?))
+    Ok(Json(state.solves.save_solve(id, &name, &patch).await?))
 }
 
 /// The results of a kept solve, re-solved from the job's latest checkpoint.
@@ -79,11 +80,11 @@ pub async fn save(
         (status = 200, description = "The results with the solve's options", body = JobResult),
         (status = 404, description = "No such job or solve", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "No checkpoint yet, or it is corrupted", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.solve_result(id, &name).await?))
+    Ok(Json(state.solves.solve_result(id, &name).await?))
 }
 
 /// Forget a kept solve (`default` cannot be).
@@ -94,10 +95,10 @@ pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) 
         (status = 204, description = "Deleted"),
         (status = 404, description = "No such job or solve", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "The name is invalid (or `default`)", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn delete(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<StatusCode, ApiError> {
-    state.jobs.delete_solve(id, &name).await?;
+    state.solves.delete_solve(id, &name).await?;
     Ok(StatusCode::NO_CONTENT)
 }

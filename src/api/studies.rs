@@ -16,6 +16,7 @@ use super::AppState;
 use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{DocumentBody, JobId};
+use super::responses::{NoSuchJob, NotJson, ServerFailure};
 use crate::jobs::documents::JobResult;
 use crate::jobs::resource::JobResource;
 use crate::sim::document::MomentsDocument;
@@ -61,14 +62,14 @@ pub struct StudyRequest {
     request_body(content = MergeSource, description = "A moments document, or {\"from\": URL of a peer's job}"),
     responses(
         (status = 200, description = "Merged; the results recomputed", body = JobResult),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        NotJson,
         (status = 403, description = "The source names a peer that is not on this server's allow-list (--peer)", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        NoSuchJob,
         (status = 409, description = "Another configuration, iterations already counted, or the job is active or taking another merge", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is too large (--document-limit)", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Not a valid moments document (corrupted, truncated, inconsistent, foreign), statistics that would overflow or exceed the job budget, or a peer that could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Too many document requests at once; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn merge(
@@ -76,7 +77,7 @@ pub async fn merge(
     JobId(id): JobId,
     body: DocumentBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.jobs.merge_into(id, body.bytes.clone()).await?))
+    Ok(Json(state.statistics.merge_into(id, body.bytes.clone()).await?))
 }
 
 /// Create a finished job from merged statistics of several documents or peer jobs.
@@ -86,18 +87,18 @@ pub async fn merge(
     responses(
         (status = 201, description = "The study's job, with its results computed", body = JobResource,
             headers(("Location" = String, description = "URL of the job"))),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
+        NotJson,
         (status = 403, description = "A source names a peer that is not on this server's allow-list (--peer)", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The sources have different configurations or overlapping iterations", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is too large (--document-limit)", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A source is invalid, statistics that would overflow or exceed the job budget, or a peer could not be reached or sent no usable document", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Too many document requests at once; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down, or the database cannot store the study (retry after Retry-After seconds)", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn create(State(state): State<AppState>, body: DocumentBody) -> Result<Response, ApiError> {
-    let resource = state.jobs.create_study(body.bytes.clone()).await?;
+    let resource = state.statistics.create_study(body.bytes.clone()).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/jobs/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);

@@ -12,8 +12,9 @@ use utoipa::IntoParams;
 use super::AppState;
 use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
+use super::extract::query_problem;
 use super::extract::{JsonBody, SweepId, page};
-use super::jobs::query_problem;
+use super::responses::{BadQuery, NoSuchSweep, NotJson, ServerFailure, TooLarge};
 use crate::jobs::sweeps::{SweepList, SweepResource};
 use crate::sim::sweep::{SweepSpec, SweepTable};
 
@@ -47,16 +48,16 @@ pub struct TableQuery {
     responses(
         (status = 201, description = "Created; its runs are queued", body = SweepResource,
             headers(("Location" = String, description = "URL of the sweep"))),
-        (status = 400, description = "The body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is too large", body = Problem, content_type = "application/problem+json"),
+        NotJson,
+        TooLarge,
         (status = 422, description = "A field is invalid: `field` names the axis and value (`axes[1].values[2]`) and the detail the point; or a run exceeds a limit of this server (points per sweep: --max-sweep-points, job budget, the work of an iteration)", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "The runs do not fit in the queue; retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Shutting down, or the database cannot store the sweep (nothing was created)", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> Result<Response, ApiError> {
-    let resource = state.jobs.create_sweep(doc).await?;
+    let resource = state.sweeps.create_sweep(doc).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/sweeps/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);
@@ -69,7 +70,7 @@ pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> R
     responses(
         (status = 200, description = "A page of sweeps", body = SweepList),
         (status = 422, description = "A parameter is invalid", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn list(
@@ -78,7 +79,7 @@ pub async fn list(
 ) -> Result<Json<SweepList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let (limit, cursor) = page(q.limit, q.cursor, 20, 100)?;
-    Ok(Json(state.jobs.list_sweeps(cursor, limit).await?))
+    Ok(Json(state.sweeps.list_sweeps(cursor, limit).await?))
 }
 
 /// A sweep: progress, and per point the swept values, its job, its honest noise table and
@@ -87,12 +88,12 @@ pub async fn list(
     get, operation_id = "get_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 200, description = "The sweep", body = SweepResource),
-        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        NoSuchSweep,
+        ServerFailure,
     )
 )]
 pub async fn get(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
-    Ok(Json(state.jobs.get_sweep(id).await?))
+    Ok(Json(state.sweeps.get_sweep(id).await?))
 }
 
 /// The sweep's table: one row per point (with figures) and strategy, as JSON or CSV (columns:
@@ -106,9 +107,9 @@ pub async fn get(State(state): State<AppState>, SweepId(id): SweepId) -> Result<
         (status = 200, description = "The table", content(
             (SweepTable = "application/json"),
             (String = "text/csv"))),
-        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A query parameter is invalid or unknown; `field` names it", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        NoSuchSweep,
+        BadQuery,
+        ServerFailure,
     )
 )]
 pub async fn table(
@@ -119,7 +120,7 @@ pub async fn table(
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let csv = wants_csv(&headers, q.format.as_deref())?;
-    let table = state.jobs.sweep_table(id).await?;
+    let table = state.sweeps.sweep_table(id).await?;
     if !csv {
         return Ok(Json(table).into_response());
     }
@@ -131,12 +132,12 @@ pub async fn table(
     post, operation_id = "cancel_sweep", path = "/v1/sweeps/{id}/cancel", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 200, description = "Cancel requested for every active run", body = SweepResource),
-        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        NoSuchSweep,
+        ServerFailure,
     )
 )]
 pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
-    Ok(Json(state.jobs.cancel_sweep(id).await?))
+    Ok(Json(state.sweeps.cancel_sweep(id).await?))
 }
 
 /// Delete a sweep and its jobs (refused while one runs: cancel the sweep first).
@@ -144,12 +145,12 @@ pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Resu
     delete, operation_id = "delete_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
     responses(
         (status = 204, description = "Deleted with its jobs"),
-        (status = 404, description = "No such sweep", body = Problem, content_type = "application/problem+json"),
+        NoSuchSweep,
         (status = 409, description = "A run is running or taking a merge", body = Problem, content_type = "application/problem+json"),
-        (status = 500, description = "Server failure", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
     )
 )]
 pub async fn delete(State(state): State<AppState>, SweepId(id): SweepId) -> Result<StatusCode, ApiError> {
-    state.jobs.delete_sweep(id).await?;
+    state.sweeps.delete_sweep(id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -1,5 +1,7 @@
 //! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `evaluate`, `budget`,
 //! `sweep`, `serve` and `openapi`, thin shells around the library.
+//!
+//! Imports: crate::api, crate::jobs, crate::server, crate::sim
 
 mod bench;
 mod budget;
@@ -33,10 +35,12 @@ use crate::sim::spec::SpecError;
                   be read or written); 1 anything else."
 )]
 pub struct Cli {
+    /// What to do.
     #[command(subcommand)]
     pub command: Command,
 }
 
+/// The subcommands of `optimis` (`serve` and `openapi` with feature `server` only).
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run a simulation job locally and print its noise and weights tables.
@@ -70,26 +74,60 @@ pub enum Command {
 /// Everything the command line can fail with.
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
+    /// An input file could not be read (exit status 5).
     #[error("cannot read {path}: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// An input file is not JSON (exit status 3).
     #[error("{path} is not valid JSON: {source}")]
-    Json { path: PathBuf, source: serde_json::Error },
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parse error, with its line and column.
+        source: serde_json::Error,
+    },
+    /// The job specification is invalid (exit status 3).
     #[error("invalid job specification: {0}")]
     Spec(#[from] SpecError),
     /// An input other than a job specification names a bad field.
     #[error("invalid {what}: {source}")]
-    Invalid { what: &'static str, source: SpecError },
+    Invalid {
+        /// What the input is (e.g. "weights").
+        what: &'static str,
+        /// The field at fault and why.
+        source: SpecError,
+    },
     /// A flag or the environment is misconfigured (not a job specification).
     #[error("invalid configuration: {0}")]
     Config(String),
+    /// A moments document is unreadable or invalid (exit status 3), or cannot be merged with the
+    /// others: another configuration, or iterations counted twice (exit status 4).
     #[error("{path}: {source}")]
-    Document { path: PathBuf, source: crate::sim::document::DocumentError },
+    Document {
+        /// The document's file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: crate::sim::document::DocumentError,
+    },
+    /// The worker thread pool could not be built.
     #[error("cannot start the worker threads: {0}")]
     Threads(#[from] rayon::ThreadPoolBuildError),
+    /// An output file (or directory) could not be written (exit status 5).
     #[error("cannot write {path}: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
+    Write {
+        /// The file or directory.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Standard output could not be written (exit status 5; a closed pipe is not an error).
     #[error("cannot write the output: {0}")]
     Output(#[from] std::io::Error),
+    /// The server failed to start or to run.
     #[cfg(feature = "server")]
     #[error(transparent)]
     Server(#[from] crate::server::ServerError),

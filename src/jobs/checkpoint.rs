@@ -1,6 +1,14 @@
 //! The stored forms of a job: its spec as JSON, and its checkpoint — the moments' bytes and
 //! checksum with the result document computed from them — encoded, and decoded with every check
-//! that keeps a corrupted or foreign checkpoint from being resumed or served.
+//! that keeps a corrupted or foreign checkpoint from being resumed or served; and the memory of
+//! which checkpoints were verified lately (`Verified`, `verified_checkpoint`), so that a
+//! result polled many times a second is not re-hashed each time.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use super::compute::Pools;
 
 use super::documents::StrategyPoint;
 use super::error::JobError;
@@ -11,8 +19,76 @@ use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
-use crate::store::{Checkpoint, StoreError};
+use crate::store::{Checkpoint, Store, StoreError};
 
+/// How long a verification of a job's stored moments stands: a result read after it hashes them
+/// again. One hash (milliseconds for a paper-sized checkpoint) per job per second, however many
+/// reads a dashboard or a load makes, and a checkpoint corrupted under a running server is
+/// reported within a second rather than never.
+pub const REVERIFY_AFTER: Duration = Duration::from_secs(1);
+
+/// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
+const MAX_VERIFIED: usize = 100_000;
+
+/// The checkpoint checksum of each job whose stored moments were last verified against it, and
+/// when: a result request re-hashes the moments only when the checkpoint changed since or
+/// [`REVERIFY_AFTER`] passed (the stored bytes can still rot or be edited under a running server).
+#[derive(Default)]
+pub(crate) struct Verified {
+    /// std Mutex: map operations only, never held across an `.await`.
+    map: Mutex<HashMap<i64, (String, Instant)>>,
+}
+
+impl Verified {
+    /// Records that job `id`'s stored moments match `checksum`.
+    pub(crate) fn remember(&self, id: i64, checksum: &str) {
+        let mut map = self.map.lock().expect("verified map");
+        if map.len() >= MAX_VERIFIED {
+            map.clear();
+        }
+        map.insert(id, (checksum.to_string(), Instant::now()));
+    }
+
+    /// Whether job `id`'s stored moments were verified against `checksum` less than
+    /// [`REVERIFY_AFTER`] ago.
+    pub(crate) fn recently(&self, id: i64, checksum: &str) -> bool {
+        let map = self.map.lock().expect("verified map");
+        map.get(&id).is_some_and(|(c, at)| c == checksum && at.elapsed() < REVERIFY_AFTER)
+    }
+}
+
+/// Job `id`'s latest checkpoint, its checksum verified on the request pool (and remembered in
+/// `verified`): a corrupted checkpoint is reported (409), never served or resumed from.
+pub(crate) async fn verified_checkpoint(
+    store: &Store,
+    pools: &Pools,
+    verified: &Verified,
+    id: i64,
+) -> Result<Checkpoint, JobError> {
+    let checkpoint = store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+    let checkpoint = pools
+        .light(move || {
+            let actual = sha256_hex(&checkpoint.moments);
+            if actual == checkpoint.checksum {
+                Ok(checkpoint)
+            } else {
+                Err(JobError::Store(StoreError::Corrupt {
+                    job: id,
+                    detail: format!("checkpoint checksum mismatch (stored {}, computed {actual})", checkpoint.checksum),
+                }))
+            }
+        })
+        .await??;
+    verified.remember(id, &checkpoint.checksum);
+    Ok(checkpoint)
+}
+
+/// The refusal of a job that has no checkpoint yet.
+pub(crate) fn no_checkpoint(id: i64) -> JobError {
+    JobError::Conflict(format!("job {id} has no checkpoint yet: results appear after its first checkpoint"))
+}
+
+/// A spec as the JSON text the store keeps.
 pub(crate) fn spec_json(spec: &JobSpec) -> Result<String, JobError> {
     serde_json::to_string(spec).map_err(|e| JobError::Internal(e.to_string()))
 }

@@ -45,6 +45,8 @@ pub struct Stop {
 }
 
 impl Stop {
+    /// True once the computation's request went away or the server began to shut down: its
+    /// result would be thrown away, so a long loop should end early.
     pub fn stopped(&self) -> bool {
         self.abandoned.load(Ordering::Relaxed) || *self.shutdown.borrow()
     }
@@ -65,6 +67,8 @@ impl Drop for Abandon {
 }
 
 impl Pools {
+    /// Starts both pools (two light threads, one heavy thread with [`HEAVY_SLOTS`] admissions);
+    /// fails if a thread cannot be started.
     pub fn new() -> Result<Self, rayon::ThreadPoolBuildError> {
         let pool = |n, name: &'static str| {
             rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("optimis-{name}-{i}")).build()

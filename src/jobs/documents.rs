@@ -12,11 +12,16 @@ use crate::sim::solve::strategy::Strategy;
 /// A job's results: the noise table and weights of the core's report, from the latest checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobResult {
+    /// Id of the job these results belong to.
     pub job_id: i64,
     /// True until the job has succeeded with all its iterations: the figures come from a
     /// checkpoint of a job that is still running, was cancelled or failed.
     pub partial: bool,
+    /// The job's state when the results were read (a queued job may hold a checkpoint: an
+    /// extended one).
     pub state: JobState,
+    /// The report of the latest checkpoint (noise table, recommendation, weights, gain,
+    /// warnings), its fields inlined into this object.
     #[serde(flatten)]
     pub report: RunReport,
 }
@@ -24,6 +29,8 @@ pub struct JobResult {
 /// One page of the job list, newest first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobList {
+    /// The jobs of this page (at most `limit`, only those in `state` if it was given), newest
+    /// (highest id) first.
     pub jobs: Vec<JobResource>,
     /// Pass as `cursor` to get the next page; null on the last page.
     pub next_cursor: Option<String>,
@@ -32,8 +39,13 @@ pub struct JobList {
 /// One strategy at one checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct StrategyPoint {
+    /// The noise-table row (`plane1`, …, `optimal_cv`, …), as in the result's `noise_table`.
     pub strategy: Strategy,
+    /// The row's luminance estimate L at this checkpoint: the mean per-iteration pixel value in
+    /// the model's units (cross-fitted for fitted rows); null when the row could not be computed.
     pub luminance: Option<f64>,
+    /// The row's RMS noise of one iteration at this checkpoint, in percent of L
+    /// (100·std(C_s)/|L|); null when the row could not be computed.
     pub rms_percent: Option<f64>,
 }
 
@@ -42,13 +54,17 @@ pub struct StrategyPoint {
 pub struct HistoryPoint {
     /// Iterations held by the checkpoint.
     pub iterations: u64,
+    /// Every row of the checkpoint's noise table, in the table's order.
     pub strategies: Vec<StrategyPoint>,
 }
 
 /// How a job's figures evolved, checkpoint by checkpoint (at most 1,000 points, evenly thinned).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobHistory {
+    /// Id of the job whose checkpoints these are.
     pub job_id: i64,
+    /// The checkpoints' points, fewest iterations first (evenly thinned to at most 1,000); empty
+    /// before the first checkpoint.
     pub points: Vec<HistoryPoint>,
 }
 

@@ -1,5 +1,6 @@
-//! Runs one job: on a blocking thread (never a tokio worker), driving the rayon pool segment by
-//! segment, with a checkpoint after every segment.
+//! Runs one job: on a blocking thread (never a tokio worker), asking the executor (`executor`: the
+//! local rayon pool today) for one segment of iterations at a time, with a checkpoint after every
+//! segment.
 //!
 //! A segment ends when a checkpoint is due (every K iterations or T seconds), when the job is
 //! asked to stop (cancel or shutdown: within one chunk of light paths, or 1,024 candidates of a
@@ -9,7 +10,7 @@
 //! bit-identical to an uninterrupted run.
 //!
 //! A database that cannot store (disk full, I/O error, busy) does not fail the job: its writes are
-//! retried with a growing pause (up to [`STORAGE_RETRY_CAP`]) for as long as the job is not asked
+//! retried with a growing pause (up to `STORAGE_RETRY_CAP`) for as long as the job is not asked
 //! to stop, with the iterations kept in memory; once storage is back the job carries on. If the
 //! server stops meanwhile, the job resumes at the next start from its last stored checkpoint.
 
@@ -21,7 +22,7 @@ use super::checkpoint::{checkpoint_of, decode_checkpoint};
 use super::error::JobError;
 use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
 use super::state::{ActiveJob, Inner, StopReason};
-use crate::sim::runner::{RunError, run_iterations};
+use crate::sim::runner::RunError;
 use crate::sim::solve::noise::path_rows;
 use crate::sim::solve::warnings::Warning;
 use crate::sim::stats::moments::Moments;
@@ -91,20 +92,20 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         let mut last_publish = segment_start.checked_sub(PROGRESS_INTERVAL).unwrap_or(segment_start);
         let policy = &inner.policy;
         let mut counted = done;
-        let outcome = inner.pool.install(|| {
-            run_iterations(config, seed, start + done..start + total, &mut moments, &job.stop, |m, next| {
-                let next = next - start;
-                inner.metrics.add_iterations(next - counted, config.light_paths);
-                counted = next;
-                if last_publish.elapsed() >= PROGRESS_INTERVAL {
-                    last_publish = Instant::now();
-                    publish_progress(job, m, next, done, segment_start, config.light_paths);
-                }
-                let due = next - checkpointed >= policy.checkpoint_iterations
-                    || segment_start.elapsed() >= policy.checkpoint_interval;
-                if due { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
-            })
-        });
+        let mut on_batch = |m: &Moments, next: u64| {
+            let next = next - start;
+            inner.metrics.add_iterations(next - counted, config.light_paths);
+            counted = next;
+            if last_publish.elapsed() >= PROGRESS_INTERVAL {
+                last_publish = Instant::now();
+                publish_progress(job, m, next, done, segment_start, config.light_paths);
+            }
+            let due = next - checkpointed >= policy.checkpoint_iterations
+                || segment_start.elapsed() >= policy.checkpoint_interval;
+            if due { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+        };
+        let range = start + done..start + total;
+        let outcome = inner.executor.run_segment(config, seed, range, &mut moments, &job.stop, &mut on_batch);
         if moments.iterations() > checkpointed {
             if !write_checkpoint(inner, job, &moments, reference)? {
                 return stopped(inner, job);
@@ -229,7 +230,7 @@ fn write_checkpoint(
     }
     inner.metrics.observe_checkpoint(started.elapsed());
     // The bytes just written are the ones hashed: results may be served without re-hashing them.
-    inner.remember_verified(job.id, &checkpoint.checksum);
+    inner.verified.remember(job.id, &checkpoint.checksum);
     job.view.send_modify(|r| {
         r.progress.iterations_checkpointed = checkpoint.iterations_done;
         r.progress.iterations_done = r.progress.iterations_done.max(checkpoint.iterations_done);

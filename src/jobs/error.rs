@@ -5,6 +5,7 @@ use crate::sim::document::DocumentError;
 use crate::sim::spec::SpecError;
 use crate::store::StoreError;
 
+/// Why a job operation failed; each variant names the HTTP status the API answers it with.
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
     /// A field of the request is invalid (HTTP 422).
@@ -29,14 +30,31 @@ pub enum JobError {
     /// A peer could not be reached or did not answer with a moments document (HTTP 422: the
     /// request names a source that yields no statistics). `field` is the JSON path of its `from`.
     #[error("{field}: {message}")]
-    Peer { field: String, message: String },
+    Peer {
+        /// JSON path of the source's `from` (`sources[2].from`, or `from` for a merge), or
+        /// `sources` when a study's sources did not all arrive within its deadline.
+        field: String,
+        /// What went wrong: the peer unreachable, its answer unusable, or the deadline passed.
+        message: String,
+    },
     /// The source names a server that is not on this server's allow-list (HTTP 403); nothing was
     /// sent to it.
     #[error("{field}: {message}")]
-    PeerNotAllowed { field: String, message: String },
+    PeerNotAllowed {
+        /// JSON path of the `from` that names the server (`sources[2].from`, or `from`).
+        field: String,
+        /// The refused origin, this server's allowed peers and the `--peer` that would allow it.
+        message: String,
+    },
     /// The server is at a limit; retry later (HTTP 429 with Retry-After).
     #[error("{detail}")]
-    Busy { detail: String, retry_after_seconds: u64 },
+    Busy {
+        /// Which limit was reached (the queue, the heavy computations, the pulls from peers, a
+        /// sweep's re-fits), for the client.
+        detail: String,
+        /// Seconds to wait before retrying, sent as the `Retry-After` header.
+        retry_after_seconds: u64,
+    },
     /// The server is shutting down and accepts no new work (HTTP 503).
     #[error("the server is shutting down")]
     ShuttingDown,

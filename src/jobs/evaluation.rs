@@ -5,35 +5,36 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::JobError;
-use super::manager::JobManager;
 use super::resource::JobState;
+use super::statistics::{Latest, Statistics};
 use crate::sim::model::params::SpecError;
 use crate::sim::solve::evaluate::{Evaluation, GivenWeights, evaluate};
 
 /// A job's evaluation of given weights.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobEvaluation {
+    /// Id of the job whose latest checkpoint the weights were scored on.
     pub job_id: i64,
     /// True until the job has succeeded with all its iterations.
     pub partial: bool,
+    /// The job's state when the evaluation was computed.
     pub state: JobState,
+    /// The given weights' figures on the job's iterations beside its per-path strategies, its
+    /// fields inlined into this object.
     #[serde(flatten)]
     pub evaluation: Evaluation,
 }
 
-impl JobManager {
+impl Statistics {
     /// Scores `given` on the job's latest checkpoint; nothing is run or stored.
     pub async fn evaluate(&self, id: i64, given: GivenWeights) -> Result<JobEvaluation, JobError> {
-        let (state, total, spec, merged) = self.state_and_total(id).await?;
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
-        let done = checkpoint.iterations_done;
+        let Latest { state, partial, job, moments, .. } = self.latest(id).await?;
         let evaluation = self
+            .jobs
             .compute_heavy(move |_| -> Result<Evaluation, JobError> {
-                let job = spec.validate()?;
                 evaluate(&moments, &job.config.cells, &given).map_err(|e| SpecError::new(e.field, e.message).into())
             })
             .await??;
-        let partial = !(state == JobState::Succeeded && done >= total);
         Ok(JobEvaluation { job_id: id, partial, state, evaluation })
     }
 }

@@ -1,7 +1,8 @@
-//! The job manager: accepts jobs, queues them in submission order, runs a bounded number at once,
-//! and owns every change of a job's state.
+//! The job manager: the lifecycle core. It accepts jobs, queues them in submission order, runs a
+//! bounded number at once through the executor, and owns every change of a job's state (start and
+//! recovery, submit, get, list, cancel, extend, delete, shutdown).
 //!
-//! Shared state is one `Arc<Inner>` behind a cheap `Clone` handle. Its parts:
+//! Shared state is one `Arc<Inner>` (`state`) behind a cheap `Clone` handle. Its parts:
 //! * `active` — the queued and running jobs, each with a watch channel holding its current
 //!   resource, so polls and event streams read memory, not the database;
 //! * `queue` — job ids waiting for a worker, oldest first;
@@ -10,23 +11,24 @@
 //!   atomic with respect to every other transition. It is held across database writes only, never
 //!   across computation: work whose length depends on the input (verifying and merging documents,
 //!   solving) runs before it is taken or after it is released;
-//! * `merging` — jobs whose statistics a merge is changing (reserved under the lock, released when
-//!   the merge ends), which extend and delete refuse to touch meanwhile.
+//! * `held` — finished jobs an operation is changing (a merge), which extend and delete refuse to
+//!   touch meanwhile;
+//! * `verified` — which checkpoints were hashed lately (`checkpoint::Verified`).
 //!
-//! CPU work never runs on tokio's workers: jobs run on a blocking thread that drives the dedicated
-//! rayon pool (see `driver`), and one-off computations a request waits for (validation with the
+//! CPU work never runs on tokio's workers: jobs run on a blocking thread that drives the executor
+//! (see `driver`, `executor`), and one-off computations a request waits for (validation with the
 //! reference luminance and the iteration's expected work, verification of documents, re-solves)
-//! go to a small second rayon pool through a oneshot channel, so that they never queue behind a
-//! running job's chunks. Each of them is bounded (see `sim::checks::quadrature`, `sim::engines::cost`,
+//! go to the request pools (`compute`), so that they never queue behind a running job's chunks.
+//! Each of them is bounded (see `sim::checks::quadrature`, `sim::engines::cost`,
 //! `sim::math::exact_sum`).
 //!
-//! The statistics operations (results, re-solves, merges, studies) live in `statistics`; the jobs in
-//! memory and their transitions in `state`; the loop that starts them in `scheduler`.
+//! The features built on the lifecycle — statistics, solves, predictions, sweeps — are handles of
+//! their own that use the small toolbox in `toolbox`; none of them is a method of the manager.
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use serde_json::Value;
@@ -34,60 +36,46 @@ use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
 use super::checkpoint::spec_json;
-use super::compute::{Pools, Stop};
+use super::compute::Pools;
 use super::error::JobError;
-use super::peers::Peers;
+use super::executor::Executor;
 use super::policy::{RunPolicy, check_budget, check_iteration_work, range_len, refuse_shard_extension, target_total};
 use super::references::scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row, rfc3339};
 use super::scheduler::scheduler;
-use super::signing::Provenance;
-use super::state::{ActiveJob, Inner, MergeReservation, StopReason};
+use super::state::{ActiveJob, Inner, StopReason};
+use super::toolbox::JobManager;
 use crate::metrics::{JobSample, Metrics};
 use crate::sim::math::digest::sha256_hex;
-use crate::sim::spec::{SpecError, ValidJob, parse_job_spec};
+use crate::sim::spec::{SpecError, parse_job_spec};
 use crate::store::{Inserted, NewJob, Store, StoreError};
-
-/// Handle to the job manager; cheap to clone.
-#[derive(Clone)]
-pub struct JobManager {
-    pub(super) inner: Arc<Inner>,
-}
 
 impl JobManager {
     /// Starts the manager on `store`: re-queues the jobs a previous server left running or queued
     /// (running ones first, each to resume from its last checkpoint; a job whose cancel was
     /// acknowledged ends cancelled instead) and starts the scheduler.
     ///
-    /// `pool` runs the jobs; `pools` run the computations requests wait for; `provenance` signs
-    /// exports and checks what merges bring; `peers` are the
-    /// servers merges may pull from.
+    /// `executor` runs the jobs' iterations; `pools` run the computations requests wait for.
     pub async fn start(
         store: Store,
         policy: RunPolicy,
-        pool: Arc<rayon::ThreadPool>,
+        executor: Arc<dyn Executor>,
         pools: Pools,
         metrics: Arc<Metrics>,
-        peers: Peers,
-        provenance: Provenance,
     ) -> Result<Self, StoreError> {
         let (shutdown, _) = watch::channel(false);
         let inner = Arc::new(Inner {
             store,
-            pool,
+            executor,
             pools,
-            peers,
-            provenance,
             metrics,
             policy,
             runtime: Handle::current(),
             active: Mutex::new(HashMap::new()),
             queue: Mutex::new(VecDeque::new()),
             lifecycle: tokio::sync::Mutex::new(()),
-            merging: Mutex::new(HashSet::new()),
-            verified: Mutex::new(HashMap::new()),
-            predictions: Default::default(),
-            refit: Default::default(),
+            held: Mutex::new(HashSet::new()),
+            verified: Default::default(),
             wake: Notify::new(),
             running: AtomicUsize::new(0),
             driver_ended: Notify::new(),
@@ -128,78 +116,6 @@ impl JobManager {
             }
         }
         Ok(())
-    }
-
-    pub(super) fn enqueue(&self, id: i64, job: ValidJob, resource: JobResource) {
-        let total = resource.progress.iterations_total;
-        let active = Arc::new(ActiveJob {
-            id,
-            start: job.spec.iteration_range().start,
-            job,
-            stop: AtomicBool::new(false),
-            stop_reason: AtomicU8::new(0),
-            total: AtomicU64::new(total),
-            view: watch::channel(resource).0,
-        });
-        self.inner.active.lock().expect("active map").insert(id, active);
-        self.inner.queue.lock().expect("queue").push_back(id);
-        self.inner.wake.notify_one();
-    }
-
-    pub(super) fn active(&self, id: i64) -> Option<Arc<ActiveJob>> {
-        self.inner.active.lock().expect("active map").get(&id).cloned()
-    }
-
-    /// Reserves job `id` for a merge (call under the lifecycle lock), or says that another merge
-    /// holds it.
-    pub(super) fn reserve_for_merge(&self, id: i64) -> Result<MergeReservation, JobError> {
-        if !self.inner.merging.lock().expect("merging set").insert(id) {
-            return Err(JobError::Conflict(format!("job {id} is taking another merge; retry when it has finished")));
-        }
-        Ok(MergeReservation { inner: self.inner.clone(), id })
-    }
-
-    fn refuse_while_merging(&self, id: i64) -> Result<(), JobError> {
-        if self.inner.merging.lock().expect("merging set").contains(&id) {
-            return Err(JobError::Conflict(format!("job {id} is taking a merge; retry when it has finished")));
-        }
-        Ok(())
-    }
-
-    /// Runs light work `f` (parsing, validation, checksums) on the request pool and awaits it.
-    pub(super) async fn compute<T: Send + 'static>(
-        &self,
-        f: impl FnOnce() -> T + Send + 'static,
-    ) -> Result<T, JobError> {
-        self.inner.pools.light(f).await
-    }
-
-    /// Runs heavy work `f` (quadratures, re-fits, re-solves, predictions) on the bounded heavy
-    /// pool (`compute`): 429 when it stays full; `f` can see that its request went away.
-    pub(super) async fn compute_heavy<T: Send + 'static>(
-        &self,
-        f: impl FnOnce(&Stop) -> T + Send + 'static,
-    ) -> Result<T, JobError> {
-        self.inner.pools.heavy(self.shutdown_signal(), f).await
-    }
-
-    /// Receives shutdown: true once the server is stopping.
-    pub fn shutdown_signal(&self) -> watch::Receiver<bool> {
-        self.inner.shutdown.subscribe()
-    }
-
-    pub(super) fn is_shutting_down(&self) -> bool {
-        *self.inner.shutdown.borrow()
-    }
-
-    /// The store behind the manager.
-    pub fn store(&self) -> &Store {
-        &self.inner.store
-    }
-
-    /// The server's metrics.
-    pub fn metrics(&self) -> &Arc<Metrics> {
-        &self.inner.metrics
     }
 
     /// Iterations and throughput of every running job, from memory.
@@ -275,12 +191,20 @@ impl JobManager {
 
     /// Refuses a new job when the queue is full.
     fn check_queue(&self) -> Result<(), JobError> {
-        let queued = self.inner.queue.lock().expect("queue").len();
+        let queued = self.queued();
         if queued >= self.inner.policy.max_queued_jobs {
             return Err(JobError::Busy {
                 detail: format!("{queued} jobs are already waiting, the most this server queues (--max-queued-jobs)"),
                 retry_after_seconds: 30,
             });
+        }
+        Ok(())
+    }
+
+    /// Refuses to change a job an operation holds (a merge).
+    fn refuse_while_held(&self, id: i64) -> Result<(), JobError> {
+        if self.is_held(id) {
+            return Err(JobError::Conflict(format!("job {id} is taking a merge; retry when it has finished")));
         }
         Ok(())
     }
@@ -359,7 +283,7 @@ impl JobManager {
             self.verified_checkpoint(id).await?;
         }
         let _guard = self.inner.lifecycle.lock().await;
-        self.refuse_while_merging(id)?;
+        self.refuse_while_held(id)?;
         let now = now_ms();
         if let Some(job) = self.active(id) {
             refuse_shard_extension(id, &job.job.spec)?;
@@ -411,17 +335,15 @@ impl JobManager {
     /// Deletes a job that is not running, with its checkpoint.
     pub async fn delete(&self, id: i64) -> Result<(), JobError> {
         let _guard = self.inner.lifecycle.lock().await;
-        self.refuse_while_merging(id)?;
-        if let Some(job) = self.active(id) {
-            if !self.inner.queue.lock().expect("queue").contains(&id) {
+        self.refuse_while_held(id)?;
+        if self.active(id).is_some() {
+            if !self.is_queued(id) {
                 return Err(JobError::Conflict(format!("job {id} is running; cancel it before deleting it")));
             }
             if !self.inner.store.delete_job(id).await? {
                 return Err(JobError::NotFound(id.to_string()));
             }
-            self.inner.queue.lock().expect("queue").retain(|&q| q != id);
-            self.inner.active.lock().expect("active map").remove(&id);
-            job.view.send_modify(|r| r.state = JobState::Cancelled);
+            self.discard_queued(id);
             return Ok(());
         }
         if self.inner.store.delete_job(id).await? { Ok(()) } else { Err(JobError::NotFound(id.to_string())) }

@@ -66,14 +66,32 @@ impl std::fmt::Debug for Peer {
 /// Why the peer configuration cannot be used (reported at start).
 #[derive(Debug, thiserror::Error)]
 pub enum PeerConfigError {
+    /// A `--peer` argument (as given) is not a usable base URL, and why.
     #[error("--peer {0:?}: {1}")]
     Url(String, String),
+    /// A secret file (a peer's or this server's token, the TLS key) or the `--peer-ca` file
+    /// cannot be read.
     #[error("cannot read {path}: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        /// The file that cannot be read.
+        path: PathBuf,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// A secret file is readable by other users than its owner, or holds no acceptable token (at
+    /// least 16 visible ASCII characters); the message says which and how to fix it.
     #[error("{0}")]
     Insecure(String),
+    /// The `--peer-ca` file holds no PEM certificate, or one that cannot be parsed.
     #[error("--peer-ca {path}: {message}")]
-    Ca { path: PathBuf, message: String },
+    Ca {
+        /// The `--peer-ca` file.
+        path: PathBuf,
+        /// Why its certificates cannot be used.
+        message: String,
+    },
+    /// The HTTP client that pulls from peers cannot be built (its TLS verifier or the client
+    /// itself), with the library's reason.
     #[error("cannot build the peer client: {0}")]
     Client(String),
 }

@@ -6,8 +6,8 @@ use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::error::JobError;
-use super::manager::JobManager;
 use super::resource::JobState;
+use super::statistics::{Latest, Statistics};
 use crate::sim::model::params::check_path_counts;
 use crate::sim::solve::predict::{Budget, Prediction, predict};
 
@@ -28,36 +28,49 @@ pub struct PredictRequest {
 /// A job's prediction.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobPrediction {
+    /// Id of the job whose latest checkpoint the prediction is made from.
     pub job_id: i64,
     /// True until the job has succeeded with all its iterations.
     pub partial: bool,
+    /// The job's state when the prediction was computed.
     pub state: JobState,
+    /// The predicted noise table and re-fitted weights at the requested budget, its fields
+    /// inlined into this object.
     #[serde(flatten)]
     pub prediction: Prediction,
 }
 
-impl JobManager {
+/// Predictions of jobs' noise at other ray budgets; cheap to clone.
+#[derive(Clone)]
+pub struct Predictions {
+    statistics: Statistics,
+}
+
+impl Predictions {
+    /// Predictions from the statistics of `statistics`' jobs.
+    pub fn new(statistics: Statistics) -> Self {
+        Self { statistics }
+    }
+
     /// Predicts the job's noise table at the budget of `request` from its latest checkpoint;
     /// nothing is run or stored.
     pub async fn predict(&self, id: i64, request: &PredictRequest) -> Result<JobPrediction, JobError> {
         check_path_counts(request.light_paths, request.camera_paths, ["light_paths", "camera_paths"])?;
-        let (state, total, spec, merged) = self.state_and_total(id).await?;
+        let Latest { state, partial, job, moments, .. } = self.statistics.latest(id).await?;
         let solver = match &request.solver {
-            Some(patch) => spec.solver.patched(patch)?,
-            None => spec.solver.clone(),
+            Some(patch) => job.spec.solver.patched(patch)?,
+            None => job.spec.solver.clone(),
         };
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
-        let done = checkpoint.iterations_done;
-        let measured = Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
+        let measured = Budget { light_paths: job.spec.light_paths, camera_paths: job.spec.camera_paths };
         let to = Budget { light_paths: request.light_paths, camera_paths: request.camera_paths };
         let prediction = self
+            .statistics
+            .jobs
             .compute_heavy(move |_| -> Result<Prediction, JobError> {
-                let job = spec.validate()?;
                 predict(&moments, &job.config.cells, &solver, measured, to)
                     .map_err(|e| JobError::Conflict(e.to_string()))
             })
             .await??;
-        let partial = !(state == JobState::Succeeded && done >= total);
         Ok(JobPrediction { job_id: id, partial, state, prediction })
     }
 }

@@ -17,8 +17,14 @@ pub use crate::store::JobState;
 /// cross-fitted optima (the in-sample `optimal` row is optimistic and left out).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BestStrategy {
+    /// The noise-table row: the recommended one when the checkpoint names one, otherwise the
+    /// honest row with the lowest RMS that keeps the solver's fixed weights.
     pub strategy: Strategy,
+    /// Its luminance estimate L, the mean per-iteration pixel value in the model's units (the
+    /// paper's scene: about 26·10⁻⁵).
     pub luminance: f64,
+    /// Its RMS noise of one iteration in percent of L, 100·std(C_s)/|L| (cross-fitted for a
+    /// fitted row); always positive.
     pub rms_percent: f64,
 }
 
@@ -27,6 +33,8 @@ pub struct BestStrategy {
 pub struct Progress {
     /// Iterations computed (in memory while running).
     pub iterations_done: u64,
+    /// Iterations the job runs to: its `iterations` (the shard's range for a shard), raised by
+    /// `extend`; for a merged job, the iterations it holds.
     pub iterations_total: u64,
     /// Iterations held by the latest checkpoint (what `result` reports and a restart resumes from).
     pub iterations_checkpointed: u64,
@@ -34,19 +42,27 @@ pub struct Progress {
     pub light_paths_per_second: Option<f64>,
     /// Estimated seconds to completion while running.
     pub eta_seconds: Option<f64>,
+    /// The best strategy so far: at a checkpoint the recommended row; between checkpoints while
+    /// running, the best per-path row of the iterations in memory. Null before any figures.
     pub best: Option<BestStrategy>,
 }
 
 /// A job as the API shows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobResource {
+    /// The job's id, as in `/v1/jobs/{id}`.
     pub id: i64,
+    /// Where the job is in its life cycle: `queued → running → succeeded | failed | cancelled`
+    /// (`extend` queues a succeeded or cancelled job again).
     pub state: JobState,
+    /// The job's specification, fully resolved: the preset applied and every field explicit
+    /// (`iterations` raised by `extend`).
     pub spec: JobSpec,
     /// RFC 3339, UTC.
     pub created_at: String,
     /// RFC 3339, UTC.
     pub updated_at: String,
+    /// Iterations done, checkpointed and planned, throughput, ETA and the best strategy so far.
     pub progress: Progress,
     /// Why the job failed.
     pub error: Option<String>,

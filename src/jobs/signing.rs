@@ -33,16 +33,32 @@ const ED25519_SPKI_PREFIX: [u8; 12] = [0x30, 0x2a, 0x30, 0x05, 0x06, 0x03, 0x2b,
 /// Why a key file cannot be used (reported at start).
 #[derive(Debug, thiserror::Error)]
 pub enum KeyError {
+    /// The `--signing-key` file is not an Ed25519 private key in PKCS#8 PEM.
     #[error("--signing-key {path}: {message}")]
-    Signing { path: PathBuf, message: String },
+    Signing {
+        /// The `--signing-key` file.
+        path: PathBuf,
+        /// Why it cannot be used (for a file that is not PKCS#8 PEM, with how to make one).
+        message: String,
+    },
+    /// A `--trust` file is not an Ed25519 public key in SubjectPublicKeyInfo PEM.
     #[error("--trust {path}: {message}")]
-    Trust { path: PathBuf, message: String },
+    Trust {
+        /// The `--trust` file.
+        path: PathBuf,
+        /// Why it cannot be used.
+        message: String,
+    },
 }
 
 /// What this server signs with and whose signatures it requires.
 #[derive(Debug, Default)]
 pub struct Provenance {
+    /// The `--signing-key` that signs every moments document this server exports; none: they go
+    /// out unsigned.
     pub key: Option<SigningKey>,
+    /// The `--trust` keys; merges and studies accept only documents signed by one of them (none
+    /// given: signatures are neither required nor checked).
     pub trust: TrustedKeys,
 }
 
@@ -91,6 +107,8 @@ impl SigningKey {
         Ok(Self { pair, key_id })
     }
 
+    /// The key's id (16 hex digits of the SHA-256 of its raw public key), written into every
+    /// signature it makes; a server that trusts the public key knows it by the same id.
     pub fn key_id(&self) -> &str {
         &self.key_id
     }

@@ -12,8 +12,8 @@ use utoipa::ToSchema;
 
 use super::documents::JobResult;
 use super::error::JobError;
-use super::manager::JobManager;
 use super::resource::{now_ms, rfc3339};
+use super::statistics::Statistics;
 use crate::sim::model::params::check;
 use crate::sim::solve::options::SolverOptions;
 
@@ -26,6 +26,8 @@ pub const DEFAULT_SOLVE: &str = "default";
 /// A named solve of a job.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SavedSolve {
+    /// The solve's name in `/v1/jobs/{id}/solves/{name}`: `default` for the job's own options,
+    /// else 1 to 64 characters of `a-z`, `0-9`, `_`, `-`, `.`.
     pub name: String,
     /// True for `default`, the job's own solver options (what `/result` shows).
     pub default: bool,
@@ -41,7 +43,9 @@ pub struct SavedSolve {
 /// A job's solves: `default` first, then the named ones, oldest first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SolveList {
+    /// Id of the job the solves belong to.
     pub job_id: i64,
+    /// `default` first, then the named solves, oldest first (at most 32 named).
     pub solves: Vec<SavedSolve>,
 }
 
@@ -58,15 +62,25 @@ fn check_name(name: &str) -> Result<(), JobError> {
     Ok(())
 }
 
-impl JobManager {
+/// Named re-solves of jobs; cheap to clone.
+#[derive(Clone)]
+pub struct Solves {
+    statistics: Statistics,
+}
+
+impl Solves {
+    /// Named solves re-solved from the statistics of `statistics`' jobs.
+    pub fn new(statistics: Statistics) -> Self {
+        Self { statistics }
+    }
+
     /// Stores `patch` as the job's solve `name` (replacing one of that name) and answers its result.
     pub async fn save_solve(&self, id: i64, name: &str, patch: &Value) -> Result<JobResult, JobError> {
         check_name(name)?;
-        let (_, _, spec, _) = self.state_and_total(id).await?;
-        spec.solver.patched(patch)?;
+        self.statistics.jobs.get(id).await?.spec.solver.patched(patch)?;
         // Solved before it is stored: a job without a checkpoint keeps no solve it cannot answer.
-        let result = self.solve(id, patch, None).await?;
-        if !self.inner.store.put_solve(id, name, &patch.to_string(), now_ms(), MAX_SOLVES).await? {
+        let result = self.statistics.solve(id, patch, None).await?;
+        if !self.statistics.jobs.store().put_solve(id, name, &patch.to_string(), now_ms(), MAX_SOLVES).await? {
             return Err(JobError::Conflict(format!(
                 "job {id} keeps at most {MAX_SOLVES} named solves; delete one (DELETE /v1/jobs/{id}/solves/NAME)"
             )));
@@ -76,7 +90,7 @@ impl JobManager {
 
     /// The job's solves, `default` first.
     pub async fn list_solves(&self, id: i64) -> Result<SolveList, JobError> {
-        let job = self.get(id).await?;
+        let job = self.statistics.jobs.get(id).await?;
         let mut solves = vec![SavedSolve {
             name: DEFAULT_SOLVE.into(),
             default: true,
@@ -84,7 +98,7 @@ impl JobManager {
             patch: Value::Object(Default::default()),
             created_at: job.created_at.clone(),
         }];
-        for row in self.inner.store.list_solves(id).await? {
+        for row in self.statistics.jobs.store().list_solves(id).await? {
             let patch: Value = serde_json::from_str(&row.patch).map_err(|e| {
                 JobError::Internal(format!("stored solve {:?} of job {id} is unreadable: {e}", row.name))
             })?;
@@ -103,20 +117,20 @@ impl JobManager {
     /// The result of solve `name` from the latest checkpoint (`default`: the job's result).
     pub async fn solve_result(&self, id: i64, name: &str) -> Result<JobResult, JobError> {
         if name == DEFAULT_SOLVE {
-            return self.result(id).await;
+            return self.statistics.result(id).await;
         }
-        self.get(id).await?;
-        let row = self.inner.store.get_solve(id, name).await?.ok_or_else(|| no_solve(id, name))?;
+        self.statistics.jobs.get(id).await?;
+        let row = self.statistics.jobs.store().get_solve(id, name).await?.ok_or_else(|| no_solve(id, name))?;
         let patch: Value = serde_json::from_str(&row.patch)
             .map_err(|e| JobError::Internal(format!("stored solve {name:?} of job {id} is unreadable: {e}")))?;
-        self.solve(id, &patch, None).await
+        self.statistics.solve(id, &patch, None).await
     }
 
     /// Deletes solve `name` (`default` cannot be).
     pub async fn delete_solve(&self, id: i64, name: &str) -> Result<(), JobError> {
         check_name(name)?;
-        self.get(id).await?;
-        if self.inner.store.delete_solve(id, name).await? { Ok(()) } else { Err(no_solve(id, name)) }
+        self.statistics.jobs.get(id).await?;
+        if self.statistics.jobs.store().delete_solve(id, name).await? { Ok(()) } else { Err(no_solve(id, name)) }
     }
 }
 

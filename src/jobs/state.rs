@@ -1,6 +1,6 @@
 //! The jobs in memory and the transitions of their state.
 //!
-//! [`Inner`] is the manager's shared state (see `manager` for what each part is for); the
+//! `Inner` is the manager's shared state (see `manager` for what each part is for); the
 //! transitions a running job goes through (running, succeeded, cancelled, interrupted, failed) are
 //! methods on it, called by the job's driver, so that the driver needs nothing of the manager.
 //! Every transition takes the lifecycle lock, writes the store and then updates memory.
@@ -8,27 +8,19 @@
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
 
 use tokio::runtime::Handle;
 use tokio::sync::{Notify, watch};
 
+use super::checkpoint::Verified;
+use super::compute::Pools;
 use super::error::JobError;
-use super::peers::Peers;
+use super::executor::Executor;
 use super::policy::RunPolicy;
 use super::resource::{JobResource, JobState, now_ms, rfc3339};
 use crate::metrics::Metrics;
 use crate::sim::spec::ValidJob;
 use crate::store::Store;
-
-/// How long a verification of a job's stored moments stands: a result read after it hashes them
-/// again. One hash (milliseconds for a paper-sized checkpoint) per job per second, however many
-/// reads a dashboard or a load makes, and a checkpoint corrupted under a running server is
-/// reported within a second rather than never.
-pub const REVERIFY_AFTER: Duration = Duration::from_secs(1);
-
-/// Most jobs whose verified checkpoint checksum is remembered (beyond it the memory starts over).
-pub(super) const MAX_VERIFIED: usize = 100_000;
 
 /// Why a running job was asked to stop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,17 +74,15 @@ impl ActiveJob {
     }
 }
 
+/// The lifecycle's shared state (see `manager` for what each part is for). Feature state (peers,
+/// signing keys, sweep predictions) lives in the feature handles, not here.
 pub(crate) struct Inner {
     pub store: Store,
-    /// The simulation pool, shared by the running jobs.
-    pub pool: Arc<rayon::ThreadPool>,
+    /// Where the jobs' iterations run (the local simulation pool today).
+    pub executor: Arc<dyn Executor>,
     /// The pools for computations a request waits for (`compute`): on the simulation pool they
     /// would queue behind thousands of chunks of the running jobs.
-    pub(super) pools: super::compute::Pools,
-    /// The allowed peers and the client that pulls from them.
-    pub(super) peers: Peers,
-    /// The signing key for exports and the keys merges require (`signing`).
-    pub(super) provenance: super::signing::Provenance,
+    pub(super) pools: Pools,
     pub metrics: Arc<Metrics>,
     pub policy: RunPolicy,
     pub runtime: Handle,
@@ -102,18 +92,11 @@ pub(crate) struct Inner {
     pub(super) queue: Mutex<VecDeque<i64>>,
     /// Serialises state transitions; async because it is held across database writes.
     pub(super) lifecycle: tokio::sync::Mutex<()>,
-    /// Jobs a merge is changing; std Mutex, held for set operations only.
-    pub(super) merging: Mutex<HashSet<i64>>,
-    /// The checkpoint checksum of each job whose stored moments were last verified against it, and
-    /// when (`statistics::verified_checkpoint`): a result request re-hashes the moments only when the
-    /// checkpoint changed since or [`REVERIFY_AFTER`] passed (the stored bytes can still rot or be
-    /// edited under a running server). std Mutex, map operations only.
-    pub(super) verified: Mutex<HashMap<i64, (String, Instant)>>,
-    /// Predicted figures of sweep runs, per (job, checkpoint checksum) (`sweeps`).
-    pub(super) predictions: super::sweeps::PredictionCache,
-    /// One re-fit of predicted sweep points at a time (`sweeps`): concurrent reads of a sweep wait
-    /// for it and then read its result from `predictions` instead of each re-fitting every point.
-    pub(super) refit: tokio::sync::Mutex<()>,
+    /// Finished jobs an operation is changing (a merge: `Hold`), which extend and delete refuse
+    /// to touch meanwhile; std Mutex, held for set operations only.
+    pub(super) held: Mutex<HashSet<i64>>,
+    /// Which checkpoints were verified lately (`checkpoint::Verified`).
+    pub(super) verified: Verified,
     /// Wakes the scheduler: a job was queued or a worker became free.
     pub(super) wake: Notify,
     pub(super) running: AtomicUsize,
@@ -122,15 +105,16 @@ pub(crate) struct Inner {
     pub(super) shutdown: watch::Sender<bool>,
 }
 
-/// A job's merge in progress: released (and the job open to extend and delete again) on drop.
-pub(super) struct MergeReservation {
+/// A finished job held by an operation (a merge): released (and the job open to extend and
+/// delete again) on drop.
+pub(crate) struct Hold {
     pub(super) inner: Arc<Inner>,
     pub(super) id: i64,
 }
 
-impl Drop for MergeReservation {
+impl Drop for Hold {
     fn drop(&mut self) {
-        self.inner.merging.lock().expect("merging set").remove(&self.id);
+        self.inner.held.lock().expect("held set").remove(&self.id);
     }
 }
 
@@ -180,22 +164,6 @@ impl Inner {
                 self.store.set_state(id, JobState::Failed, Some(reason), now_ms()).await.map(|_| ()).map_err(Into::into)
             }
         }
-    }
-
-    /// Records that job `id`'s stored moments match `checksum` (see `verified`).
-    pub(crate) fn remember_verified(&self, id: i64, checksum: &str) {
-        let mut verified = self.verified.lock().expect("verified map");
-        if verified.len() >= MAX_VERIFIED {
-            verified.clear();
-        }
-        verified.insert(id, (checksum.to_string(), Instant::now()));
-    }
-
-    /// Whether job `id`'s stored moments were verified against `checksum` less than
-    /// [`REVERIFY_AFTER`] ago.
-    pub(crate) fn recently_verified(&self, id: i64, checksum: &str) -> bool {
-        let verified = self.verified.lock().expect("verified map");
-        verified.get(&id).is_some_and(|(c, at)| c == checksum && at.elapsed() < REVERIFY_AFTER)
     }
 
     /// Whether the server is stopping.

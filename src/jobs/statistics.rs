@@ -1,198 +1,83 @@
-//! What the job manager does with stored statistics: results and histories, re-solves, the moments
-//! export, merges into a finished job and studies (new jobs from several sources).
-//!
-//! Documents arrive as bytes and are parsed straight into typed values on the request pool
-//! ([`parse_merge_body`], [`parse_study_body`]), never through a generic JSON value and never on a
-//! tokio worker; peers are pulled through the allow-list of [`super::peers`]. A merge reserves its
-//! target under the lifecycle lock, then verifies and adds the statistics with the lock released,
-//! and takes the lock again only to write: no other transition waits for its computation, and
-//! extend and delete refuse the reserved job meanwhile. Everything a merge computes goes into a
-//! copy of the target's statistics, so a refused merge changes nothing.
+//! Statistics of stored jobs: results and histories, re-solves with other solver options, and the
+//! moments export — each read from the latest checkpoint, verified against its checksum. Merges
+//! and studies (`merges`) and evaluations of given weights (`evaluation`) are operations of the
+//! same handle.
 
-use futures_util::stream::{self, StreamExt, TryStreamExt};
-use serde::Deserialize;
+use std::sync::Arc;
+
 use serde_json::Value;
 
-use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
+use super::checkpoint::{decode_checkpoint, no_checkpoint};
 use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS};
 use super::error::JobError;
-use super::manager::JobManager;
-use super::peers::CONCURRENT_PULLS;
-use super::policy::check_budget;
-use super::references::{expected_luminances, scene_reference};
-use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
-use crate::sim::document::{DocumentError, DocumentSignature, MomentsDocument, merged_spec, parse_json};
-use crate::sim::math::digest::sha256_hex;
+use super::peers::Peers;
+use super::references::expected_luminances;
+use super::resource::JobState;
+use super::signing::Provenance;
+use super::toolbox::JobManager;
+use crate::sim::document::{MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
-use crate::sim::spec::{JobSpec, SpecError};
-use crate::sim::stats::coverage::Coverage;
+use crate::sim::spec::ValidJob;
 use crate::sim::stats::moments::Moments;
-use crate::store::{Checkpoint, NewJob, StoreError};
 
-/// Most sources of one study.
-pub const MAX_STUDY_SOURCES: usize = 256;
-
-/// A merge source as sent: `{"from": URL}` or the fields of a moments document. Deserialised
-/// field by field (an untagged enum would first copy the whole document into a generic value).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SourceFields {
-    from: Option<String>,
-    kind: Option<String>,
-    format_version: Option<u32>,
-    fingerprint: Option<String>,
-    coverage: Option<Coverage>,
-    spec: Option<JobSpec>,
-    moments: Option<Moments>,
-    checksum: Option<String>,
-    signature: Option<DocumentSignature>,
+/// A job's latest statistics, read once through [`Statistics::latest`].
+pub(super) struct Latest {
+    /// The job's state when read.
+    pub state: JobState,
+    /// True unless the job succeeded with all its iterations (`JobResult::partial`).
+    pub partial: bool,
+    /// Whether the job holds merged statistics (its spec then says how many iterations).
+    pub merged: bool,
+    /// The job's R → 0 reference luminance, when its quadrature converged.
+    pub reference: Option<f64>,
+    /// The job's specification, validated.
+    pub job: ValidJob,
+    /// The latest checkpoint's moments, verified.
+    pub moments: Moments,
 }
 
-/// Where merged statistics come from.
-pub enum Source {
-    /// A document in the request, verified; `field` is its JSON path (empty for a merge's body).
-    Document { doc: Box<MomentsDocument>, field: String },
-    /// The job at this URL on a peer server; `field` is the JSON path of the URL.
-    Peer { url: String, field: String },
+/// The statistics of stored jobs; cheap to clone. It owns what only statistics need: the peers
+/// merges may pull from and this server's signing key and trusted keys.
+#[derive(Clone)]
+pub struct Statistics {
+    pub(super) jobs: JobManager,
+    /// The allowed peers and the client that pulls from them.
+    pub(super) peers: Arc<Peers>,
+    /// The signing key for exports and the keys merges require (`signing`).
+    pub(super) provenance: Arc<Provenance>,
 }
 
-impl SourceFields {
-    /// The source, with an inline document verified. `at` is the JSON path of the source.
-    fn into_source(self, at: &str) -> Result<Source, JobError> {
-        let field = |name: &str| if at.is_empty() { name.to_string() } else { format!("{at}.{name}") };
-        if let Some(url) = self.from {
-            let others = [
-                self.kind.is_some(),
-                self.format_version.is_some(),
-                self.fingerprint.is_some(),
-                self.coverage.is_some(),
-                self.spec.is_some(),
-                self.moments.is_some(),
-                self.checksum.is_some(),
-                self.signature.is_some(),
-            ];
-            if others.iter().any(|&x| x) {
-                return Err(SpecError::new(at, "a peer source has exactly one field, `from`").into());
-            }
-            return Ok(Source::Peer { url, field: field("from") });
-        }
-        let missing = |name: &str| SpecError::new(field(name), "missing field of a moments document (or give `from`)");
-        let doc = MomentsDocument {
-            kind: self.kind.ok_or_else(|| missing("kind"))?,
-            format_version: self.format_version.ok_or_else(|| missing("format_version"))?,
-            fingerprint: self.fingerprint.ok_or_else(|| missing("fingerprint"))?,
-            coverage: self.coverage.ok_or_else(|| missing("coverage"))?,
-            spec: self.spec.ok_or_else(|| missing("spec"))?,
-            moments: self.moments.ok_or_else(|| missing("moments"))?,
-            checksum: self.checksum.ok_or_else(|| missing("checksum"))?,
-            signature: self.signature,
-        };
-        doc.verify()?;
-        Ok(Source::Document { doc: Box::new(doc), field: at.to_string() })
-    }
-}
-
-/// A JSON parse error: 400 for text that is not JSON, 422 naming the field for JSON of the wrong
-/// shape.
-fn parse_error(bytes: &[u8], message: String) -> JobError {
-    match serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-        Err(e) if e.is_syntax() || e.is_eof() => {
-            JobError::Malformed(format!("the request body is not valid JSON: {e}"))
-        }
-        _ => {
-            let (field, message) = match message.split_once(": ") {
-                Some((path, rest)) if !path.contains(' ') => (path.to_string(), rest.to_string()),
-                _ => (String::new(), message),
-            };
-            SpecError::new(field, message).into()
-        }
-    }
-}
-
-/// Parses the body of `POST /v1/jobs/{id}/merge` (CPU work: on the request pool).
-pub fn parse_merge_body(bytes: &[u8]) -> Result<Source, JobError> {
-    let fields: SourceFields = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
-    fields.into_source("")
-}
-
-/// The body of `POST /v1/studies`, parsed.
-pub struct StudyBody {
-    pub sources: Vec<Source>,
-    pub solver: Option<Value>,
-}
-
-/// Parses the body of `POST /v1/studies` (CPU work: on the request pool).
-pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Raw {
-        sources: Vec<SourceFields>,
-        solver: Option<Value>,
-    }
-    let raw: Raw = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
-    if !(1..=MAX_STUDY_SOURCES).contains(&raw.sources.len()) {
-        return Err(SpecError::new(
-            "sources",
-            format!("must list 1 to {MAX_STUDY_SOURCES} sources, got {}", raw.sources.len()),
-        )
-        .into());
-    }
-    let sources = raw
-        .sources
-        .into_iter()
-        .enumerate()
-        .map(|(i, s)| s.into_source(&format!("sources[{i}]")))
-        .collect::<Result<_, _>>()?;
-    Ok(StudyBody { sources, solver: raw.solver })
-}
-
-impl JobManager {
-    pub(super) async fn state_and_total(&self, id: i64) -> Result<(JobState, u64, JobSpec, bool), JobError> {
-        let resource = self.get(id).await?;
-        Ok((resource.state, resource.progress.iterations_total, resource.spec, resource.merged))
+impl Statistics {
+    /// The statistics of `jobs`' jobs; merges pull from `peers`, exports are signed and merged
+    /// documents checked with `provenance`.
+    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance) -> Self {
+        Self { jobs, peers: Arc::new(peers), provenance: Arc::new(provenance) }
     }
 
-    /// The latest checkpoint, its checksum verified (on the request pool): a corrupted checkpoint
-    /// is reported (409), never served or resumed from.
-    pub(super) async fn verified_checkpoint(&self, id: i64) -> Result<Checkpoint, JobError> {
-        let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let checkpoint = self
-            .compute(move || {
-                let actual = sha256_hex(&checkpoint.moments);
-                if actual == checkpoint.checksum {
-                    Ok(checkpoint)
-                } else {
-                    Err(JobError::Store(StoreError::Corrupt {
-                        job: id,
-                        detail: format!(
-                            "checkpoint checksum mismatch (stored {}, computed {actual})",
-                            checkpoint.checksum
-                        ),
-                    }))
-                }
-            })
-            .await??;
-        self.inner.remember_verified(id, &checkpoint.checksum);
-        Ok(checkpoint)
+    /// The lifecycle these statistics belong to.
+    pub fn jobs(&self) -> &JobManager {
+        &self.jobs
     }
 
     /// The results of the latest checkpoint. Its moments are verified against their checksum when
     /// this checkpoint is first served and again once the last verification is older than
-    /// [`REVERIFY_AFTER`](super::state::REVERIFY_AFTER) (a corrupted checkpoint answers 409, not a stale result); the reads in
+    /// [`REVERIFY_AFTER`](super::checkpoint::REVERIFY_AFTER) (a corrupted checkpoint answers 409, not a stale result); the reads in
     /// between read the result alone, as a dashboard or a load polls it many times a second.
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
-        let (state, total, _, _) = self.state_and_total(id).await?;
-        let (done, json, checksum) = self.inner.store.load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let known = self.inner.recently_verified(id, &checksum);
+        let resource = self.jobs.get(id).await?;
+        let (state, total) = (resource.state, resource.progress.iterations_total);
+        let (done, json, checksum) = self.jobs.store().load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let known = self.jobs.recently_verified(id, &checksum);
         let (done, json) = if known {
             (done, json)
         } else {
-            let checkpoint = self.verified_checkpoint(id).await?;
+            let checkpoint = self.jobs.verified_checkpoint(id).await?;
             (checkpoint.iterations_done, checkpoint.result)
         };
         let report: RunReport = self
+            .jobs
             .compute(move || serde_json::from_str(&json))
             .await?
             .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
@@ -202,9 +87,10 @@ impl JobManager {
     /// Each strategy's figures at every checkpoint (thinned to at most 1,000 points; the store
     /// keeps at most ~2,000 per job).
     pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
-        self.get(id).await?;
-        let rows = self.inner.store.load_history(id, MAX_HISTORY_POINTS).await?;
+        self.jobs.get(id).await?;
+        let rows = self.jobs.store().load_history(id, MAX_HISTORY_POINTS).await?;
         let points = self
+            .jobs
             .compute(move || {
                 rows.into_iter()
                     .map(|(iterations, json)| {
@@ -218,22 +104,25 @@ impl JobManager {
         Ok(JobHistory { job_id: id, points })
     }
 
-    /// The latest checkpoint's moments, verified against their checksum (and, for a job's own
-    /// run, against the range it ran), decoded on the request pool.
-    pub(super) async fn checkpoint_moments(
-        &self,
-        id: i64,
-        spec: &JobSpec,
-        merged: bool,
-    ) -> Result<(Moments, Checkpoint), JobError> {
-        let checkpoint = self.inner.store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let spec = spec.clone();
-        self.compute(move || {
-            let job = spec.validate()?;
-            let moments = decode_checkpoint(id, &checkpoint, &job, !merged)?;
-            Ok((moments, checkpoint))
-        })
-        .await?
+    /// The one door from a stored job to its statistics: the job's state, its specification
+    /// validated once, and its latest checkpoint's moments verified against their checksum (and,
+    /// for a job's own run, against the range it ran) — decoded on the request pool. Everything
+    /// that computes on a job's statistics (re-solves, evaluations, predictions, exports, sweep
+    /// figures) starts here.
+    pub(super) async fn latest(&self, id: i64) -> Result<Latest, JobError> {
+        let resource = self.jobs.get(id).await?;
+        let checkpoint = self.jobs.store().load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let (spec, merged) = (resource.spec, resource.merged);
+        let (job, moments, iterations) = self
+            .jobs
+            .compute(move || -> Result<_, JobError> {
+                let job = spec.validate()?;
+                let moments = decode_checkpoint(id, &checkpoint, &job, !merged)?;
+                Ok((job, moments, checkpoint.iterations_done))
+            })
+            .await??;
+        let partial = !(resource.state == JobState::Succeeded && iterations >= resource.progress.iterations_total);
+        Ok(Latest { state: resource.state, partial, merged, reference: resource.reference_luminance, job, moments })
     }
 
     /// Re-solves the latest checkpoint with other solver options (a merge patch on the job's
@@ -243,21 +132,17 @@ impl JobManager {
         if let Some(l) = weights_lambda {
             check(l.is_finite() && (0.0..=1e12).contains(&l), "lambda", || format!("must be in [0, 1e12], got {l}"))?;
         }
-        let (state, total, spec, merged) = self.state_and_total(id).await?;
-        let solver = spec.solver.patched(patch)?;
-        let reference = self.get(id).await?.reference_luminance;
-        let (moments, checkpoint) = self.checkpoint_moments(id, &spec, merged).await?;
-        let done = checkpoint.iterations_done;
+        let solver = self.jobs.get(id).await?.spec.solver.patched(patch)?;
+        let Latest { state, partial, reference, job, moments, .. } = self.latest(id).await?;
         let report = self
-            .compute_heavy(move |_| -> Result<RunReport, JobError> {
-                let job = spec.validate()?;
+            .jobs
+            .compute_heavy(move |_| -> RunReport {
                 let weights = weights_lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
                 let expected = expected_luminances(&job.config);
                 let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-                Ok(build_report(&moments, &job.config.cells, &solver, &inputs))
+                build_report(&moments, &job.config.cells, &solver, &inputs)
             })
-            .await??;
-        let partial = !(state == JobState::Succeeded && done >= total);
+            .await?;
         Ok(JobResult { job_id: id, partial, state, report })
     }
 
@@ -265,203 +150,13 @@ impl JobManager {
     /// text, made on the request pool), signed if this server has a signing key. A merged job's
     /// spec says how many iterations it holds (and no shard), so that its document verifies.
     pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
-        let (_, _, spec, merged) = self.state_and_total(id).await?;
-        let (moments, _) = self.checkpoint_moments(id, &spec, merged).await?;
-        let inner = self.inner.clone();
-        self.compute(move || {
-            let spec = if merged { merged_spec(&spec, &moments) } else { spec };
-            inner.provenance.sign(MomentsDocument::new(spec, moments)).to_json()
-        })
-        .await
-    }
-
-    /// The verified document of a source (pulled from its peer if it names one).
-    async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
-        let (doc, field) = match source {
-            Source::Document { doc, field } => (*doc, field),
-            Source::Peer { url, field } => {
-                let bytes = self.inner.peers.pull(&url, &field).await?;
-                let doc = self.compute(move || MomentsDocument::from_json(&bytes)).await?;
-                let doc = doc.map_err(|e| JobError::Peer {
-                    field: field.clone(),
-                    message: format!("the peer {url} sent an unusable document: {e}"),
-                })?;
-                (doc, field)
-            }
-        };
-        // With --trust, only documents signed by a trusted key (checked after the checksum, which
-        // the signature covers, was recomputed from the content).
-        let at = field.strip_suffix(".from").or_else(|| field.strip_suffix("from")).unwrap_or(&field);
-        self.inner.provenance.trust.check(&doc, at)?;
-        Ok(doc)
-    }
-
-    /// Checks, without a connection, that every peer source is allowed (so that a study with one
-    /// forbidden source pulls nothing).
-    fn check_peers(&self, sources: &[Source]) -> Result<(), JobError> {
-        for source in sources {
-            if let Source::Peer { url, field } = source {
-                self.inner.peers.resolve(url, field)?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Merges a moments document (its bytes: a document, or `{"from": URL}` of a peer's job) into
-    /// a finished job's statistics and recomputes its results. Refused, with nothing changed, if
-    /// the job is active or taking another merge, the configuration differs, any iteration would be
-    /// counted twice, a sum would overflow, or the result exceeds the server's job budget.
-    pub async fn merge_into(&self, id: i64, body: bytes::Bytes) -> Result<JobResult, JobError> {
-        let source = self.compute(move || parse_merge_body(&body)).await??;
-        self.check_peers(std::slice::from_ref(&source))?;
-        let doc = self.fetch(source).await?;
-        // Reserve the job: a short critical section (state checks only).
-        let (row, _reservation) = {
-            let _guard = self.inner.lifecycle.lock().await;
-            if self.active(id).is_some() {
-                return Err(JobError::Conflict(format!(
-                    "job {id} is queued or running; merge into it once it has finished, or cancel it first"
-                )));
-            }
-            let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
-            if !matches!(row.state, JobState::Succeeded | JobState::Cancelled) {
-                return Err(JobError::Conflict(format!(
-                    "job {id} is {}; only a succeeded or cancelled job takes merges",
-                    row.state
-                )));
-            }
-            let reservation = self.reserve_for_merge(id)?;
-            (row, reservation)
-        };
-        // Verify, merge and summarise with the lock released (the reservation keeps extend and
-        // delete away), on the heavy pool (the summary re-fits), into a copy of the target's
-        // statistics.
-        let checkpoint = self.inner.store.load_checkpoint(id).await?;
-        let policy = self.inner.policy.clone();
-        let (checkpoint, spec) = self
-            .compute_heavy(move |_| -> Result<(Checkpoint, String), JobError> {
-                let spec = parse_stored_spec(&row)?;
-                let job = spec.validate()?;
-                let mut moments = match checkpoint {
-                    Some(checkpoint) => decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
-                    None => Moments::new(&job.config),
-                };
-                moments.merge(&doc.moments).map_err(DocumentError::from)?;
-                moments.check_bounded().map_err(DocumentError::from)?;
-                let spec = merged_spec(&spec, &moments);
-                check_budget(&policy, &spec, moments.iterations())?;
-                let checkpoint = checkpoint_of(&moments, &job, row.reference_luminance)?;
-                Ok((checkpoint, spec_json(&spec)?))
+        let Latest { merged, job, moments, .. } = self.latest(id).await?;
+        let provenance = self.provenance.clone();
+        self.jobs
+            .compute(move || {
+                let spec = if merged { merged_spec(&job.spec, &moments) } else { job.spec.clone() };
+                provenance.sign(MomentsDocument::new(spec, moments)).to_json()
             })
-            .await??;
-        {
-            let _guard = self.inner.lifecycle.lock().await;
-            self.inner.store.write_merged(id, &checkpoint, &spec, now_ms()).await?;
-        }
-        self.result(id).await
-    }
-
-    /// Creates a finished job from several moments documents or peer jobs (a study, its body as
-    /// bytes): their statistics merged, their results computed. `solver` optionally patches the
-    /// solver options of the first source's spec. Peers are pulled at most
-    /// [`CONCURRENT_PULLS`] at a time and each document is merged as it arrives (exact sums: the
-    /// order does not change a bit), so memory holds a few documents, not all of them.
-    pub async fn create_study(&self, body: bytes::Bytes) -> Result<JobResource, JobError> {
-        if self.is_shutting_down() {
-            return Err(JobError::ShuttingDown);
-        }
-        let StudyBody { sources, solver } = self.compute(move || parse_study_body(&body)).await??;
-        self.check_peers(&sources)?;
-        let arrivals = stream::iter(sources.into_iter().enumerate())
-            .map(|(i, source)| async move { self.fetch(source).await.map(|doc| (i, doc)) })
-            .buffer_unordered(CONCURRENT_PULLS);
-        let gather = async {
-            let mut first: Option<(usize, JobSpec)> = None;
-            let mut total: Option<Moments> = None;
-            let mut arrivals = std::pin::pin!(arrivals);
-            while let Some((i, doc)) = arrivals.try_next().await? {
-                if first.as_ref().is_none_or(|(j, _)| i < *j) {
-                    first = Some((i, doc.spec.clone()));
-                }
-                total = Some(match total {
-                    None => doc.moments,
-                    Some(mut acc) => self
-                        .compute(move || {
-                            acc.merge(&doc.moments)?;
-                            Ok::<_, crate::sim::stats::moments::MergeError>(acc)
-                        })
-                        .await?
-                        .map_err(DocumentError::from)?,
-                });
-            }
-            Ok::<_, JobError>((first, total))
-        };
-        // The whole gathering is bounded (each pull is too, but a study of many slow sources
-        // would otherwise hold its request for the sum of their deadlines).
-        let deadline = self.inner.policy.study_deadline;
-        let (first, total) = tokio::time::timeout(deadline, gather).await.map_err(|_| JobError::Peer {
-            field: "sources".into(),
-            message: format!(
-                "the sources did not all arrive and merge within the study deadline of {} s (--study-deadline); \
-                 nothing was created",
-                deadline.as_secs_f64()
-            ),
-        })??;
-        let (Some((_, base)), Some(moments)) = (first, total) else {
-            return Err(SpecError::new("sources", "must list at least one source").into());
-        };
-        let policy = self.inner.policy.clone();
-        let (new, checkpoint) = self
-            .compute_heavy(move |_| -> Result<(NewJob, Checkpoint), JobError> {
-                moments.check_bounded().map_err(DocumentError::from)?;
-                let mut spec = merged_spec(&base, &moments);
-                if let Some(patch) = &solver {
-                    spec.solver = spec.solver.patched(patch)?;
-                }
-                let job = spec.validate()?;
-                check_budget(&policy, &job.spec, moments.iterations())?;
-                let reference = scene_reference(&job.config.scene);
-                let checkpoint = checkpoint_of(&moments, &job, reference)?;
-                let new = NewJob {
-                    spec: spec_json(&job.spec)?,
-                    fingerprint: job.config.fingerprint().to_string(),
-                    iterations_total: checkpoint.iterations_done,
-                    reference_luminance: reference,
-                    idempotency_key: None,
-                    request_hash: None,
-                    now: now_ms(),
-                };
-                Ok((new, checkpoint))
-            })
-            .await??;
-        let row = self.inner.store.insert_study(&new, &checkpoint).await?;
-        resource_from_row(&row)
-    }
-}
-
-fn no_checkpoint(id: i64) -> JobError {
-    JobError::Conflict(format!("job {id} has no checkpoint yet: results appear after its first checkpoint"))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sources_are_parsed_field_by_field() {
-        let peer = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2"}"#).unwrap();
-        assert!(matches!(peer, Source::Peer { url, field } if url == "http://h:1/v1/jobs/2" && field == "from"));
-        let mixed = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2", "kind": "optimis-moments"}"#);
-        assert!(matches!(mixed, Err(JobError::Invalid(e)) if e.message.contains("exactly one field")));
-        assert!(matches!(parse_merge_body(b"{\"from\": "), Err(JobError::Malformed(_))));
-        assert!(matches!(parse_merge_body(b"[1, 2]"), Err(JobError::Invalid(_))));
-        let missing = parse_merge_body(br#"{"kind": "optimis-moments"}"#);
-        assert!(matches!(missing, Err(JobError::Invalid(e)) if e.field == "format_version"), "names the field");
-        let unknown = parse_merge_body(br#"{"fromm": 1}"#);
-        assert!(matches!(unknown, Err(JobError::Invalid(e)) if e.message.contains("fromm")));
-        let study = parse_study_body(br#"{"sources": [{"from": "http://h:1/v1/jobs/2"}, {"kind": "x"}]}"#);
-        assert!(matches!(study, Err(JobError::Invalid(e)) if e.field == "sources[1].format_version"));
-        let empty = parse_study_body(br#"{"sources": []}"#);
-        assert!(matches!(empty, Err(JobError::Invalid(e)) if e.field == "sources"));
+            .await
     }
 }

@@ -20,10 +20,11 @@ use utoipa::ToSchema;
 
 use super::checkpoint::spec_json;
 use super::error::JobError;
-use super::manager::JobManager;
 use super::policy::{check_budget, check_iteration_work, range_len};
 use super::references::{cached_scene_reference, scene_reference};
 use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
+use super::statistics::Statistics;
+use super::toolbox::JobManager;
 use crate::sim::model::scene::Scene;
 use crate::sim::spec::SpecError;
 use crate::sim::sweep::{
@@ -41,6 +42,8 @@ const MAX_CACHED_RUNS: usize = 1024;
 /// One point of a sweep as the API shows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SweepPointView {
+    /// The point's position in the sweep, from 0 (with `grid`, the last axis varies fastest); the
+    /// `point` column of the sweep's table.
     pub index: usize,
     /// The swept fields' values.
     #[schema(value_type = Object)]
@@ -49,6 +52,7 @@ pub struct SweepPointView {
     pub run: usize,
     /// The run's job; null if it was deleted.
     pub job_id: Option<i64>,
+    /// The state of the run's job; null if it was deleted.
     pub state: Option<JobState>,
     /// Its honest noise table and recommended weights, once the run has a checkpoint (predicted,
     /// for a point on an axis by prediction).
@@ -56,6 +60,8 @@ pub struct SweepPointView {
     /// With `measure_predictions`: the direct run's job, and its figures beside the prediction.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_job_id: Option<i64>,
+    /// With `measure_predictions`: the direct run's figures, to compare with the predicted
+    /// `figures`; absent until that run has a checkpoint.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured: Option<PointFigures>,
 }
@@ -63,25 +69,33 @@ pub struct SweepPointView {
 /// How far a sweep has come.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SweepProgress {
+    /// Runs (jobs) the sweep queued: one per distinct run, plus the direct runs of
+    /// `measure_predictions`; points on an axis by prediction share their run.
     pub runs: usize,
     /// Runs per job state (a run whose job was deleted counts as `deleted`).
     pub runs_by_state: BTreeMap<String, usize>,
+    /// Iterations done, summed over the runs whose jobs still exist.
     pub iterations_done: u64,
+    /// Iterations planned (each job's `iterations_total`), summed over the runs whose jobs still
+    /// exist.
     pub iterations_total: u64,
 }
 
 /// A sweep.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SweepResource {
+    /// The sweep's id, as in `/v1/sweeps/{id}` and its runs' `sweep_id`.
     pub id: i64,
     /// RFC 3339, UTC.
     pub created_at: String,
     /// `running` while any run runs, else `queued` while any waits, else `succeeded` if all did,
     /// else `failed` if any failed, else `cancelled`.
     pub state: JobState,
+    /// The sweep document (base job document, axes, mode), its defaults filled in.
     pub spec: SweepSpec,
     /// The swept fields, in the axes' order.
     pub fields: Vec<String>,
+    /// Runs, runs per state and iterations, over the sweep's jobs.
     pub progress: SweepProgress,
     /// Every point; `figures` only in `GET /v1/sweeps/{id}` (not in lists or acknowledgements).
     pub points: Vec<SweepPointView>,
@@ -90,15 +104,18 @@ pub struct SweepResource {
 /// One page of sweeps, newest first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SweepList {
+    /// The sweeps of this page (at most `limit`), newest (highest id) first, without their
+    /// points' figures.
     pub sweeps: Vec<SweepResource>,
+    /// Pass as `cursor` to get the next page; null on the last page.
     pub next_cursor: Option<String>,
 }
 
 /// Predicted figures of a run's points at one checkpoint (its checksum).
-pub(super) type PredictionCache = std::sync::Mutex<BTreeMap<i64, CachedPredictions>>;
+type PredictionCache = std::sync::Mutex<BTreeMap<i64, CachedPredictions>>;
 
 /// A run's predicted figures, the checksum of the checkpoint they come from and when they were made.
-pub(super) struct CachedPredictions {
+struct CachedPredictions {
     checksum: String,
     made: Instant,
     figures: Arc<Vec<(usize, PointFigures)>>,
@@ -111,17 +128,37 @@ const REFIT_INTERVAL: Duration = Duration::from_secs(10);
 /// The longest a read of a sweep waits for another request's re-fit before it is answered 429.
 const REFIT_WAIT: Duration = Duration::from_secs(20);
 
-impl JobManager {
+/// Sweeps: their runs queued as jobs of the lifecycle, their figures read from the runs'
+/// statistics; cheap to clone. It owns the predicted figures of the runs' points (a cache per
+/// checkpoint) and the lock that keeps their re-fits one at a time.
+#[derive(Clone)]
+pub struct Sweeps {
+    jobs: JobManager,
+    statistics: Statistics,
+    /// Predicted figures of sweep runs, per (job, checkpoint checksum).
+    predictions: Arc<PredictionCache>,
+    /// One re-fit of predicted sweep points at a time: concurrent reads of a sweep wait for it and
+    /// then read its result from `predictions` instead of each re-fitting every point.
+    refit: Arc<tokio::sync::Mutex<()>>,
+}
+
+impl Sweeps {
+    /// Sweeps whose runs are jobs of `statistics`' lifecycle.
+    pub fn new(statistics: Statistics) -> Self {
+        Self { jobs: statistics.jobs().clone(), statistics, predictions: Default::default(), refit: Default::default() }
+    }
+
     /// Plans a sweep, checks every run as a job, and queues the runs; acknowledged once stored.
     pub async fn create_sweep(&self, document: Value) -> Result<SweepResource, JobError> {
-        if self.is_shutting_down() {
+        if self.jobs.is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
-        let policy = self.inner.policy.clone();
+        let policy = self.jobs.policy().clone();
         // Planning and the checks of every run first (cheap), then the queue's room, and only then
         // the reference quadratures — once per distinct scene, cached across requests, stopped
         // when the client goes away, the server shuts down or the deadline passes.
         let (plan, valid) = self
+            .jobs
             .compute(move || -> Result<_, JobError> {
                 let plan = plan(&document, policy.max_sweep_points)?;
                 let mut valid = Vec::with_capacity(plan.runs.len());
@@ -144,6 +181,7 @@ impl JobManager {
         self.check_room_for(valid.len())?;
         let scenes: Vec<Scene> = valid.iter().map(|job| job.config.scene.clone()).collect();
         let references = self
+            .jobs
             .compute_heavy(move |stop| {
                 let started = Instant::now();
                 let mut out = Vec::with_capacity(scenes.len());
@@ -179,15 +217,15 @@ impl JobManager {
         // Again: other requests may have filled the queue while the quadratures ran.
         self.check_room_for(new_jobs.len())?;
         let spec_text = serde_json::to_string(&plan.spec).map_err(|e| JobError::Internal(e.to_string()))?;
-        let _guard = self.inner.lifecycle.lock().await;
+        let _guard = self.jobs.transition().await;
         // Nothing is acknowledged once the server is stopping.
-        if self.is_shutting_down() {
+        if self.jobs.is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
         let now = now_ms();
-        let (id, rows) = self.inner.store.insert_sweep(&spec_text, &new_jobs, now).await?;
+        let (id, rows) = self.jobs.store().insert_sweep(&spec_text, &new_jobs, now).await?;
         for (row, job) in rows.iter().zip(valid) {
-            self.enqueue(row.id, job, resource_from_row(row)?);
+            self.jobs.enqueue(row.id, job, resource_from_row(row)?);
         }
         drop(_guard);
         let row = SweepRow { id, spec: spec_text, created_at: now };
@@ -196,12 +234,12 @@ impl JobManager {
 
     /// 429 unless `runs` more jobs fit in the queue.
     fn check_room_for(&self, runs: usize) -> Result<(), JobError> {
-        let queued = self.inner.queue.lock().expect("queue").len();
-        if queued + runs > self.inner.policy.max_queued_jobs {
+        let queued = self.jobs.queued();
+        if queued + runs > self.jobs.policy().max_queued_jobs {
             return Err(JobError::Busy {
                 detail: format!(
                     "the sweep's {runs} runs do not fit in the queue ({queued} jobs waiting, at most {} queued: --max-queued-jobs)",
-                    self.inner.policy.max_queued_jobs
+                    self.jobs.policy().max_queued_jobs
                 ),
                 retry_after_seconds: 30,
             });
@@ -217,7 +255,7 @@ impl JobManager {
 
     /// A page of sweeps, newest first (without figures).
     pub async fn list_sweeps(&self, cursor: Option<i64>, limit: u32) -> Result<SweepList, JobError> {
-        let mut rows = self.inner.store.list_sweeps(cursor, limit + 1).await?;
+        let mut rows = self.jobs.store().list_sweeps(cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
         let next_cursor = if more { rows.last().map(|r| r.id.to_string()) } else { None };
@@ -235,15 +273,15 @@ impl JobManager {
         let resource = self.sweep_resource(&row, &plan, true).await?;
         let results: Vec<PointResults> =
             resource.points.into_iter().map(|p| PointResults { figures: p.figures, measured: p.measured }).collect();
-        self.compute(move || SweepTable::build(&plan, &results)).await
+        self.jobs.compute(move || SweepTable::build(&plan, &results)).await
     }
 
     /// Cancels every queued or running run of a sweep (each keeps the iterations it completed).
     pub async fn cancel_sweep(&self, id: i64) -> Result<SweepResource, JobError> {
         let (row, plan) = self.sweep_plan(id).await?;
-        for (_, job) in self.inner.store.sweep_jobs(id).await? {
+        for (_, job) in self.jobs.store().sweep_jobs(id).await? {
             if matches!(job.state, JobState::Queued | JobState::Running) {
-                match self.cancel(job.id).await {
+                match self.jobs.cancel(job.id).await {
                     // It ended meanwhile: nothing to cancel.
                     Ok(_) | Err(JobError::Conflict(_)) => {}
                     Err(e) => return Err(e),
@@ -255,37 +293,33 @@ impl JobManager {
 
     /// Deletes a sweep and its jobs; refused while one of them runs (cancel the sweep first).
     pub async fn delete_sweep(&self, id: i64) -> Result<(), JobError> {
-        let jobs = self.inner.store.sweep_jobs(id).await?;
-        let _guard = self.inner.lifecycle.lock().await;
-        if self.inner.store.get_sweep(id).await?.is_none() {
+        let jobs = self.jobs.store().sweep_jobs(id).await?;
+        let _guard = self.jobs.transition().await;
+        if self.jobs.store().get_sweep(id).await?.is_none() {
             return Err(no_sweep(id));
         }
         for (_, job) in &jobs {
-            let queued = self.inner.queue.lock().expect("queue").contains(&job.id);
-            if self.active(job.id).is_some() && !queued {
+            if self.jobs.active(job.id).is_some() && !self.jobs.is_queued(job.id) {
                 return Err(JobError::Conflict(format!(
                     "job {} of sweep {id} is running; cancel the sweep (POST /v1/sweeps/{id}/cancel) before deleting it",
                     job.id
                 )));
             }
-            if self.inner.merging.lock().expect("merging set").contains(&job.id) {
+            if self.jobs.is_held(job.id) {
                 return Err(JobError::Conflict(format!("job {} of sweep {id} is taking a merge; retry", job.id)));
             }
         }
-        if !self.inner.store.delete_sweep(id).await? {
+        if !self.jobs.store().delete_sweep(id).await? {
             return Err(no_sweep(id));
         }
         for (_, job) in &jobs {
-            self.inner.queue.lock().expect("queue").retain(|&q| q != job.id);
-            if let Some(active) = self.inner.active.lock().expect("active map").remove(&job.id) {
-                active.view.send_modify(|r| r.state = JobState::Cancelled);
-            }
+            self.jobs.discard_queued(job.id);
         }
         Ok(())
     }
 
     async fn sweep_plan(&self, id: i64) -> Result<(SweepRow, SweepPlan), JobError> {
-        let row = self.inner.store.get_sweep(id).await?.ok_or_else(|| no_sweep(id))?;
+        let row = self.jobs.store().get_sweep(id).await?.ok_or_else(|| no_sweep(id))?;
         let plan = self.replan(&row).await?;
         Ok((row, plan))
     }
@@ -295,24 +329,25 @@ impl JobManager {
     async fn replan(&self, row: &SweepRow) -> Result<SweepPlan, JobError> {
         let text = row.spec.clone();
         let id = row.id;
-        self.compute(move || {
-            let document: Value = serde_json::from_str(&text)
-                .map_err(|e| JobError::Internal(format!("stored sweep {id} is unreadable: {e}")))?;
-            plan(&document, usize::MAX)
-                .map_err(|e| JobError::Internal(format!("stored sweep {id} is no longer valid: {e}")))
-        })
-        .await?
+        self.jobs
+            .compute(move || {
+                let document: Value = serde_json::from_str(&text)
+                    .map_err(|e| JobError::Internal(format!("stored sweep {id} is unreadable: {e}")))?;
+                plan(&document, usize::MAX)
+                    .map_err(|e| JobError::Internal(format!("stored sweep {id} is no longer valid: {e}")))
+            })
+            .await?
     }
 
     async fn sweep_resource(&self, row: &SweepRow, plan: &SweepPlan, figures: bool) -> Result<SweepResource, JobError> {
-        let jobs: BTreeMap<usize, JobRow> = self.inner.store.sweep_jobs(row.id).await?.into_iter().collect();
+        let jobs: BTreeMap<usize, JobRow> = self.jobs.store().sweep_jobs(row.id).await?.into_iter().collect();
         let mut by_state: BTreeMap<String, usize> = BTreeMap::new();
         let (mut done, mut total) = (0, 0);
         let mut states = Vec::new();
         let mut run_views = Vec::with_capacity(plan.runs.len());
         for r in 0..plan.runs.len() {
             let view = match jobs.get(&r) {
-                Some(job) => Some(match self.active(job.id) {
+                Some(job) => Some(match self.jobs.active(job.id) {
                     Some(active) => active.view.borrow().clone(),
                     None => resource_from_row(job)?,
                 }),
@@ -382,7 +417,7 @@ impl JobManager {
         }
         let predicted = plan.points.iter().any(|p| p.run == r && p.predicted.is_some());
         if !predicted {
-            let result = self.result(job).await?;
+            let result = self.statistics.result(job).await?;
             let spec = &plan.runs[r].spec;
             let budget =
                 crate::sim::solve::predict::Budget { light_paths: spec.light_paths, camera_paths: spec.camera_paths };
@@ -390,10 +425,10 @@ impl JobManager {
             let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
             return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
-        let Some((_, _, checksum)) = self.inner.store.load_result(job).await? else { return Ok(Vec::new()) };
-        let running = self.active(job).is_some();
+        let Some((_, _, checksum)) = self.jobs.store().load_result(job).await? else { return Ok(Vec::new()) };
+        let running = self.jobs.active(job).is_some();
         let cached = || {
-            let cache = self.inner.predictions.lock().expect("prediction cache");
+            let cache = self.predictions.lock().expect("prediction cache");
             let hit = cache.get(&job)?;
             (hit.checksum == checksum || (running && hit.made.elapsed() < REFIT_INTERVAL))
                 .then(|| hit.figures.as_ref().clone())
@@ -402,7 +437,7 @@ impl JobManager {
             return Ok(hit);
         }
         // Single flight: one re-fit at a time, and a reader that waited finds its run re-fitted.
-        let Ok(_refit) = tokio::time::timeout(REFIT_WAIT, self.inner.refit.lock()).await else {
+        let Ok(_refit) = tokio::time::timeout(REFIT_WAIT, self.refit.lock()).await else {
             return Err(JobError::Busy {
                 detail: "other sweeps' predicted points are being re-fitted; retry".into(),
                 retry_after_seconds: 5,
@@ -411,19 +446,18 @@ impl JobManager {
         if let Some(hit) = cached() {
             return Ok(hit);
         }
-        self.inner.metrics.count_sweep_refit();
-        let result = self.result(job).await?;
-        let (state, _, spec, merged) = self.state_and_total(job).await?;
-        let (moments, _) = self.checkpoint_moments(job, &spec, merged).await?;
+        self.jobs.metrics().count_sweep_refit();
+        let result = self.statistics.result(job).await?;
+        let latest = self.statistics.latest(job).await?;
         let plan = plan.clone();
-        let partial = result.partial || state != JobState::Succeeded;
+        let partial = result.partial || latest.state != JobState::Succeeded;
         let figures = self
-            .compute_heavy(move |_| -> Result<_, JobError> {
-                let valid = plan.runs[r].spec.validate()?;
-                Ok(point_figures(&plan, r, &moments, &valid.config.cells, &result.report, partial))
+            .jobs
+            .compute_heavy(move |_| {
+                point_figures(&plan, r, &latest.moments, &latest.job.config.cells, &result.report, partial)
             })
-            .await??;
-        let mut cache = self.inner.predictions.lock().expect("prediction cache");
+            .await?;
+        let mut cache = self.predictions.lock().expect("prediction cache");
         if cache.len() >= MAX_CACHED_RUNS {
             cache.clear();
         }

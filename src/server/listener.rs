@@ -4,7 +4,7 @@
 //!
 //! * at most `max_connections` at once — beyond it the loop stops accepting (new connections wait
 //!   in the kernel's backlog and cost no file descriptor) until one closes;
-//! * at most `max_per_client` of them from one client address ([`PerClient`]): a further
+//! * at most `max_per_client` of them from one client address (`PerClient`): a further
 //!   connection from it is answered 429 and closed at once, so that one client holding half-open
 //!   connections cannot take the slots every other client needs;
 //! * a TLS handshake and the request head must arrive within `header_timeout` (hyper's
@@ -195,6 +195,7 @@ pub struct SendTimeout<IO> {
 }
 
 impl<IO> SendTimeout<IO> {
+    /// Wraps `io`, failing a write that made no progress for `limit`.
     pub fn new(io: IO, limit: Duration) -> Self {
         Self { io, limit, stalled_since: None }
     }

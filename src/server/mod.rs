@@ -3,6 +3,8 @@
 //!
 //! * [`listener`] — the accept loop: connection limit, timeouts, TLS, graceful shutdown;
 //! * [`tls`] — the server's certificate and key.
+//!
+//! Imports: crate::api, crate::jobs, crate::metrics, crate::store
 
 pub mod listener;
 pub mod tls;
@@ -19,13 +21,14 @@ use crate::api::{BearerToken, HttpLimits};
 use crate::jobs::compute::Pools;
 use crate::jobs::peers::{Peer, PeerConfigError, Peers};
 use crate::jobs::signing::{KeyError, Provenance};
-use crate::jobs::{JobManager, RunPolicy};
+use crate::jobs::{JobManager, LocalPool, RunPolicy, Services};
 use crate::store::{Store, StoreError};
 pub use listener::ConnectionLimits;
 
 /// Everything `optimis serve` can be told, validated.
 #[derive(Debug, Clone)]
 pub struct ServerConfig {
+    /// The address to listen on (`--bind`; port 0 picks a free port).
     pub bind: SocketAddr,
     /// `sqlite://path` (created if missing) or `sqlite::memory:`.
     pub database: String,
@@ -58,32 +61,48 @@ pub struct ServerConfig {
 /// The PEM files of the server's TLS certificate chain and private key.
 #[derive(Debug, Clone)]
 pub struct TlsFiles {
+    /// The certificate chain, leaf first (`--tls-cert`).
     pub cert: PathBuf,
+    /// The private key of the leaf certificate (`--tls-key`).
     pub key: PathBuf,
 }
 
 /// Why the server could not start or stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum ServerError {
+    /// The database could not be opened or migrated, or failed while recovering jobs.
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// The listening socket could not be bound.
     #[error("cannot listen on {addr}: {source}")]
-    Bind { addr: SocketAddr, source: std::io::Error },
+    Bind {
+        /// The address asked for.
+        addr: SocketAddr,
+        /// The I/O error (e.g. the address is in use).
+        source: std::io::Error,
+    },
+    /// A thread pool (the simulation's, or the requests' compute pools) could not be built.
     #[error("cannot start the simulation threads: {0}")]
     Threads(#[from] rayon::ThreadPoolBuildError),
+    /// A `--peer` or `--peer-ca` is unusable, or the peer client cannot be built.
     #[error(transparent)]
     Peers(#[from] PeerConfigError),
+    /// The TLS certificate or key is unusable.
     #[error(transparent)]
     Tls(#[from] tls::TlsError),
+    /// The signing key or a trusted public key is unusable.
     #[error(transparent)]
     Keys(#[from] KeyError),
+    /// An I/O error of the listener (its local address, the accept loop).
     #[error("server error: {0}")]
     Io(#[from] std::io::Error),
 }
 
 /// A started server: its address, and a way to stop it and wait.
 pub struct RunningServer {
+    /// The address the server listens on (with the port picked when asked for port 0).
     pub addr: SocketAddr,
+    /// The server's job manager, for tests that inspect or drive jobs directly.
     pub jobs: JobManager,
     stop: tokio::sync::oneshot::Sender<()>,
     task: tokio::task::JoinHandle<Result<(), ServerError>>,
@@ -136,12 +155,14 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
     // running job's chunks, and their light work never waits behind their heavy work.
     let pools = Pools::new()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
-    let jobs = JobManager::start(store, config.policy.clone(), pool, pools, metrics, peers, provenance).await?;
+    let executor = Arc::new(LocalPool::new(pool));
+    let jobs = JobManager::start(store, config.policy.clone(), executor, pools, metrics).await?;
+    let services = Services::new(jobs.clone(), peers, provenance);
     let guard = Guard {
         loopback: bound.ip().is_loopback(),
         allowed_hosts: config.allowed_hosts.iter().map(|h| h.to_ascii_lowercase()).collect::<Vec<_>>().into(),
     };
-    let router = crate::api::router(jobs.clone(), &config.http, config.token.clone(), guard);
+    let router = crate::api::router(services, &config.http, config.token.clone(), guard);
     Ok(App { jobs, router, tls })
 }
 

@@ -12,10 +12,23 @@ use tokio_rustls::TlsAcceptor;
 /// Why the certificate or key cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
+    /// The certificate file cannot be read, is not PEM, or holds no certificate.
     #[error("--tls-cert {path}: {message}")]
-    Certificate { path: PathBuf, message: String },
+    Certificate {
+        /// The `--tls-cert` file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The key file cannot be read or holds no private key in PEM.
     #[error("--tls-key {path}: {message}")]
-    Key { path: PathBuf, message: String },
+    Key {
+        /// The `--tls-key` file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// rustls refused the pair (e.g. a key of an unsupported type, or not the certificate's).
     #[error("the certificate and key do not form a TLS configuration: {0}")]
     Config(String),
 }

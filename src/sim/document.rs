@@ -53,6 +53,7 @@ pub struct MomentsDocument {
     /// The job specification the iterations were drawn under (for a merge, the first document's
     /// with `iterations` set to the total covered and no shard).
     pub spec: JobSpec,
+    /// The statistics themselves: the exact sums of the moment vectors over the covered iterations.
     pub moments: Moments,
     /// SHA-256 (hex) of the canonical JSON of the fields above: detects corruption, not forgery.
     pub checksum: String,
@@ -95,18 +96,27 @@ pub const SIGNATURE_DOMAIN: &[u8] = b"optimis-moments-signature-v1\n";
 /// Why a document cannot be used.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum DocumentError {
+    /// The bytes do not parse as a document (not JSON, a missing or unknown field, a list too
+    /// long); the text names the JSON path of the first error.
     #[error("not a moments document: {0}")]
     Unreadable(String),
+    /// The `kind` is not [`DOCUMENT_KIND`].
     #[error("not a moments document: kind {0:?}, expected \"optimis-moments\"")]
     Kind(String),
+    /// The `format_version` is not [`DOCUMENT_VERSION`].
     #[error("moments document version {0} is not supported (this build reads version {DOCUMENT_VERSION})")]
     Version(u32),
+    /// The checksum is not that of the document's body.
     #[error("the document's checksum does not match its content: it was corrupted or edited")]
     Checksum,
+    /// The parts disagree: the fingerprint or coverage with the moments', the spec with the
+    /// configuration or the coverage, or the spec is invalid; or there is nothing to merge.
     #[error("the document is inconsistent: {0}")]
     Inconsistent(String),
+    /// The moments cover no iteration.
     #[error("the document holds no iterations")]
     Empty,
+    /// The moments are malformed, or cannot be merged with another document's.
     #[error(transparent)]
     Merge(#[from] MergeError),
 }

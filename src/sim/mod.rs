@@ -22,6 +22,8 @@
 //!
 //! Nothing here touches a file, a socket, a clock or a database, so all of it is testable and
 //! benchmarkable alone; the CLI and the server wrap it.
+//!
+//! Imports: nothing from the crate
 
 pub mod checks;
 pub mod document;

@@ -29,8 +29,11 @@ use crate::sim::stats::moments::{MergeError, Moments};
 /// Why a run stopped early.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RunError {
+    /// The cancel flag was raised; the moments hold every batch finished before it.
     #[error("cancelled")]
     Cancelled,
+    /// An iteration could not be added to the moments: it was already counted, or a sum would
+    /// overflow.
     #[error(transparent)]
     Moments(#[from] MergeError),
 }

@@ -17,6 +17,7 @@ use serde_json::{Value, json};
 
 use crate::sim::engines::layout::{MAX_FOLD_SUMS, folds_allowed};
 use crate::sim::model::config::{DEFAULT_FOLDS, Engine, MAX_FOLDS, MIN_FOLDS, Proposals, SimConfig};
+use crate::sim::model::illumination::validate_flux;
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
     CellSpec, MIN_LENGTH, SceneSpec, check, check_path_counts, count, merge_patch, optional_count, validate_cells,
@@ -36,6 +37,7 @@ pub const DEFAULT_PRESET: &str = "paper-table1";
 pub struct JobSpec {
     /// The preset the document started from (provenance; every field below is explicit).
     pub preset: String,
+    /// The scene: distances, lobe width, illumination profile.
     pub scene: SceneSpec,
     /// Merge (kernel) radius R.
     pub merge_radius: f64,
@@ -57,6 +59,7 @@ pub struct JobSpec {
     /// Run iterations [first_iteration, first_iteration + iterations) instead of [0, iterations).
     #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "optional_count")]
     pub first_iteration: Option<u64>,
+    /// The grid of cells the weights are tabulated over.
     pub cells: CellSpec,
     /// K, the cross-fitting folds: iteration s is summed into fold s mod K, and every fitted figure
     /// that is not labelled in-sample is cross-fitted over them. Absent: 10, or the most the grid
@@ -69,6 +72,7 @@ pub struct JobSpec {
     /// `camera_paths`; the moments hold four times the sums per fold. Part of the fingerprint.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub noise_components: bool,
+    /// How the weights are fitted: fixed weights, the penalty λ and the cross-validation grid.
     pub solver: SolverOptions,
     /// How light paths are drawn. Absent in documents stored before engines existed: `brute`.
     #[serde(default)]
@@ -81,8 +85,10 @@ pub struct JobSpec {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum EngineName {
+    /// Every light path, streamed (the reference).
     #[default]
     Brute,
+    /// Only the light paths that can merge, as an exact Poisson process.
     Restricted,
 }
 
@@ -196,7 +202,9 @@ pub fn parse_job_spec(document: &Value) -> Result<JobSpec, SpecError> {
 /// A specification that passed validation, with the simulation configuration built from it.
 #[derive(Debug, Clone)]
 pub struct ValidJob {
+    /// The specification as validated.
     pub spec: JobSpec,
+    /// The simulation configuration built from it, shared by every iteration.
     pub config: Arc<SimConfig>,
 }
 
@@ -206,6 +214,7 @@ impl JobSpec {
     pub fn validate(&self) -> Result<ValidJob, SpecError> {
         let s = &self.scene;
         validate_scene(s)?;
+        validate_flux(&s.illumination)?;
         let max_r = s.l2.min(s.l3);
         check(
             self.merge_radius.is_finite() && self.merge_radius >= MIN_LENGTH && self.merge_radius < max_r,

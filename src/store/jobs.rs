@@ -1,5 +1,6 @@
-//! Queries on the `jobs` and `checkpoints` tables (a checkpoint's history row is appended with it:
-//! `history`).
+//! Queries on the `jobs` table: a job's row (its spec, state and bookkeeping) from insert to
+//! delete, and the listings. Writes that carry statistics (a checkpoint, merged statistics, a
+//! study) update the row together with the checkpoint, in `checkpoints`.
 //!
 //! Every write runs in a transaction whose commit is awaited, and goes through [`Store::track`]:
 //! an insert with `RETURNING` in autocommit mode once handed back a row whose commit had failed on
@@ -8,7 +9,6 @@
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
-use super::history::thin_history;
 use super::{JobState, Store, StoreError};
 
 /// Unix milliseconds now.
@@ -19,12 +19,18 @@ pub(crate) fn now_ms() -> i64 {
 /// A job as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobRow {
+    /// The job's id (SQLite rowid, never reused: the table is `AUTOINCREMENT`).
     pub id: i64,
+    /// Where the job is in its life cycle.
     pub state: JobState,
     /// The resolved spec, JSON.
     pub spec: String,
+    /// The simulation configuration's fingerprint (hex SHA-256, `SimConfig::fingerprint`): only
+    /// moments with the same one may be merged into this job.
     pub fingerprint: String,
+    /// Iterations the job runs in all (the length of its iteration range).
     pub iterations_total: u64,
+    /// Iterations its latest checkpoint covers (0 before the first).
     pub iterations_done: u64,
     /// The quadrature reference; None when it did not converge.
     pub reference_luminance: Option<f64>,
@@ -32,6 +38,7 @@ pub struct JobRow {
     pub best: Option<String>,
     /// JSON list of the latest checkpoint's warnings.
     pub warnings: Option<String>,
+    /// Why the job failed (a `failed` job), if it did.
     pub error: Option<String>,
     /// Holds statistics merged from other runs.
     pub merged: bool,
@@ -39,19 +46,30 @@ pub struct JobRow {
     pub cancel_requested: bool,
     /// The sweep the job is a run of, if any.
     pub sweep_id: Option<i64>,
+    /// When the job was submitted (Unix milliseconds).
     pub created_at: i64,
+    /// When the row last changed (Unix milliseconds).
     pub updated_at: i64,
 }
 
-/// A job to insert.
+/// A job to insert (queued, or a study with its checkpoint).
 #[derive(Debug, Clone)]
 pub struct NewJob {
+    /// The resolved spec, JSON ([`JobRow::spec`]).
     pub spec: String,
+    /// The configuration's fingerprint ([`JobRow::fingerprint`]).
     pub fingerprint: String,
+    /// Iterations the job is to run (a study takes its checkpoint's instead).
     pub iterations_total: u64,
+    /// The quadrature reference; None when it did not converge.
     pub reference_luminance: Option<f64>,
+    /// The client's `Idempotency-Key`, unique among jobs: a second insert with it answers the
+    /// first job instead of inserting one.
     pub idempotency_key: Option<String>,
+    /// SHA-256 (hex) of the submitted body, stored with the key to tell a replay (same body) from
+    /// a reuse of the key with another body.
     pub request_hash: Option<String>,
+    /// The insert's time (Unix milliseconds): `created_at` and `updated_at`.
     pub now: i64,
 }
 
@@ -64,24 +82,6 @@ pub enum Inserted {
     Replayed(JobRow),
     /// The key was used before with another body.
     KeyReused,
-}
-
-/// A job's latest checkpoint.
-#[derive(Debug, Clone)]
-pub struct Checkpoint {
-    pub iterations_done: u64,
-    /// The moments, JSON.
-    pub moments: Vec<u8>,
-    /// SHA-256 (hex) of `moments` when written.
-    pub checksum: String,
-    /// The result document (JSON) computed from them.
-    pub result: String,
-    /// The best strategy (JSON) at this checkpoint, copied to the job row.
-    pub best: Option<String>,
-    /// The result's warnings (JSON list), copied to the job row.
-    pub warnings: Option<String>,
-    /// Each strategy's luminance and RMS (JSON), appended to the job's history.
-    pub history: String,
 }
 
 /// The columns of a [`JobRow`], as a literal for `concat!` (queries stay static strings).
@@ -120,39 +120,6 @@ pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
     })
-}
-
-async fn upsert_checkpoint(
-    tx: &mut sqlx::SqliteConnection,
-    id: i64,
-    checkpoint: &Checkpoint,
-    now: i64,
-) -> Result<(), StoreError> {
-    sqlx::query(
-        "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
-         VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
-         moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
-         written_at = excluded.written_at",
-    )
-    .bind(id)
-    .bind(checkpoint.iterations_done as i64)
-    .bind(&checkpoint.moments)
-    .bind(&checkpoint.checksum)
-    .bind(&checkpoint.result)
-    .bind(now)
-    .execute(&mut *tx)
-    .await?;
-    sqlx::query(
-        "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
-         ON CONFLICT (job_id, iterations) DO UPDATE SET strategies = excluded.strategies, written_at = excluded.written_at",
-    )
-    .bind(id)
-    .bind(checkpoint.iterations_done as i64)
-    .bind(&checkpoint.history)
-    .bind(now)
-    .execute(&mut *tx)
-    .await?;
-    thin_history(tx, id).await
 }
 
 /// Inserts a queued job (a run of sweep `sweep.0`, number `sweep.1`, if given) in `tx`.
@@ -323,109 +290,6 @@ impl Store {
         Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
     }
 
-    /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
-    pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        let result = self.write_checkpoint_tx(id, checkpoint, now).await;
-        self.track(result)
-    }
-
-    async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        self.transaction(async |tx| {
-            upsert_checkpoint(tx, id, checkpoint, now).await?;
-            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, warnings = ?, updated_at = ? WHERE id = ?")
-                .bind(checkpoint.iterations_done as i64)
-                .bind(&checkpoint.best)
-                .bind(&checkpoint.warnings)
-                .bind(now)
-                .bind(id)
-                .execute(&mut *tx)
-                .await?;
-            Ok(())
-        })
-        .await
-    }
-
-    /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
-    /// with `iterations_total = iterations_done` = the iterations now covered, and its spec
-    /// (`spec`: iterations set to that total) says so. One transaction.
-    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
-        let result = async {
-            self.transaction(async |tx| {
-                upsert_checkpoint(tx, id, checkpoint, now).await?;
-                sqlx::query(
-                    "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
-                     updated_at = ?4, warnings = ?6 WHERE id = ?5",
-                )
-                .bind(checkpoint.iterations_done as i64)
-                .bind(&checkpoint.best)
-                .bind(spec)
-                .bind(now)
-                .bind(id)
-                .bind(&checkpoint.warnings)
-                .execute(&mut *tx)
-                .await?;
-                Ok(())
-            })
-            .await
-        }
-        .await;
-        self.track(result)
-    }
-
-    /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
-    /// transaction.
-    pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
-        let result = self.insert_study_tx(job, checkpoint).await;
-        self.track(result)
-    }
-
-    async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
-        self.transaction(async |tx| {
-            let row = sqlx::query(concat!(
-            "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
-             warnings, merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
-            job_columns!()
-        ))
-        .bind(JobState::Succeeded.as_str())
-        .bind(&job.spec)
-        .bind(&job.fingerprint)
-        .bind(checkpoint.iterations_done as i64)
-        .bind(checkpoint.iterations_done as i64)
-        .bind(job.reference_luminance)
-        .bind(&checkpoint.best)
-        .bind(&checkpoint.warnings)
-        .bind(job.now)
-        .bind(job.now)
-        .fetch_one(&mut *tx)
-        .await?;
-            let id: i64 = row.try_get("id")?;
-            upsert_checkpoint(tx, id, checkpoint, job.now).await?;
-            Ok(job_from_row(&row)?)
-        })
-        .await
-    }
-
-    /// A job's latest checkpoint, if any.
-    pub async fn load_checkpoint(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
-        let row = sqlx::query("SELECT iterations_done, moments, checksum, result FROM checkpoints WHERE job_id = ?")
-            .bind(id)
-            .fetch_optional(self.pool())
-            .await?;
-        row.map(|row| {
-            Ok::<_, sqlx::Error>(Checkpoint {
-                iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
-                moments: row.try_get("moments")?,
-                checksum: row.try_get("checksum")?,
-                result: row.try_get("result")?,
-                best: None,
-                warnings: None,
-                history: String::new(),
-            })
-        })
-        .transpose()
-        .map_err(StoreError::from)
-    }
-
     /// Number of jobs in each state (every state listed, zero included).
     pub async fn count_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
         let rows = sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state").fetch_all(self.pool()).await?;
@@ -438,19 +302,5 @@ impl Store {
             }
         }
         Ok(counts)
-    }
-
-    /// A job's latest result document, without the moments.
-    /// (iterations done, result JSON, the moments' checksum) of a job's latest checkpoint.
-    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String, String)>, StoreError> {
-        let row = sqlx::query("SELECT iterations_done, result, checksum FROM checkpoints WHERE job_id = ?")
-            .bind(id)
-            .fetch_optional(self.pool())
-            .await?;
-        row.map(|row| {
-            Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?, row.try_get("checksum")?))
-        })
-        .transpose()
-        .map_err(|e: sqlx::Error| e.into())
     }
 }

@@ -11,7 +11,10 @@
 //! Every write is a transaction whose commit is awaited: a write that the database could not store
 //! (disk full, I/O error) is an error, never a success that was not kept. The store remembers the
 //! last such failure for a while so that `/readyz` reports it.
+//!
+//! Imports: nothing from the crate
 
+mod checkpoints;
 mod history;
 mod jobs;
 mod solves;
@@ -27,8 +30,9 @@ use sqlx::SqlitePool;
 use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
+pub use checkpoints::Checkpoint;
 pub use history::{MAX_HISTORY_ROWS, evenly_kept};
-pub use jobs::{Checkpoint, Inserted, JobRow, NewJob};
+pub use jobs::{Inserted, JobRow, NewJob};
 pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;
@@ -39,12 +43,22 @@ pub static MIGRATOR: Migrator = sqlx::migrate!("./migrations");
 /// Database failures.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
+    /// A query, a connection or the pool failed (see [`StoreError::is_storage_failure`] and
+    /// [`StoreError::is_transient`]).
     #[error("database error: {0}")]
     Database(#[from] sqlx::Error),
+    /// An embedded migration could not be applied at start.
     #[error("database migration failed: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
+    /// Job `job`'s stored data cannot be used (a checkpoint whose checksum does not match, a spec
+    /// that no longer parses); `detail` says what. Raised by the job layer as it reads the rows.
     #[error("stored data of job {job} is corrupted: {detail}")]
-    Corrupt { job: i64, detail: String },
+    Corrupt {
+        /// The job's id.
+        job: i64,
+        /// What is wrong with its data.
+        detail: String,
+    },
 }
 
 impl StoreError {

@@ -7,9 +7,11 @@ use super::{Store, StoreError};
 /// A named solve as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolveRow {
+    /// The solve's name, unique per job.
     pub name: String,
     /// The patch on the job's solver options, JSON.
     pub patch: String,
+    /// When it was stored or last replaced (Unix milliseconds).
     pub created_at: i64,
 }
 

@@ -11,16 +11,23 @@ use utoipa::ToSchema;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum JobState {
+    /// Waiting for a worker (new, extended, or recovered at start).
     Queued,
+    /// A worker is running its iterations.
     Running,
+    /// Every iteration ran (or its statistics were merged in).
     Succeeded,
+    /// Stopped by an error; the row's `error` says which.
     Failed,
+    /// Stopped by a user; its latest checkpoint is kept.
     Cancelled,
 }
 
 impl JobState {
+    /// Every state, in life-cycle order.
     pub const ALL: [JobState; 5] = [Self::Queued, Self::Running, Self::Succeeded, Self::Failed, Self::Cancelled];
 
+    /// The state as stored and shown: its snake-case name (`queued`, …).
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Queued => "queued",
@@ -31,6 +38,7 @@ impl JobState {
         }
     }
 
+    /// The state named `s` ([`JobState::as_str`]), if any.
     pub fn parse(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|state| state.as_str() == s)
     }

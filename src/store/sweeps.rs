@@ -11,9 +11,11 @@ use super::{Store, StoreError};
 /// A sweep as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepRow {
+    /// The sweep's id (never reused).
     pub id: i64,
     /// The sweep document, JSON.
     pub spec: String,
+    /// When it was submitted (Unix milliseconds).
     pub created_at: i64,
 }
 

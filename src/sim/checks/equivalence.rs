@@ -24,7 +24,9 @@ use crate::sim::stats::moments::Moments;
 /// A mean and its standard error.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Estimate {
+    /// The mean of the sample.
     pub mean: f64,
+    /// The standard error of that mean (the sample's standard deviation over √n).
     pub stderr: f64,
 }
 
@@ -69,8 +71,11 @@ impl Figures {
 /// One compared figure.
 #[derive(Debug, Clone)]
 pub struct Comparison {
+    /// The figure's name ([`Figures::names`]), e.g. "L of balance".
     pub what: String,
+    /// The figure in the first run (block mean and standard error).
     pub a: Estimate,
+    /// The figure in the second run.
     pub b: Estimate,
     /// Mean and standard error of the block differences a_b − b_b.
     pub difference: Estimate,

@@ -27,8 +27,9 @@ use std::f64::consts::PI;
 /// The exact mean of a merge count and a bound on its variance.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CountExpectation {
+    /// The exact expected count.
     pub mean: f64,
-    /// An upper bound on the variance (see [`count_given`]).
+    /// An upper bound on the variance (see `count_given`).
     pub variance_bound: f64,
 }
 
@@ -43,12 +44,14 @@ impl CountExpectation {
 /// Expected plane-2 and plane-3 merge events (with variance bounds).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct MergeExpectation {
+    /// Plane-2 merge events of the iteration.
     pub plane2: CountExpectation,
+    /// Plane-3 merge events of the iteration.
     pub plane3: CountExpectation,
 }
 
 /// Exact expectation of the plane-2 and plane-3 merge events of one iteration given its camera
-/// paths, with bounds on their variance (see [`count_given`]).
+/// paths, with bounds on their variance (see `count_given`).
 pub fn merges_given(config: &SimConfig, cameras: &CameraSet) -> MergeExpectation {
     let scene = &config.scene;
     let radius = config.merge_radius;

@@ -1,5 +1,5 @@
 //! The expected luminance of every per-path strategy *at the configuration's merge radius R*, by
-//! deterministic quadrature: E[C_s] of the estimator exactly as the engines define it
+//! deterministic quadrature: E\[C_s\] of the estimator exactly as the engines define it
 //! (docs/model.md §4, §5, §8, §9), kernel averages included. [`super::quadrature`] gives the
 //! R → 0 limit that all strategies share (§11); at a finite R their expectations differ from it,
 //! and from each other, so a Monte-Carlo mean is judged against this module's value, not the limit.
@@ -11,7 +11,7 @@
 //!
 //! One iteration averages all N_F·N_B pairs (§5); pairs are identically distributed (their
 //! correlation changes the variance, not the mean), and a plane-1 merge is tallied once per light
-//! path as N_B·C0, so E[C_s] = Σ_m E[w_m^s·C_m] over one pair (camera path ξ, light path η) with
+//! path as N_B·C0, so E\[C_s\] = Σ_m E[w_m^s·C_m] over one pair (camera path ξ, light path η) with
 //! independent sub-paths. The restricted engine draws a Poisson process with the same intensity,
 //! which keeps every such sum's expectation (§6), so both engines estimate this value. Densities
 //! per unit area (§9), d1 = |x2 − x1| and d2 = |x3 − x2| in 3-D, ϑ the deflection at x2,
@@ -107,11 +107,14 @@
 //! Like the reference, a call evaluates at most [`EVALUATION_BUDGET`] lobe integrands (a
 //! strategy-weights call counts as [`WEIGHTS_COST`] of them): about a second on one core. A
 //! configuration the rules cannot resolve within it reports [`ReferenceError::NotConverged`].
+//!
+//! Imports: crate::sim::checks::quadrature, crate::sim::engines, crate::sim::model
 
 use std::f64::consts::PI;
 
+pub use super::quadrature::MAX_KERNEL_RATIO;
 use super::quadrature::{Budget, EVALUATION_BUDGET, ReferenceError, solve_monotone};
-use crate::sim::engines::tally::{PathStrategy, Technique, strategy_weights};
+use crate::sim::engines::strategies::{PathStrategy, Technique, strategy_weights};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::Lobe;
 use rules::{DiscRule, adaptive_gk, deflection, disc_fraction_inside, dot, gauss_legendre};
@@ -137,9 +140,6 @@ struct Accuracy {
 /// `power` heuristic's weights, which turn fastest across the lobe.
 const ACCURACY: Accuracy = Accuracy { outer: 1e-7, inner: 1e-7, order: 12 };
 
-/// Largest κ = R/(β·min(L2, L3)) the disc rules resolve.
-pub const MAX_KERNEL_RATIO: f64 = 1.8;
-
 /// Budget units charged per call of [`strategy_weights`] (measured: about the cost of four lobe
 /// integrands; it evaluates the geometry, a lobe pdf and every heuristic).
 pub const WEIGHTS_COST: u64 = 4;
@@ -151,11 +151,14 @@ const NEGLIGIBLE: f64 = 1e-18;
 /// One strategy's expected luminance at the configuration's R, or why it is not available.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StrategyExpectation {
+    /// The per-path strategy.
     pub strategy: PathStrategy,
+    /// Its expected luminance at the merge radius (the kernel's bias included), or why the
+    /// quadrature could not give it.
     pub luminance: Result<f64, ReferenceError>,
 }
 
-/// The expected luminance E[C_s] of every strategy of [`PathStrategy::ALL`] (in that order) at
+/// The expected luminance E\[C_s\] of every strategy of [`PathStrategy::ALL`] (in that order) at
 /// `config`'s merge radius, within [`EVALUATION_BUDGET`].
 pub fn expected_luminances(config: &SimConfig) -> Vec<StrategyExpectation> {
     expected_within(config, EVALUATION_BUDGET).0

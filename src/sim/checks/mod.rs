@@ -7,6 +7,8 @@
 //! * [`expectation`] — exact expected merge counts given the camera paths;
 //! * [`equivalence`] — block-wise comparison of two engines' figures;
 //! * [`references`] — each strategy's expected luminance at the job's R, as reports take it.
+//!
+//! Imports: crate::sim::engines, crate::sim::model, crate::sim::runner, crate::sim::solve, crate::sim::stats
 
 pub mod equivalence;
 pub mod expectation;

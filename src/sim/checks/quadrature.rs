@@ -44,18 +44,26 @@ const TOLERANCE: f64 = 1e-10;
 /// lobe 1.7·10⁶; β = 10⁻⁹° or L2 = 10⁻⁶ with R = 10⁻⁷ exhaust it in under a second.
 pub const EVALUATION_BUDGET: u64 = 20_000_000;
 
+/// Largest κ = R/(β·min(L2, L3)) the disc rules of [`super::expected`] resolve (beyond it, the
+/// expected luminances fail with [`ReferenceError::KernelTooWide`]). Declared here, beside that
+/// error, so that this file imports nothing from `expected`, which builds on it.
+pub const MAX_KERNEL_RATIO: f64 = 1.8;
+
 /// Why the reference is not available.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum ReferenceError {
+    /// The quadrature spent its evaluation budget ([`EVALUATION_BUDGET`] for the reference)
+    /// before reaching its tolerance: an extreme geometry it cannot resolve.
     #[error("the reference quadrature did not converge within {EVALUATION_BUDGET} evaluations (extreme geometry)")]
     NotConverged,
+    /// The quadrature's value is infinite or NaN.
     #[error("the reference quadrature gave a non-finite value")]
     NotFinite,
     /// `expected`: the merge disc is too wide beside the lobe's footprint on plane 1 or 2 for the
     /// disc rules that average the kernel (their error would exceed 10⁻⁸).
     #[error(
         "the merge radius is too wide for the expected-luminance quadrature: R > {max}·β·min(L2, L3), beyond its disc rules",
-        max = super::expected::MAX_KERNEL_RATIO
+        max = MAX_KERNEL_RATIO
     )]
     KernelTooWide,
     /// `expected`: the strategy's weights depend on more than the expected-luminance quadrature

@@ -46,6 +46,7 @@ pub struct CameraPath {
 /// The camera paths of one iteration with their merge grids.
 #[derive(Debug, Clone, Default)]
 pub struct CameraSet {
+    /// The N_B camera paths, in index order j (a path's half for the noise components is j mod 2).
     pub paths: Vec<CameraPath>,
     /// Vertices x2c.
     pub plane2: MergeGrid,

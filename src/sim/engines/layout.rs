@@ -13,8 +13,10 @@ use super::strategies::PathStrategy;
 use crate::sim::model::cells::MAX_CELLS;
 use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 
-/// The formats this build reads; it writes [`MOMENTS_FORMAT_VERSION`], the last.
+/// The oldest format this build reads: the first seven strategies, no H columns.
 pub const FORMAT_WITHOUT_HEURISTICS: u32 = 2;
+/// The format with the stackable strategies' H columns and the w0 = 0 variants (issue 21): the
+/// one this build writes ([`MOMENTS_FORMAT_VERSION`]).
 pub const FORMAT_WITH_HEURISTICS: u32 = 3;
 const _: () = assert!(MOMENTS_FORMAT_VERSION == FORMAT_WITH_HEURISTICS);
 
@@ -44,7 +46,9 @@ pub fn folds_allowed(cells: usize, noise_components: bool) -> usize {
 /// The shape of one format's sums for a grid of `cells` cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Layout {
+    /// K, the cells of the grid.
     pub cells: usize,
+    /// The moments format (a supported one, see [`Layout::supports`]).
     pub format: u32,
 }
 

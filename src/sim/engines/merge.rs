@@ -16,7 +16,8 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 
 use super::camera::CameraSet;
-use super::tally::{CameraPaths, ChunkScratch, Technique, strategy_weights};
+use super::strategies::{Technique, strategy_weights};
+use super::tally::{CameraPaths, ChunkScratch};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::{angle_between, theta_over_sin};
 

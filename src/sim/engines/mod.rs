@@ -10,6 +10,8 @@
 //! * [`brute`] — the streamed light-path loop (the hot path), in blocks;
 //! * [`restricted`] — the restricted engine: a Poisson process on the light paths that can merge;
 //! * [`cost`] — the expected work of one iteration, checked before a server accepts a job.
+//!
+//! Imports: crate::sim::math, crate::sim::model
 
 pub mod brute;
 pub mod camera;

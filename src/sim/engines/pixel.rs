@@ -119,12 +119,16 @@ pub fn lobe_draw_below(u1: f64, theta_min: f64, beta: f64) -> bool {
 /// plane 2 into the merge disc is within δ of the direction to the pixel (see [`PixelCone::new`]).
 #[derive(Debug, Clone, Copy)]
 pub struct DiscAngle {
+    /// δ in radians, margin included.
     pub delta: f64,
+    /// sin δ.
     pub sin: f64,
+    /// cos δ.
     pub cos: f64,
 }
 
 impl DiscAngle {
+    /// The angle of a disc of radius `radius` on plane 1 seen from distance `l2` (L2).
     pub fn new(radius: f64, l2: f64) -> Self {
         let delta = (radius / l2).asin() * (1.0 + 1e-6);
         Self { delta, sin: delta.sin(), cos: delta.cos() }

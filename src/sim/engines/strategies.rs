@@ -53,6 +53,7 @@ impl PathStrategy {
         Self::PowerPlanes23,
         Self::CorrelationAwarePlanes23,
     ];
+    /// How many per-path strategies there are: the length of every per-strategy array.
     pub const COUNT: usize = Self::ALL.len();
 
     /// The strategies whose weights are not constant per cell, and so can widen the tabulated

@@ -1,4 +1,7 @@
-//! Tallies of merge events: per chunk of light paths, then per iteration.
+//! The accumulators of merge events: per chunk of light paths ([`ChunkScratch`], handing over a
+//! [`ChunkTally`]), then per iteration ([`IterationTally`], with its moment vector). What is
+//! tallied per strategy — the catalogue of per-path strategies and the merge techniques — is
+//! [`super::strategies`]'s; this file only sums.
 //!
 //! Every merge event (light path i, camera path j, plane m) adds its contribution C_m to the cell
 //! of its join path, and w·C_m to each per-path strategy. Chunks tally into a reusable dense
@@ -9,7 +12,7 @@
 //! applies it once per iteration.
 
 use super::layout::Layout;
-pub use super::strategies::{PathStrategy, Technique, strategy_weights};
+use super::strategies::{PathStrategy, Technique};
 use crate::sim::math::rng::{StreamRng, uniform};
 use crate::sim::model::config::SimConfig;
 
@@ -55,10 +58,13 @@ pub struct ChunkScratch {
 pub struct ChunkTally {
     /// (slot m·K + α, Σ C, events).
     pub entries: Vec<(u32, f64, u64)>,
+    /// Σ w·C of each per-path strategy over the chunk (not normalised).
     pub strategies: [f64; PathStrategy::COUNT],
+    /// Merge events per plane (plane-1 hits counted once per light path).
     pub merges: [u64; 3],
     /// With noise components: the block sums of each entry, in the same order (empty without).
     pub blocks: Vec<[f64; BLOCKS]>,
+    /// With noise components: Σ w·C of each per-path strategy per block (zeros without).
     pub block_strategies: BlockStrategies,
 }
 

@@ -24,6 +24,7 @@ impl Csv {
         self.out.push_str("\r\n");
     }
 
+    /// The text written so far: the header and every row, each ended by CRLF.
     pub fn finish(self) -> String {
         self.out
     }

@@ -44,10 +44,13 @@ const MERGE_PART_LIMIT: f64 = f64::from_bits((1023 + 1015) << 52);
 /// Why a list of parts is not an acceptable sum.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum SumError {
+    /// More than [`MAX_PARTS`] parts (a canonical sum never needs more).
     #[error("a sum has more than {MAX_PARTS} parts (a canonical sum never needs more)")]
     TooManyParts,
+    /// A part is infinite or NaN.
     #[error("a sum part is not finite")]
     NotFinite,
+    /// A part, or the sum, exceeds [`MAX_MAGNITUDE`] (2¹⁰⁰⁰) in magnitude.
     #[error("a sum exceeds 2^1000 in magnitude (its parts overflow when added)")]
     TooLarge,
 }

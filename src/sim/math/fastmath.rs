@@ -92,7 +92,7 @@ const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
 
 /// `(sin x, cos x)` for |x| ≤ 2²⁰ (the camera paths need ϑ ≤ 8.57·45° < 7).
 ///
-/// Reduction: n = round(x·2/π) by the [`ROUNDER`] trick, r = x − n·π/2 in two fused steps (the
+/// Reduction: n = round(x·2/π) by the `ROUNDER` trick, r = x − n·π/2 in two fused steps (the
 /// first, x − n·PIO2_HI, is exact up to one rounding of the small result; the second adds
 /// −n·PIO2_LO), so |r| ≤ π/4 + 2⁻⁴⁰ and r is within a few 10⁻¹⁷ (relative to max(|r|, |n|·10⁻³²))
 /// of its exact value; then the fdlibm kernels and the quadrant n mod 4 as in [`sincos_turn`].

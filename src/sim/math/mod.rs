@@ -8,6 +8,8 @@
 //! * [`sampling`] — points of the unit disc, cosine directions, rotations about an axis;
 //! * [`digest`] — SHA-256 as hex;
 //! * [`csv`] — RFC 4180 CSV text for the tables' exports.
+//!
+//! Imports: nothing from the crate
 
 pub mod csv;
 pub mod digest;

@@ -24,8 +24,11 @@ pub struct CellGrid {
 /// Bounds of one cell, as reported in results (`hi = None` for a tail cell).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct CellBounds {
+    /// [lo, hi) of r2 = |x2|, in the scene's length unit (that of L2 and L3); hi = None: the tail.
     pub r2: [Option<f64>; 2],
+    /// [lo, hi) of r3 = |x3|, likewise.
     pub r3: [Option<f64>; 2],
+    /// [lo, hi) of φ, the angle between x2 and x3, in radians within [0, π] (always bounded).
     pub phi: [Option<f64>; 2],
 }
 
@@ -52,14 +55,17 @@ impl CellGrid {
         false
     }
 
+    /// The edges of the r2 = |x2| axis: 0 first, strictly increasing; the last opens the tail cell.
     pub fn r2_edges(&self) -> &[f64] {
         &self.r2_edges
     }
 
+    /// The edges of the r3 = |x3| axis, like [`CellGrid::r2_edges`].
     pub fn r3_edges(&self) -> &[f64] {
         &self.r3_edges
     }
 
+    /// The number of equal bins of φ over [0, π] (at least 1).
     pub fn phi_bins(&self) -> u32 {
         self.phi_bins
     }

@@ -32,8 +32,9 @@ pub enum Proposals {
 /// that says so.
 pub const MOMENTS_FORMAT_VERSION: u32 = 3;
 
-/// Fewest and most cross-fitting folds K.
+/// Fewest cross-fitting folds K.
 pub const MIN_FOLDS: usize = 2;
+/// Most cross-fitting folds K (a fine grid may allow fewer: `engines::layout::folds_allowed`).
 pub const MAX_FOLDS: usize = 20;
 /// The default K: the weights of each cross-fit are fitted on 9/10 of the iterations (closer to the
 /// all-data fit the result recommends than 2-fold's half), and the jackknife over 10 fold fits has
@@ -80,6 +81,7 @@ impl Engine {
 /// A validated configuration, shared read-only by every iteration.
 #[derive(Debug, Clone)]
 pub struct SimConfig {
+    /// The scene: distances, lobe and illumination.
     pub scene: Scene,
     /// Merge radius R.
     pub merge_radius: f64,
@@ -87,7 +89,9 @@ pub struct SimConfig {
     pub light_paths: u64,
     /// N_B.
     pub camera_paths: u64,
+    /// The grid of cells α the weights are tabulated over.
     pub cells: CellGrid,
+    /// How an iteration's light paths are drawn.
     pub engine: Engine,
     /// K: iteration s is summed into fold s mod K (cross-fitting, `solve::noise`).
     pub folds: usize,

@@ -147,6 +147,7 @@ pub struct VertexDensities {
 }
 
 impl JoinGeometry {
+    /// The geometry of the join path through `x2` on plane 2 and `x3` on plane 3 in `scene`.
     pub fn new(scene: &Scene, x2: [f64; 2], x3: [f64; 2]) -> Self {
         let u = Vector3::new(x2[0], x2[1], scene.l2);
         let v = Vector3::new(x3[0] - x2[0], x3[1] - x2[1], scene.l3);

@@ -11,7 +11,7 @@
 
 use std::f64::consts::PI;
 
-use super::params::IlluminationSpec;
+use super::params::{IlluminationSpec, MIN_RING_FLUX, SpecError, check};
 use crate::sim::math::fastmath::sincos_turn;
 use crate::sim::math::rng::{StreamRng, uniform, unit52};
 use crate::sim::math::sampling::unit_disc_point;
@@ -19,7 +19,9 @@ use crate::sim::math::sampling::unit_disc_point;
 /// One annulus of constant level.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ring {
+    /// Inner radius on plane 3 (the previous ring's outer radius; 0 for the first).
     pub r_in: f64,
+    /// Outer radius on plane 3.
     pub r_out: f64,
     /// Unnormalised level (as in the spec).
     pub level: f64,
@@ -142,7 +144,7 @@ impl Illumination {
     }
 
     /// Draws a start point x3l with density I/Φ: a ring by its share of the flux, then a point
-    /// uniform in its area (see [`RingSampler`]).
+    /// uniform in its area (see `RingSampler`).
     pub fn sample(&self, rng: &mut StreamRng) -> [f64; 2] {
         let k = self.choose_ring(rng);
         self.samplers[k].sample(rng)
@@ -197,6 +199,24 @@ impl Illumination {
             }
         }
     }
+}
+
+/// Checks that every emitting ring of the profile `spec` describes emits at least
+/// [`MIN_RING_FLUX`]; its ranges come first ([`validate_scene`](super::params::validate_scene)).
+pub fn validate_flux(spec: &IlluminationSpec) -> Result<(), SpecError> {
+    let f = "scene.illumination";
+    let profile = Illumination::from_spec(spec);
+    for ring in profile.rings() {
+        let flux = ring.level * (ring.r_out * ring.r_out - ring.r_in * ring.r_in);
+        check(flux >= MIN_RING_FLUX, f, || {
+            format!(
+                "the ring [{}, {}) with level {} emits a flux of {flux:e}; every emitting ring needs at least \
+                 {MIN_RING_FLUX:e} (level × (r_out² − r_in²))",
+                ring.r_in, ring.r_out, ring.level
+            )
+        })?;
+    }
+    Ok(())
 }
 
 /// Points at squared radius `radius2(i)` and the azimuth in the high half of `azimuth_bits[i]`.

@@ -11,6 +11,8 @@
 //!   correlation-aware heuristic derived for the iteration's N_F × N_B pairs;
 //! * [`densities`] — where light vertices fall, in closed form (light start and plane-2 arrival);
 //! * [`config`] — everything that changes the law of an iteration, and its fingerprint.
+//!
+//! Imports: crate::sim::math
 
 pub mod cells;
 pub mod config;

@@ -1,6 +1,8 @@
 //! The plain parameter types of the model — the scene, the light's profile, the cell grid — as the
 //! JSON documents spell them, and their validation: every range a scene value must lie in is
-//! checked here, once, naming the field and the range ([`SpecError`]).
+//! checked here, once, naming the field and the range ([`SpecError`]) — but for the least flux of
+//! the light's rings ([`MIN_RING_FLUX`]), which needs the profile built and so is checked by
+//! [`super::illumination::validate_flux`] (this file imports nothing from `illumination`).
 
 use serde::{Deserialize, Deserializer, Serialize};
 use serde_json::Value;
@@ -19,6 +21,7 @@ pub struct SpecError {
 }
 
 impl SpecError {
+    /// An error about the field at JSON path `field`.
     pub fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self { field: field.into(), message: message.into() }
     }
@@ -35,6 +38,7 @@ pub struct SceneSpec {
     pub l3: f64,
     /// Width β of the plane-2 transmission lobe, in degrees.
     pub beta_deg: f64,
+    /// The radial profile I(r) of the light on plane 3.
     pub illumination: IlluminationSpec,
 }
 
@@ -44,11 +48,24 @@ pub struct SceneSpec {
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum IlluminationSpec {
     /// The paper's profile: `contrast` for r ≤ a, 1 for a < r < r_ls, 0 beyond.
-    Spot { a: f64, r_ls: f64, contrast: f64 },
+    Spot {
+        /// Radius of the bright spot.
+        a: f64,
+        /// Radius of the whole light source.
+        r_ls: f64,
+        /// Level of the spot relative to the rest of the source.
+        contrast: f64,
+    },
     /// 1 for r < r_ls, 0 beyond.
-    Uniform { r_ls: f64 },
+    Uniform {
+        /// Radius of the light source.
+        r_ls: f64,
+    },
     /// Piecewise constant: `level` up to `outer_radius`, ring after ring, 0 beyond the last.
-    Rings { rings: Vec<RingSpec> },
+    Rings {
+        /// The rings, innermost first, with increasing outer radii.
+        rings: Vec<RingSpec>,
+    },
 }
 
 /// One ring of a `rings` profile.
@@ -56,8 +73,10 @@ pub enum IlluminationSpec {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct RingSpec {
+    /// Outer radius of the ring (its inner radius is the previous ring's outer radius, or 0).
     #[cfg_attr(feature = "server", schema(minimum = 1e-9, maximum = 1e6))]
     pub outer_radius: f64,
+    /// Unnormalised level of the ring (the model normalises the profile to total flux 1).
     #[cfg_attr(feature = "server", schema(minimum = 0.0, maximum = 1e12))]
     pub level: f64,
 }
@@ -95,6 +114,7 @@ pub fn optional_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u64>, D:
     count(d).map(Some)
 }
 
+/// [`count`] for a field that must fit in a `u32`.
 pub fn count_u32<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
     use serde::de::Error;
     let n = count(d)?;
@@ -144,7 +164,9 @@ pub(crate) fn in_closed(x: f64, lo: f64, hi: f64) -> bool {
     x.is_finite() && x >= lo && x <= hi
 }
 
-/// Checks the scene: plane distances, lobe width and light profile.
+/// Checks the scene: plane distances, lobe width and the light profile's ranges. The flux of the
+/// profile's rings needs the profile built: [`validate_flux`](super::illumination::validate_flux)
+/// checks it next.
 pub fn validate_scene(s: &SceneSpec) -> Result<(), SpecError> {
     for (name, v) in [("scene.l2", s.l2), ("scene.l3", s.l3)] {
         check(in_closed(v, MIN_LENGTH, MAX_LENGTH), name, || {
@@ -154,29 +176,12 @@ pub fn validate_scene(s: &SceneSpec) -> Result<(), SpecError> {
     check(in_closed(s.beta_deg, MIN_BETA_DEG, 45.0), "scene.beta_deg", || {
         format!("must be in [{MIN_BETA_DEG:e}, 45] degrees, got {}", s.beta_deg)
     })?;
-    validate_illumination(&s.illumination)
+    validate_profile(&s.illumination)
 }
 
 /// Smallest flux level·(r_out² − r_in²) of an emitting ring: far below any real profile, far above
 /// the subnormals, whose reciprocals overflow (a subnormal flux once made the reference NaN).
 pub const MIN_RING_FLUX: f64 = 1e-200;
-
-fn validate_illumination(ill: &IlluminationSpec) -> Result<(), SpecError> {
-    let f = "scene.illumination";
-    validate_profile(ill)?;
-    let profile = super::illumination::Illumination::from_spec(ill);
-    for ring in profile.rings() {
-        let flux = ring.level * (ring.r_out * ring.r_out - ring.r_in * ring.r_in);
-        check(flux >= MIN_RING_FLUX, f, || {
-            format!(
-                "the ring [{}, {}) with level {} emits a flux of {flux:e}; every emitting ring needs at least \
-                 {MIN_RING_FLUX:e} (level × (r_out² − r_in²))",
-                ring.r_in, ring.r_out, ring.level
-            )
-        })?;
-    }
-    Ok(())
-}
 
 fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
     let f = "scene.illumination";
@@ -243,6 +248,8 @@ fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
     Ok(())
 }
 
+/// Checks the cell grid (edges from 0, strictly increasing and bounded; φ bins in 1–360) and
+/// builds it.
 pub fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
     validate_edges(&cells.r2_edges, "cells.r2_edges")?;
     validate_edges(&cells.r3_edges, "cells.r3_edges")?;

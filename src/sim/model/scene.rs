@@ -37,6 +37,7 @@ pub struct Lobe {
 }
 
 impl Lobe {
+    /// The lobe of width `beta` (radians, > 0).
     pub fn new(beta: f64) -> Self {
         Self { beta, norm: 1.0 / (2.0 * PI * beta * beta), inv_two_beta2: 1.0 / (2.0 * beta * beta) }
     }
@@ -112,7 +113,9 @@ pub struct Scene {
     pub l2: f64,
     /// Distance plane 2 → plane 3.
     pub l3: f64,
+    /// The plane-2 lobe that deflects light paths.
     pub lobe: Lobe,
+    /// The emission on plane 3: a piecewise-constant radial profile I(r), ready to sample.
     pub illumination: Illumination,
 }
 

@@ -27,9 +27,13 @@ use crate::sim::stats::moments::Moments;
 /// Seconds per light path, per camera path and pixel, and per iteration, and the pixel count P.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Costs {
+    /// t_F: seconds per light path (one set serves every pixel).
     pub light_path: f64,
+    /// t_B: seconds per camera path and pixel.
     pub camera_path: f64,
+    /// t_0: fixed seconds per iteration.
     pub iteration: f64,
+    /// P: the pixels of the image the renderer computes.
     pub pixels: f64,
 }
 
@@ -43,7 +47,9 @@ impl Costs {
 /// One strategy at one budget.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BudgetPoint {
+    /// The strategy whose noise was predicted.
     pub strategy: Strategy,
+    /// (N_F, N_B) of the point.
     pub budget: Budget,
     /// Predicted RMS% of one iteration.
     pub rms_percent: f64,
@@ -51,6 +57,7 @@ pub struct BudgetPoint {
     pub rms_percent_stderr: Option<f64>,
     /// Whether the strategy keeps the solver's fixed weights (only those are ranked).
     pub respects_fixed: bool,
+    /// t = t_F·N_F + t_B·N_B·P + t_0 at this budget ([`Costs::iteration_seconds`]).
     pub seconds_per_iteration: f64,
     /// Seconds to the target RMS: max(1, (rms/target)²) iterations.
     pub seconds_to_target: f64,
@@ -59,6 +66,7 @@ pub struct BudgetPoint {
 /// A strategy's fastest budget in the searched range.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BestBudget {
+    /// The point itself (its fields appear at the top level of the JSON).
     #[serde(flatten)]
     pub point: BudgetPoint,
     /// How many times sooner than the paper's switch at (10⁷, 100) it reaches the target.
@@ -76,7 +84,9 @@ pub struct BestBudget {
 /// budget while the headline's best lies on its edge, up to [`MAX_DECADES`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SearchRange {
+    /// The smallest and largest N_F of the grid.
     pub light_paths: [u64; 2],
+    /// The smallest and largest N_B of the grid.
     pub camera_paths: [u64; 2],
     /// Whether the range reached the limit of what the run can predict.
     pub at_limit: bool,
@@ -85,7 +95,9 @@ pub struct SearchRange {
 /// The best budget of every strategy, the paper's configuration, and every point evaluated.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BudgetPlan {
+    /// The target RMS% the times are measured to.
     pub target_rms_percent: f64,
+    /// The costs the times are computed with.
     pub costs: Costs,
     /// What the run recommends at its own budget.
     pub recommended: Option<Strategy>,
@@ -95,6 +107,7 @@ pub struct BudgetPlan {
     pub headline: Option<Strategy>,
     /// Why the headline is not the recommended strategy, if so.
     pub headline_note: Option<String>,
+    /// The budgets searched, after widening.
     pub search: SearchRange,
     /// Per strategy (that could be predicted), its fastest point: those that keep the fixed
     /// weights first (ranked by time), then the others (shown, not ranked).
@@ -125,6 +138,7 @@ pub struct FixedTime {
 /// One strategy's best budget at one ratio N_F/N_B, after the fixed time.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FixedTimePoint {
+    /// The strategy of the curve this point is on.
     pub strategy: Strategy,
     /// N_F/N_B of the ratio's group on the grid (the geometric mean of its budgets' ratios, which
     /// differ only by the grid's rounding to integers).

@@ -29,7 +29,7 @@ use super::rms_error::{FoldSums, RmsReference, references, rms_stderr};
 pub use super::rms_error::{jackknife_se, rms_percent};
 use super::solver::{Fit, SolveError, fit};
 use super::ystats::YStats;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
@@ -42,6 +42,7 @@ pub const UNSTABLE_STDERR: f64 = 0.25;
 /// The moments as the cross-fits need them: all iterations, each fold, and each fold's complement.
 #[derive(Debug, Clone)]
 pub struct CrossFitting {
+    /// The sums of all iterations (the all-data fit's).
     pub all: YStats,
     /// Fold f's sums (the test set of fit f).
     pub test: Vec<YStats>,
@@ -79,6 +80,7 @@ impl CrossFitting {
 /// One fitted strategy cross-fitted at one λ.
 #[derive(Debug, Clone)]
 pub struct CrossFit {
+    /// The smoothness penalty λ every fold was fitted at.
     pub lambda: f64,
     /// The heuristics stacked on the table (empty: the table alone).
     pub family: Vec<PathStrategy>,
@@ -188,16 +190,20 @@ pub fn cross_fit(
 /// One λ of a selection: its cross-fit, the all-data fit, and how it scored.
 #[derive(Debug, Clone)]
 pub struct Scored {
+    /// The λ's cross-fit: the fold fits and their scored sums.
     pub cross_fit: CrossFit,
     /// The fit on all iterations at this λ (the weights a result recommends).
     pub all: Fit,
+    /// The cross-fitted RMS% (finite).
     pub rms_percent: f64,
+    /// Its standard error ([`super::rms_error`]), when one can be given.
     pub rms_stderr: Option<f64>,
     /// Cells whose data-fitted weights change from fold to fold by more than [`UNSTABLE_STDERR`].
     pub unstable_cells: Vec<usize>,
 }
 
 impl Scored {
+    /// Whether no cell is unstable: only a stable fit may be recommended.
     pub fn is_stable(&self) -> bool {
         self.unstable_cells.is_empty()
     }
@@ -224,7 +230,9 @@ pub fn score(
 /// The λ a selection chose, and every λ it scored (in grid order).
 #[derive(Debug, Clone)]
 pub struct Selection {
+    /// The chosen λ's row (check [`Scored::is_stable`] before recommending it).
     pub chosen: Scored,
+    /// Every λ that could be scored, in grid order.
     pub scored: Vec<Scored>,
 }
 
@@ -289,5 +297,4 @@ pub fn nested_selection(
 }
 
 #[cfg(test)]
-#[path = "crossfit_tests.rs"]
 mod tests;

@@ -18,7 +18,7 @@ use super::recommend::paired_ratio;
 use super::rms_error::{references, rms_stderr};
 use super::row::{NoiseRow, path_fold_sums, path_rows};
 use super::strategy::Strategy;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::{CellGrid, MAX_CELLS};
 use crate::sim::stats::bounded::bounded;
 use crate::sim::stats::coverage::Coverage;
@@ -33,11 +33,17 @@ const EDGE_TOLERANCE: f64 = 1e-12;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct GivenCell {
+    /// [lo, hi) of r2 = |x2| (hi null: the tail cell); must match the run's cell.
     pub r2: [Option<f64>; 2],
+    /// [lo, hi) of r3 = |x3|, likewise.
     pub r3: [Option<f64>; 2],
+    /// [lo, hi) of φ in radians, likewise.
     pub phi: [Option<f64>; 2],
+    /// The weight of plane-1 merges (the pixel) in this cell.
     pub w0: f64,
+    /// The weight of plane-2 merges.
     pub w1: f64,
+    /// The weight of plane-3 merges.
     pub w2: f64,
 }
 
@@ -45,7 +51,9 @@ pub struct GivenCell {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct GivenHeuristic {
+    /// The stacked heuristic (a stackable per-path strategy).
     pub strategy: Strategy,
+    /// Its coefficient β in w = table + Σ β·w_h.
     pub beta: f64,
 }
 
@@ -74,9 +82,13 @@ pub struct GivenWeights {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct GivenRecommendation {
+    /// The recommended strategy: a per-path one is evaluated as it is, a fitted one through the
+    /// document's `weights`.
     pub strategy: Strategy,
+    /// The smoothness penalty the weights were fitted at (read, not needed to evaluate them).
     #[serde(default)]
     pub lambda: Option<f64>,
+    /// The heuristics stacked on the table, with their β.
     #[serde(default, deserialize_with = "bounded::<_, _, { PathStrategy::COUNT }>")]
     pub heuristics: Vec<GivenHeuristic>,
 }
@@ -86,7 +98,9 @@ pub struct GivenRecommendation {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{field}: {message}")]
 pub struct EvaluateError {
+    /// The JSON path of the offending part (e.g. `weights[3]`, `recommended.heuristics`).
     pub field: String,
+    /// What is wrong with it.
     pub message: String,
 }
 
@@ -100,6 +114,7 @@ fn invalid(field: impl Into<String>, message: impl Into<String>) -> EvaluateErro
 pub struct Evaluation {
     /// Iterations of the run scored on.
     pub iterations: u64,
+    /// The run's cross-fitting folds K (the jackknife's groups).
     pub folds: usize,
     /// The strategy the weights came from (`recommended.strategy`), if named.
     pub source: Option<Strategy>,
@@ -114,6 +129,7 @@ pub struct Evaluation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Versus {
+    /// The per-path strategy's own figures on the run.
     pub row: NoiseRow,
     /// Var(strategy)/Var(evaluated weights) on the same iterations (> 1: the weights are better).
     pub variance_ratio: Option<f64>,

@@ -18,14 +18,19 @@ use crate::sim::model::cells::CellGrid;
 /// stability, for the recommendation and the warnings.
 #[derive(Debug, Clone)]
 pub struct Fitted {
+    /// The fitted row's strategy (`optimal_holdout`, `optimal_cv`, `optimal_stacked`, a corrected
+    /// heuristic).
     pub strategy: Strategy,
+    /// Its cross-fit at the chosen (or the spec's) λ and the all-data fit.
     pub scored: Scored,
 }
 
 /// The fitted rows in table order, and the fits behind those that could be computed.
 #[derive(Debug, Clone)]
 pub struct FittedRows {
+    /// One row per fitted strategy, in table order; a fit that failed is a row with its error.
     pub rows: Vec<NoiseRow>,
+    /// The fits of the rows that could be computed.
     pub fitted: Vec<Fitted>,
 }
 

@@ -17,6 +17,8 @@
 //!   noise components;
 //! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy;
 //! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run.
+//!
+//! Imports: crate::sim::engines, crate::sim::math, crate::sim::model, crate::sim::stats
 
 pub mod budget;
 pub mod crossfit;

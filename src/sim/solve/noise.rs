@@ -24,13 +24,14 @@ pub use super::row::{HeuristicWeight, NoiseRow, WeightErrors, path_rows, respect
 pub(crate) use super::row::{central_3_4, power_sums};
 use super::solver::{Fit, SolveError, fit, stack_family};
 use super::strategy::Strategy;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// The noise table, the fits behind it and the recommendation.
 #[derive(Debug, Clone)]
 pub struct NoiseTable {
+    /// The table's rows, in the order of the module doc.
     pub rows: Vec<NoiseRow>,
     /// The in-sample fit at the spec's λ (the paper's procedure; `?lambda=` weights tables).
     pub optimal: Result<Fit, SolveError>,
@@ -52,6 +53,7 @@ pub struct NoiseTable {
     /// All folds added together, and the cross-fitting sets: kept for the report's warnings, merge
     /// rates and `?lambda=` weights, so that nothing pools the folds twice.
     pub pooled: FoldMoments,
+    /// The sums of all iterations, of each fold and of each fold's complement.
     pub cross_fitting: CrossFitting,
 }
 
@@ -138,7 +140,9 @@ pub fn weights_at(
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct MergeRate {
+    /// Mean merge events per iteration.
     pub mean: f64,
+    /// Its standard error (the per-iteration counts' standard deviation over √iterations).
     pub stderr: f64,
 }
 

@@ -30,10 +30,13 @@ pub struct SolverOptions {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct FixedWeights {
+    /// The weight of plane-1 merges (the pixel) in every cell, if fixed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w0: Option<f64>,
+    /// The weight of plane-2 merges in every cell, if fixed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w1: Option<f64>,
+    /// The weight of plane-3 merges in every cell, if fixed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub w2: Option<f64>,
 }

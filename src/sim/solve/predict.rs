@@ -28,7 +28,7 @@ use super::solver::stack_family;
 use super::strategy::Strategy;
 use super::ystats::{YStats, unpack};
 use crate::sim::engines::layout::Layout;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::components::{CAMERA, CROSS, LIGHT};
 use crate::sim::stats::moments::{FoldMoments, Moments};
@@ -37,17 +37,21 @@ use crate::sim::stats::moments::{FoldMoments, Moments};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Budget {
+    /// N_F: light paths per iteration.
     pub light_paths: u64,
+    /// N_B: camera paths per iteration.
     pub camera_paths: u64,
 }
 
 /// Why no prediction can be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PredictError {
+    /// The moments were run without `noise_components`: nothing to predict from.
     #[error(
         "these moments keep no noise components: run the job with \"noise_components\": true (even light_paths and camera_paths) to predict other budgets"
     )]
     NoComponents,
+    /// Fewer than two iterations: the components' variances cannot be estimated.
     #[error("at least 2 iterations are needed, got {0}")]
     TooFewIterations(u64),
 }
@@ -62,6 +66,7 @@ pub struct Prediction {
     pub measured: Budget,
     /// Iterations of the run (the standard errors of L are for as many at the new budget).
     pub iterations: u64,
+    /// The run's cross-fitting folds K.
     pub folds: usize,
     /// Rows as in a job's noise table: the per-path strategies, then `optimal_cv` and
     /// `optimal_stacked` re-fitted for the new budget (cross-fitted, with the jackknife SE of

@@ -38,11 +38,12 @@ use super::fitted::Fitted;
 use super::row::{NoiseRow, WeightErrors, sample_variance};
 use super::solver::Fit;
 use super::strategy::Strategy;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 
 /// The recommended row.
 #[derive(Debug, Clone)]
 pub struct Recommended {
+    /// The recommended row's strategy.
     pub strategy: Strategy,
     /// The fitted row's fit at its λ (None when a per-path strategy is recommended).
     pub fitted: Option<Scored>,
@@ -72,6 +73,7 @@ impl Recommended {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Gain {
+    /// The ratio Var(versus)/Var(strategy) on the same iterations (> 1: `strategy` is better).
     pub value: f64,
     /// Paired jackknife over the folds (module docs); null with fewer than two folds holding
     /// iterations.
@@ -85,6 +87,7 @@ pub struct Gain {
 /// The recommendation and its gains.
 #[derive(Debug, Clone)]
 pub struct Choice {
+    /// The recommended row, or why no row can be recommended.
     pub recommended: Result<Recommended, String>,
     /// Against the best other per-path strategy that keeps the fixed weights.
     pub gain: Option<Gain>,

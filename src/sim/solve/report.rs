@@ -18,7 +18,7 @@ use super::solver::stack_family;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
 use super::warnings::{Warning, warnings};
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::stats::coverage::Coverage;
@@ -29,20 +29,28 @@ use crate::sim::stats::moments::Moments;
 pub struct WeightRow {
     /// [lo, hi] on r2; hi is null for the tail cell.
     pub r2: [Option<f64>; 2],
+    /// [lo, hi] on r3; hi is null for the tail cell.
     pub r3: [Option<f64>; 2],
     /// [lo, hi] on φ, radians in [0, π].
     pub phi: [Option<f64>; 2],
+    /// The weight of plane-1 merges (the pixel) in this cell.
     pub w0: f64,
+    /// The weight of plane-2 merges.
     pub w1: f64,
+    /// The weight of plane-3 merges; the three sum to 1 − Σβ of the stacked heuristics (1 for a
+    /// table alone).
     pub w2: f64,
     /// Jackknife standard errors over the K fold fits, for cells fitted to their own samples (0
     /// for a fixed weight); null for a cell the penalty sets (`smoothed`), an empty one, or when
     /// fewer than two folds hold iterations or a fold fit failed.
     pub w0_stderr: Option<f64>,
+    /// The standard error of `w1`, as `w0_stderr`.
     pub w1_stderr: Option<f64>,
+    /// The standard error of `w2`, as `w0_stderr`.
     pub w2_stderr: Option<f64>,
     /// Merge events in the cell (all planes) over all iterations.
     pub samples: u64,
+    /// How the cell's weights were set (fitted, fixed, smoothed, …).
     pub status: CellStatus,
 }
 
@@ -50,8 +58,11 @@ pub struct WeightRow {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct MergesPerIteration {
+    /// Plane-1 merges (at the pixel; counted once per light path).
     pub plane1: MergeRate,
+    /// Plane-2 merges.
     pub plane2: MergeRate,
+    /// Plane-3 merges.
     pub plane3: MergeRate,
 }
 
@@ -61,6 +72,7 @@ pub struct MergesPerIteration {
 pub struct WeightsFit {
     /// The recommended fitted row; `optimal` for a table asked for at a given λ.
     pub strategy: Strategy,
+    /// The gradient penalty λ of the fit.
     pub lambda: f64,
     /// Always true: a weights table is fitted on all iterations (the figures that say how good
     /// the weights are, in the noise table, are the cross-fitted ones).
@@ -71,6 +83,7 @@ pub struct WeightsFit {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RecommendedWeights {
+    /// The recommended row's strategy.
     pub strategy: Strategy,
     /// The λ chosen by cross-validation (null when a per-path strategy is recommended).
     pub lambda: Option<f64>,
@@ -86,6 +99,7 @@ pub struct RecommendedWeights {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct RunReport {
+    /// Iterations the moments hold.
     pub iterations: u64,
     /// The cross-fitting folds K of the moments.
     pub folds: usize,
@@ -93,6 +107,8 @@ pub struct RunReport {
     /// quadrature did not converge within its evaluation budget (extreme geometry). Each per-path
     /// row's `expected_luminance` is its expectation at the job's R, which its `z` compares with.
     pub reference_luminance: Option<f64>,
+    /// Every strategy's L and RMS% with their standard errors: the per-path strategies, then the
+    /// fitted rows (the paper's Table 1, and more).
     pub noise_table: Vec<NoiseRow>,
     /// The recommended row (the honest row with the lowest RMS that keeps the fixed weights, a
     /// fitted one only if it beats the best per-path strategy beyond 1.645 standard errors, one-sided 95%); null
@@ -102,13 +118,14 @@ pub struct RunReport {
     /// or the in-sample fit at the λ asked for; empty when a per-path strategy is recommended or
     /// the fit failed (see `solve_error`).
     pub weights: Vec<WeightRow>,
+    /// Which fit `weights` shows; null when it is empty.
     pub weights_fit: Option<WeightsFit>,
     /// Var(best other per-path strategy keeping the fixed weights) / Var(recommended row), with the
     /// paired jackknife SE.
     pub gain: Option<Gain>,
     /// The recommendation's guard: Var(best per-path row keeping the fixed weights)/Var(best stable
     /// fitted row) on the same iterations, with the paired jackknife SE; the fitted row
-    /// (`strategy`) is recommended only if the ratio exceeds 1 by more than its SE, else the
+    /// (`strategy`) is recommended only if the ratio exceeds 1 by more than 1.645 SE, else the
     /// per-path row (`versus`).
     #[serde(default)]
     pub guard: Option<Gain>,
@@ -117,8 +134,11 @@ pub struct RunReport {
     /// Why the weights could not be fitted (every fitted row's `error` says so too), even when a
     /// per-path strategy is recommended in their place; null when the fit succeeded.
     pub solve_error: Option<String>,
+    /// Mean merge events per iteration at each plane, with standard errors.
     pub merges_per_iteration: MergesPerIteration,
+    /// The configuration fingerprint of the moments (hex SHA-256).
     pub fingerprint: String,
+    /// The (seed, iteration range) pairs the moments hold.
     pub coverage: Coverage,
 }
 
@@ -155,8 +175,12 @@ pub fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> V
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct ExpectedLuminance {
+    /// The per-path strategy.
     pub strategy: Strategy,
+    /// The strategy's expected luminance at R; null when the quadrature could not give it (see
+    /// `error`).
     pub luminance: Option<f64>,
+    /// Why there is no expected luminance; null when there is one.
     pub error: Option<String>,
 }
 
@@ -165,7 +189,9 @@ pub struct ExpectedLuminance {
 /// sample on all iterations at `lambda`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WeightsQuery {
+    /// The gradient penalty λ to fit at.
     pub lambda: f64,
+    /// The fitted family whose table to show.
     pub strategy: Strategy,
 }
 

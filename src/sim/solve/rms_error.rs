@@ -30,9 +30,13 @@ pub type FoldSums = Vec<(usize, [f64; 3])>;
 /// the delta-method SE of its RMS.
 #[derive(Debug, Clone)]
 pub struct RmsReference {
+    /// The per-path strategy.
     pub strategy: Strategy,
+    /// Its (M_f, Σ C, Σ C²) per used fold.
     pub folds: FoldSums,
+    /// Its RMS% over all iterations.
     pub rms_percent: f64,
+    /// The delta-method standard error of that RMS%.
     pub rms_percent_stderr: f64,
 }
 

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::options::FixedWeights;
 use super::strategy::Strategy;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// A stacked heuristic's coefficient in a fitted row: per-path weights are the table's plus
@@ -33,9 +33,14 @@ pub struct HeuristicWeight {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct LambdaScore {
+    /// The gradient penalty λ.
     pub lambda: f64,
+    /// The cross-fitted RMS% of the fit at λ.
     pub rms_percent: f64,
+    /// Its standard error; null when none can be given.
     pub rms_percent_stderr: Option<f64>,
+    /// Whether no data-fitted table weight changes from fold to fold by more than 0.25
+    /// (jackknife SE): an unstable λ is never chosen while a stable one exists.
     pub stable: bool,
 }
 
@@ -44,9 +49,13 @@ pub struct LambdaScore {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct NoiseRow {
+    /// The row's strategy.
     pub strategy: Strategy,
+    /// L: the mean of the strategy's per-iteration estimates C_s (cross-fitted for fitted rows).
     pub luminance: Option<f64>,
+    /// The standard error of L: std(C_s)/√M.
     pub luminance_stderr: Option<f64>,
+    /// The relative noise of one iteration: 100·std(C_s)/|L|.
     pub rms_percent: Option<f64>,
     /// Per-path rows: the delta method on the power sums; fitted rows: the jackknife over the
     /// cross-fitting folds (null for the in-sample `optimal`, whose RMS is optimistic).
@@ -97,6 +106,7 @@ pub struct NoiseRow {
     /// Why the row has no expected luminance.
     #[serde(default)]
     pub expected_error: Option<String>,
+    /// Why the row's figures could not be computed (its values are then null).
     pub error: Option<String>,
 }
 

@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 use super::options::FixedWeights;
 use super::ystats::YStats;
 use crate::sim::engines::layout::Layout;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 
 /// How a cell's weights were determined.
@@ -83,12 +83,14 @@ pub struct CellWeights {
     pub w: [f64; 3],
     /// Merge events in the cell, all planes, over the fitted iterations.
     pub samples: u64,
+    /// How the weights were set.
     pub status: CellStatus,
 }
 
 /// A solution of the weight problem.
 #[derive(Debug, Clone)]
 pub struct Fit {
+    /// The table: each cell α's weights, in cell order.
     pub cells: Vec<CellWeights>,
     /// β_h of each stacked heuristic (empty for a plain table).
     pub heuristics: Vec<(PathStrategy, f64)>,
@@ -123,14 +125,27 @@ impl Fit {
 /// Why no optimal weights could be computed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
+    /// Fewer than two iterations: no variance to minimise.
     #[error("at least 2 iterations are needed to estimate a variance, got {0}")]
     TooFewIterations(u64),
+    /// Every contribution is zero.
     #[error("no merge events: every contribution is zero, there is nothing to weight")]
     NoSignal,
+    /// The normal equations are rank-deficient: the data do not determine the listed cells'
+    /// weights (`rank` of `dimension` free weights).
     #[error(
         "the weight system is singular (rank {rank} of {dimension}): the data do not determine the weights of cells {cells:?}; add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
     )]
-    Singular { dimension: usize, rank: usize, cells: Vec<usize> },
+    Singular {
+        /// Free weights in the system.
+        dimension: usize,
+        /// The rank the data give it.
+        rank: usize,
+        /// The cells α whose weights are undetermined.
+        cells: Vec<usize>,
+    },
+    /// A heuristic that cannot be stacked: its weights break the fixed weights, or the moments'
+    /// format has no column for it.
     #[error(
         "{} cannot be stacked: its weights break the solver's fixed weights, or these moments (an older format) do not keep its column",
         .0.name()
@@ -172,7 +187,7 @@ fn cell_parameters(fixed: &FixedWeights) -> ([f64; 2], Vec<[f64; 2]>) {
 /// Relative pivot below which the Jacobi-scaled system counts as singular.
 const PIVOT_TOLERANCE: f64 = 1e-11;
 
-/// Ridge on each β, relative to its own curvature (module docs): far above [`PIVOT_TOLERANCE`],
+/// Ridge on each β, relative to its own curvature (module docs): far above `PIVOT_TOLERANCE`,
 /// far below anything that moves the variance (it shrinks a determined β by ~10⁻⁷ of itself).
 pub const BETA_RIDGE: f64 = 1e-7;
 
@@ -449,5 +464,4 @@ fn fill_empty_cells(cells: &mut [CellWeights], grid: &CellGrid) {
 }
 
 #[cfg(test)]
-#[path = "solver_tests.rs"]
 mod tests;

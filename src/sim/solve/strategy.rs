@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 
 /// A row of the noise table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -7,12 +7,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::UNSTABLE_STDERR;
-use super::recommend::GUARD_SE;
 use super::noise::{NoiseRow, NoiseTable, central_3_4, power_sums};
+use super::recommend::GUARD_SE;
 use super::solver::{CellStatus, Fit, MIN_CELL_EVENTS};
 use super::strategy::Strategy;
 use super::ystats::YStats;
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// What a warning is about.
@@ -44,7 +44,9 @@ pub enum WarningCode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Warning {
+    /// What kind of problem (stable: scripts match on it).
     pub code: WarningCode,
+    /// The problem in a sentence, with the figures behind it.
     pub message: String,
     /// The noise-table row concerned, if one.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -40,13 +40,17 @@ use serde::{Deserialize, Serialize};
 
 use super::bounded::bounded;
 use crate::sim::engines::layout::{Layout, MAX_PACKED};
-use crate::sim::engines::tally::{BLOCKS, IterationTally, PathStrategy};
+use crate::sim::engines::strategies::PathStrategy;
+use crate::sim::engines::tally::{BLOCKS, IterationTally};
 use crate::sim::math::exact_sum::ExactSum;
 use crate::sim::model::config::{packed_index, packed_len};
 
-/// The three kinds of block pairs.
+/// The three kinds of block pairs, as indices of [`ComponentSums::matrix`]: blocks sharing a
+/// light half (U_L).
 pub const LIGHT: usize = 0;
+/// Blocks sharing a camera half (U_C).
 pub const CAMERA: usize = 1;
+/// Blocks sharing nothing (U_0).
 pub const CROSS: usize = 2;
 
 /// Σ over a fold's iterations of the symmetrised block products.

@@ -29,6 +29,7 @@ pub struct Coverage(Vec<SeedRanges>);
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct SeedRanges {
+    /// The seed whose random streams drew the iterations.
     pub seed: u64,
     /// Sorted, disjoint, non-adjacent `[start, end)` pairs.
     pub ranges: Vec<[u64; 2]>,
@@ -38,7 +39,9 @@ pub struct SeedRanges {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Overlap {
+    /// The seed both sides hold iterations of.
     pub seed: u64,
+    /// The `[start, end)` iterations both hold.
     pub range: [u64; 2],
 }
 
@@ -51,12 +54,21 @@ impl std::fmt::Display for Overlap {
 /// Why a coverage read from outside is refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum CoverageError {
+    /// The seeds are not in increasing order, or one appears twice.
     #[error("coverage seeds are not sorted and distinct")]
     Seeds,
+    /// A seed's ranges are empty, unsorted, overlapping or adjacent (adjacent ranges are one).
     #[error("coverage ranges of seed {0} are not sorted, non-empty and disjoint")]
     Ranges(u64),
+    /// A range ends past [`MAX_ITERATION_INDEX`].
     #[error("coverage of seed {seed} names iteration {end}, beyond the largest index 2^62")]
-    Index { seed: u64, end: u64 },
+    Index {
+        /// The seed of the range.
+        seed: u64,
+        /// The range's end (exclusive).
+        end: u64,
+    },
+    /// More than [`MAX_RANGES`] ranges in all.
     #[error("coverage holds more than {MAX_RANGES} ranges")]
     TooManyRanges,
 }

@@ -1,14 +1,27 @@
 //! The checks of one fold's sums that a parser cannot make (see `moments`, "Moments read from
-//! outside"): that the sums agree with their counts.
+//! outside"): that the sums agree with their counts; and [`Moments::check_well_formed`], which
+//! runs them on every fold (here, so that `moments.rs` calls nothing of this file).
 
-use super::moments::{FoldMoments, packed_index};
+use super::moments::{FoldMoments, MergeError, Moments, packed_index};
 use crate::sim::engines::layout::Layout;
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
+
+impl Moments {
+    /// Every check for moments read from outside (a file, a peer, a database row): the structure
+    /// and that the sums agree with their counts (see the module documentation of `moments`).
+    pub fn check_well_formed(&self) -> Result<(), MergeError> {
+        self.check_shape()?;
+        for (f, fold) in self.folds.iter().enumerate() {
+            fold.check_consistent(self.layout()).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
+        }
+        Ok(())
+    }
+}
 
 impl FoldMoments {
     /// What a parser cannot check: that the sums agree with their counts. Fails with the first
     /// contradiction found.
-    pub(super) fn check_consistent(&self, layout: Layout) -> Result<(), String> {
+    fn check_consistent(&self, layout: Layout) -> Result<(), String> {
         let (cells, n) = (layout.cells, layout.dimension());
         if let Some(bad) = self.sums().position(|s| !(s.is_finite() && s.value().abs() <= MAX_MAGNITUDE)) {
             return Err(format!("sum #{bad} is not finite or exceeds 2^1000"));

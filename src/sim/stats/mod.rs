@@ -3,6 +3,8 @@
 //! * [`bounded`] — list deserialisation bounded by the largest valid value;
 //! * [`coverage`] — the (seed, iteration range) pairs a moments value holds;
 //! * [`moments`] — the additive sufficient statistics, their checks and merges.
+//!
+//! Imports: crate::sim::engines, crate::sim::math, crate::sim::model
 
 pub mod bounded;
 pub mod components;

@@ -34,7 +34,8 @@ use super::bounded::bounded;
 use super::components::ComponentSums;
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
 use crate::sim::engines::layout::{Layout, MAX_DIMENSION, MAX_PACKED};
-use crate::sim::engines::tally::{IterationTally, PathStrategy};
+use crate::sim::engines::strategies::PathStrategy;
+use crate::sim::engines::tally::IterationTally;
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use crate::sim::model::cells::MAX_CELLS;
 pub use crate::sim::model::config::packed_index;
@@ -238,21 +239,41 @@ pub struct Moments {
 /// Why two moments values cannot be merged (or a document cannot be used).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum MergeError {
+    /// A moments format this build does not read (`expected`: the one it writes).
     #[error(
         "moments format {found} is not supported (this build reads formats 2 and {expected}; format 1, written before K-fold cross-fitting, holds two folds of even and odd iterations that cannot be split into K folds: run the iterations again with this build)"
     )]
-    Format { found: u32, expected: u32 },
+    Format {
+        /// The format of the moments refused.
+        found: u32,
+        /// The format this build writes.
+        expected: u32,
+    },
     /// Moments of two formats: the older lacks sums the newer keeps, so they cannot be added.
     #[error(
         "moments of format {found} cannot be merged with moments of format {expected}: format 2 (written before optimis kept the w0 = 0 heuristics and the stacked optimum's columns) lacks sums that format 3 keeps; merge format-2 documents with each other, or run the iterations again with this build"
     )]
-    FormatMix { found: u32, expected: u32 },
+    FormatMix {
+        /// The format of the moments merged in.
+        found: u32,
+        /// The format of the moments merged into.
+        expected: u32,
+    },
+    /// Moments of another configuration: their fingerprints (or cell or fold counts) differ.
     #[error(
         "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
     )]
-    Fingerprint { found: String, expected: String },
+    Fingerprint {
+        /// The fingerprint of the moments merged in.
+        found: String,
+        /// The fingerprint of the moments merged into.
+        expected: String,
+    },
+    /// Iterations of the same seed on both sides (listed): adding them would count them twice.
     #[error("these iterations are already counted: {}", list(.0))]
     Overlap(Vec<Overlap>),
+    /// The moments contradict themselves or their layout (e.g. array lengths that do not match
+    /// the grid, a negative sum of squares, a fold's count that disagrees with its coverage).
     #[error("malformed moments: {0}")]
     Malformed(String),
     /// A counter would wrap or an exact sum would leave the representable range; nothing changed.
@@ -397,7 +418,7 @@ impl Moments {
 
     /// The cheap structural checks a merge needs: format, shapes, coverage, and coverage counts
     /// that match the folds.
-    fn check_shape(&self) -> Result<(), MergeError> {
+    pub(super) fn check_shape(&self) -> Result<(), MergeError> {
         if !Layout::supports(self.format_version) {
             return Err(MergeError::Format { found: self.format_version, expected: MOMENTS_FORMAT_VERSION });
         }
@@ -437,16 +458,6 @@ impl Moments {
         Ok(())
     }
 
-    /// Every check for moments read from outside (a file, a peer, a database row): the structure
-    /// and that the sums agree with their counts (see the module documentation).
-    pub fn check_well_formed(&self) -> Result<(), MergeError> {
-        self.check_shape()?;
-        for (f, fold) in self.folds.iter().enumerate() {
-            fold.check_consistent(self.layout()).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
-        }
-        Ok(())
-    }
-
     /// Checks that every sum is finite and at most 2¹⁰⁰⁰ in magnitude, so that its canonical form
     /// reads back (merges of documents check their result with this).
     pub fn check_bounded(&self) -> Result<(), MergeError> {
@@ -477,5 +488,4 @@ impl Moments {
 }
 
 #[cfg(test)]
-#[path = "moments_tests.rs"]
 mod tests;

@@ -61,8 +61,10 @@ pub struct Axis {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum SweepMode {
+    /// Every combination of the axes' values, the last axis varying fastest.
     #[default]
     Grid,
+    /// The i-th values of all axes together (the axes have equal lengths).
     Zip,
 }
 
@@ -71,14 +73,17 @@ pub enum SweepMode {
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum AxisSource {
+    /// Each value is a job of its own.
     #[default]
     Run,
+    /// The values are predicted from one run with noise components (budget axes only).
     Prediction,
 }
 
 /// A job the sweep runs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannedRun {
+    /// The run's number in the sweep (its jobs are stored in this order).
     pub index: usize,
     /// The resolved, validated specification.
     pub spec: JobSpec,
@@ -88,6 +93,7 @@ pub struct PlannedRun {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct PlannedPoint {
+    /// The point's number: its place in the expansion of the axes.
     pub index: usize,
     /// The value of every axis, in the axes' order.
     #[cfg_attr(feature = "server", schema(value_type = Vec<Object>))]
@@ -104,8 +110,11 @@ pub struct PlannedPoint {
 /// A validated sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepPlan {
+    /// The sweep document as validated.
     pub spec: SweepSpec,
+    /// The jobs to run, in run order (fewer than the points when values are predicted).
     pub runs: Vec<PlannedRun>,
+    /// The table's points, in expansion order.
     pub points: Vec<PlannedPoint>,
 }
 

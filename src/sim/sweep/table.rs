@@ -23,7 +23,9 @@ use crate::sim::stats::moments::Moments;
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum FigureSource {
+    /// From a run at the point's own budget.
     Measured,
+    /// Predicted from the noise components of a run at another budget.
     Predicted,
 }
 
@@ -31,6 +33,7 @@ pub enum FigureSource {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct PointFigures {
+    /// Whether the figures were measured or predicted.
     pub source: FigureSource,
     /// The point's ray budget.
     pub budget: Budget,
@@ -40,6 +43,7 @@ pub struct PointFigures {
     pub partial: bool,
     /// The honest rows of the noise table (the in-sample `optimal` row left out).
     pub noise_table: Vec<NoiseRow>,
+    /// The recommended row at this point, if one could be recommended.
     pub recommended: Option<RecommendedWeights>,
     /// The recommended weights with their standard errors.
     pub weights: Vec<WeightRow>,
@@ -121,7 +125,9 @@ pub fn point_figures(
 /// of a predicted point beside its prediction.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PointResults {
+    /// The point's figures (the prediction, for a predicted point); None until its run has some.
     pub figures: Option<PointFigures>,
+    /// With `measure_predictions`, a predicted point's direct measurement.
     pub measured: Option<PointFigures>,
 }
 
@@ -145,22 +151,30 @@ impl PointResults {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct SweepRow {
+    /// The point's index in the sweep's expansion.
     pub point: usize,
     /// The swept fields' values at this point.
     #[cfg_attr(feature = "server", schema(value_type = Object))]
     pub values: Map<String, Value>,
+    /// Whether the figures were measured or predicted.
     pub source: FigureSource,
+    /// N_F of the point.
     pub light_paths: u64,
+    /// N_B of the point.
     pub camera_paths: u64,
     /// Iterations behind the figures (fewer than the point's `iterations` while its run is partial).
     pub iterations_done: u64,
+    /// True until the point's run has succeeded with all its iterations.
     pub partial: bool,
+    /// The noise-table row's strategy.
     pub strategy: Strategy,
     /// L in the model's units (docs/model.md).
     pub luminance: Option<f64>,
+    /// The standard error of L.
     pub luminance_stderr: Option<f64>,
     /// RMS of one iteration, percent of L.
     pub rms_percent: Option<f64>,
+    /// The standard error of the RMS%.
     pub rms_percent_stderr: Option<f64>,
     /// Whether the strategy keeps the solver's fixed weights (else it is shown for comparison).
     pub respects_fixed: bool,
@@ -174,6 +188,8 @@ pub struct SweepRow {
 pub struct SweepTable {
     /// The swept fields, in the axes' order.
     pub fields: Vec<String>,
+    /// Per point with figures, one row per noise-table row, in point order (a predicted point
+    /// measured directly: its predicted rows, then its measured ones).
     pub rows: Vec<SweepRow>,
 }
 
@@ -227,7 +243,7 @@ impl SweepTable {
         Self { fields, rows }
     }
 
-    /// RFC 4180 CSV: `point`, one column per swept field (named by its path), then [`COLUMNS`].
+    /// RFC 4180 CSV: `point`, one column per swept field (named by its path), then `COLUMNS`.
     /// Numbers in shortest round-trip form, empty for null; a swept value that is an object or an
     /// array is its JSON text.
     pub fn to_csv(&self) -> String {

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 
 use super::super::quadrature::{Budget, ReferenceError, WG, WGK, XGK};
 use super::{MAX_KERNEL_RATIO, Values};
-use crate::sim::engines::tally::PathStrategy;
+use crate::sim::engines::strategies::PathStrategy;
 
 /// A product rule for the average over a disc of radius R: the centre's weight and the other
 /// nodes as offsets with weights (module doc).

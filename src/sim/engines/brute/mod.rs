@@ -3,14 +3,14 @@
 //! Each light path (docs/model.md §3) starts at x3l with density I/Φ, leaves plane 3 in a
 //! cosine-distributed direction to x2l, is deflected by the plane-2 lobe and reaches plane 1 at
 //! x1l. Its energy is 1 up to x2l, and sin ϑ/ϑ after the lobe (the exact-pdf throughput, see
-//! [`super::scene::Lobe`]). It merges with every camera vertex within R (the contributions are in
+//! [`Lobe`]). It merges with every camera vertex within R (the contributions are in
 //! [`super::merge`]). Paths are never stored: each is generated, tested and dropped.
 //!
 //! Speed: the loop allocates nothing, takes no lock and dispatches nothing dynamically. Paths go in
 //! blocks of `BLOCK` laid out as arrays, and everything that every path needs is branch-free
 //! arithmetic over those arrays, which the compiler turns into SIMD code: a block of random words
 //! from the multi-lane generator ([`LaneRng`]); the start points and directions in polar form (one
-//! square root each, a polynomial sine and cosine from [`super::fastmath`], no rejection loop, so
+//! square root each, a polynomial sine and cosine from [`fastmath`], no rejection loop, so
 //! no unpredictable branch); the hit on plane 2; the pixel-cone test; and the cells of the two near
 //! filters (`NearFilter`, which replace the merge grids' occupancy test on the hot path). Then
 //! the near-filter bits are looked up, eight paths at a time, and the few paths with any flag
@@ -23,10 +23,16 @@
 //! results depend only on (seed, iteration, chunk), never on the machine or the thread count.
 //!
 //! Plane 1 needs the lobe sample, but a path whose direction misses the pixel by more than the lobe
-//! can ever deflect (8.57β, see [`super::sampling::LOBE_MAX_SIGMAS`]) plus the angular radius of the
+//! can ever deflect (8.57β, see [`LOBE_MAX_SIGMAS`]) plus the angular radius of the
 //! merge disc cannot hit it: that exact cone test ([`PixelCone`]) skips the lobe for most paths.
 //! Once u₁ is drawn, two more exact tests (the first without a logarithm) skip the logarithm, the
 //! azimuth and the trigonometry unless ϑ can still bring the path within reach.
+//!
+//! [`Lobe`]: crate::sim::model::scene::Lobe
+//! [`fastmath`]: crate::sim::math::fastmath
+//! [`LOBE_MAX_SIGMAS`]: crate::sim::model::scene::LOBE_MAX_SIGMAS
+//!
+//! Imports: crate::sim::engines, crate::sim::math, crate::sim::model
 
 use nalgebra::Vector3;
 

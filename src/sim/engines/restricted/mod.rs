@@ -63,6 +63,8 @@
 //! paper's spot: forward for the bright core, reverse for the dim disc); `Proposals::Reverse`
 //! uses the reverse proposals throughout — a second, independent scheme with the same law, which
 //! the equivalence tests compare against.
+//!
+//! Imports: crate::sim::engines, crate::sim::math, crate::sim::model
 
 mod bundles;
 mod plan;

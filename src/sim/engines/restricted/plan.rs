@@ -127,6 +127,8 @@ pub fn forward_reach(theta_max: f64, l2: f64, l3: f64, radius: f64, r_out: f64) 
 }
 
 impl RestrictedPlan {
+    /// The plan of `config` with `proposals` (`Auto`: the cheaper valid proposal per pair): the
+    /// emission's layers with their reach, the pixel cone and the plane-1 bundle.
     pub fn new(config: &SimConfig, proposals: Proposals) -> Self {
         let scene = &config.scene;
         let flux = scene.illumination.flux();

@@ -5,7 +5,8 @@ use std::f64::consts::TAU;
 use serde_json::json;
 
 use super::*;
-use crate::sim::engines::tally::{IterationTally, PathStrategy};
+use crate::sim::engines::strategies::PathStrategy;
+use crate::sim::engines::tally::IterationTally;
 use crate::sim::math::rng::{StreamRng, stream, uniform_open0};
 use crate::sim::model::config::SimConfig;
 use crate::sim::solve::noise::noise_table;

@@ -1,0 +1,36 @@
+//! Handler of `/v1/jobs/{id}/predict`: a job's noise table at another ray budget. It only
+//! translates between HTTP and the predictions handle (`AppState::predictions`).
+
+use axum::Json;
+use axum::extract::State;
+
+use super::AppState;
+use super::error::{ApiError, Problem};
+use super::extract::{JobId, JsonBody, typed};
+use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
+use crate::jobs::prediction::{JobPrediction, PredictRequest};
+
+/// Predict the noise table at another ray budget (N_F, N_B) from the job's latest checkpoint, and
+/// re-fit the optimal weights for it; needs a job run with `"noise_components": true`. Nothing is
+/// run or stored.
+#[utoipa::path(
+    post, operation_id = "predict_job", path = "/v1/jobs/{id}/predict", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    request_body(content = PredictRequest, description = "The budget to predict for, and solver options to change"),
+    responses(
+        (status = 200, description = "The predicted noise table and re-fitted weights", body = JobPrediction),
+        NotJson,
+        NoSuchJob,
+        (status = 409, description = "No checkpoint yet, or the job keeps no noise components", body = Problem, content_type = "application/problem+json"),
+        TooLarge,
+        (status = 422, description = "A field is invalid; `field` names it", body = Problem, content_type = "application/problem+json"),
+        ServerFailure,
+    )
+)]
+pub async fn predict(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    JsonBody(body): JsonBody,
+) -> Result<Json<JobPrediction>, ApiError> {
+    let request: PredictRequest = typed(&body)?;
+    Ok(Json(state.predictions.predict(id, &request).await?))
+}

@@ -1,0 +1,40 @@
+//! The job layer's handles, built once at start-up: the lifecycle core and the feature services
+//! on it. The HTTP state holds each of them; a route file uses one.
+
+use super::peers::Peers;
+use super::prediction::Predictions;
+use super::signing::Provenance;
+use super::solves::Solves;
+use super::statistics::Statistics;
+use super::sweeps::Sweeps;
+use super::toolbox::JobManager;
+
+/// Every handle of the job layer; cheap to clone.
+#[derive(Clone)]
+pub struct Services {
+    /// The lifecycle: submit, get, list, cancel, extend, delete, events, shutdown.
+    pub jobs: JobManager,
+    /// Results, histories, re-solves, the moments export, evaluations, merges and studies.
+    pub statistics: Statistics,
+    /// Named re-solves kept with a job.
+    pub solves: Solves,
+    /// Noise tables predicted at other ray budgets.
+    pub predictions: Predictions,
+    /// Sweeps and their tables.
+    pub sweeps: Sweeps,
+}
+
+impl Services {
+    /// The feature services on the lifecycle `jobs`: merges pull from `peers`, exports are signed
+    /// and merged documents checked with `provenance`.
+    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance) -> Self {
+        let statistics = Statistics::new(jobs.clone(), peers, provenance);
+        Self {
+            solves: Solves::new(statistics.clone()),
+            predictions: Predictions::new(statistics.clone()),
+            sweeps: Sweeps::new(statistics.clone()),
+            statistics,
+            jobs,
+        }
+    }
+}

@@ -1,0 +1,189 @@
+//! Queries on the `checkpoints` table: every write that stores a job's statistics (a checkpoint,
+//! merged statistics, a study born with them), each in one transaction with the job row's
+//! bookkeeping (`iterations_done`, best strategy, warnings) and the history row (`history`), so
+//! the three never disagree; and the reads of the latest checkpoint.
+//!
+//! Every write runs in a transaction whose commit is awaited, and goes through [`Store::track`]
+//! (see `jobs`).
+
+use sqlx::Row;
+
+use super::history::thin_history;
+use super::jobs::{JobRow, NewJob, job_columns, job_from_row};
+use super::{JobState, Store, StoreError};
+
+/// A job's latest checkpoint: its statistics and what was computed from them. As read back by
+/// [`Store::load_checkpoint`], only the first four fields are filled (`best`, `warnings` and
+/// `history` live in the job row and the history table).
+#[derive(Debug, Clone)]
+pub struct Checkpoint {
+    /// The iterations the moments cover; written to the job's `iterations_done` with them.
+    pub iterations_done: u64,
+    /// The moments, JSON.
+    pub moments: Vec<u8>,
+    /// SHA-256 (hex) of `moments` when written.
+    pub checksum: String,
+    /// The result document (JSON) computed from them.
+    pub result: String,
+    /// The best strategy (JSON) at this checkpoint, copied to the job row.
+    pub best: Option<String>,
+    /// The result's warnings (JSON list), copied to the job row.
+    pub warnings: Option<String>,
+    /// Each strategy's luminance and RMS (JSON), appended to the job's history.
+    pub history: String,
+}
+
+/// Replaces job `id`'s checkpoint row and appends (or replaces) its history row at the same
+/// iterations, then thins the history, in `tx`; the caller updates the job row in the same
+/// transaction.
+async fn upsert_checkpoint(
+    tx: &mut sqlx::SqliteConnection,
+    id: i64,
+    checkpoint: &Checkpoint,
+    now: i64,
+) -> Result<(), StoreError> {
+    sqlx::query(
+        "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
+         VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
+         moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
+         written_at = excluded.written_at",
+    )
+    .bind(id)
+    .bind(checkpoint.iterations_done as i64)
+    .bind(&checkpoint.moments)
+    .bind(&checkpoint.checksum)
+    .bind(&checkpoint.result)
+    .bind(now)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query(
+        "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
+         ON CONFLICT (job_id, iterations) DO UPDATE SET strategies = excluded.strategies, written_at = excluded.written_at",
+    )
+    .bind(id)
+    .bind(checkpoint.iterations_done as i64)
+    .bind(&checkpoint.history)
+    .bind(now)
+    .execute(&mut *tx)
+    .await?;
+    thin_history(tx, id).await
+}
+
+impl Store {
+    /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
+    pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+        let result = self.write_checkpoint_tx(id, checkpoint, now).await;
+        self.track(result)
+    }
+
+    async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+        self.transaction(async |tx| {
+            upsert_checkpoint(tx, id, checkpoint, now).await?;
+            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, warnings = ?, updated_at = ? WHERE id = ?")
+                .bind(checkpoint.iterations_done as i64)
+                .bind(&checkpoint.best)
+                .bind(&checkpoint.warnings)
+                .bind(now)
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+            Ok(())
+        })
+        .await
+    }
+
+    /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
+    /// with `iterations_total = iterations_done` = the iterations now covered, and its spec
+    /// (`spec`: iterations set to that total) says so. One transaction.
+    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
+        let result = async {
+            self.transaction(async |tx| {
+                upsert_checkpoint(tx, id, checkpoint, now).await?;
+                sqlx::query(
+                    "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
+                     updated_at = ?4, warnings = ?6 WHERE id = ?5",
+                )
+                .bind(checkpoint.iterations_done as i64)
+                .bind(&checkpoint.best)
+                .bind(spec)
+                .bind(now)
+                .bind(id)
+                .bind(&checkpoint.warnings)
+                .execute(&mut *tx)
+                .await?;
+                Ok(())
+            })
+            .await
+        }
+        .await;
+        self.track(result)
+    }
+
+    /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
+    /// transaction.
+    pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
+        let result = self.insert_study_tx(job, checkpoint).await;
+        self.track(result)
+    }
+
+    async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
+        self.transaction(async |tx| {
+            let row = sqlx::query(concat!(
+            "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
+             warnings, merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
+            job_columns!()
+        ))
+        .bind(JobState::Succeeded.as_str())
+        .bind(&job.spec)
+        .bind(&job.fingerprint)
+        .bind(checkpoint.iterations_done as i64)
+        .bind(checkpoint.iterations_done as i64)
+        .bind(job.reference_luminance)
+        .bind(&checkpoint.best)
+        .bind(&checkpoint.warnings)
+        .bind(job.now)
+        .bind(job.now)
+        .fetch_one(&mut *tx)
+        .await?;
+            let id: i64 = row.try_get("id")?;
+            upsert_checkpoint(tx, id, checkpoint, job.now).await?;
+            Ok(job_from_row(&row)?)
+        })
+        .await
+    }
+
+    /// A job's latest checkpoint, if any.
+    pub async fn load_checkpoint(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
+        let row = sqlx::query("SELECT iterations_done, moments, checksum, result FROM checkpoints WHERE job_id = ?")
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        row.map(|row| {
+            Ok::<_, sqlx::Error>(Checkpoint {
+                iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
+                moments: row.try_get("moments")?,
+                checksum: row.try_get("checksum")?,
+                result: row.try_get("result")?,
+                best: None,
+                warnings: None,
+                history: String::new(),
+            })
+        })
+        .transpose()
+        .map_err(StoreError::from)
+    }
+
+    /// A job's latest result document without the moments: (iterations done, result JSON, the
+    /// moments' checksum) of its checkpoint, if it has one.
+    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String, String)>, StoreError> {
+        let row = sqlx::query("SELECT iterations_done, result, checksum FROM checkpoints WHERE job_id = ?")
+            .bind(id)
+            .fetch_optional(self.pool())
+            .await?;
+        row.map(|row| {
+            Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?, row.try_get("checksum")?))
+        })
+        .transpose()
+        .map_err(|e: sqlx::Error| e.into())
+    }
+}
