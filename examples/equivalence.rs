@@ -24,10 +24,10 @@ fn main() {
     let doc = serde_json::json!({ "preset": preset });
     let job = parse_job_spec(&doc).and_then(|s| s.validate()).expect("a valid preset");
     let started = std::time::Instant::now();
-    let brute = measure(&job.config.with_engine(Engine::Brute), 1, 0, blocks, block_len);
+    let brute = measure(&job.config().with_engine(Engine::Brute), 1, 0, blocks, block_len);
     let brute_seconds = started.elapsed().as_secs_f64();
     let started = std::time::Instant::now();
-    let restricted = measure(&job.config.with_engine(Engine::Restricted(Proposals::Auto)), 1, 0, blocks, block_len);
+    let restricted = measure(&job.config().with_engine(Engine::Restricted(Proposals::Auto)), 1, 0, blocks, block_len);
     let restricted_seconds = started.elapsed().as_secs_f64();
     println!(
         "{preset}: {blocks} blocks of {block_len} iterations; brute {brute_seconds:.0} s, restricted {restricted_seconds:.1} s"
@@ -43,7 +43,7 @@ fn main() {
     }
     println!("largest |z|: {worst:.2}");
     // Each engine's plane-2 and plane-3 merges against their exact expectation given the cameras.
-    let expected = merges(&job.config, 1, 0..blocks * block_len);
+    let expected = merges(job.config(), 1, 0..blocks * block_len);
     for (name, figures) in [("brute", &brute), ("restricted", &restricted)] {
         for (plane, expected) in [(2, expected.plane2), (3, expected.plane3)] {
             let observed = (figures.merges[plane - 1].mean * (blocks * block_len) as f64).round();

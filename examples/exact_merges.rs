@@ -24,7 +24,7 @@ fn main() {
     let iterations: u64 = args.get(3).and_then(|n| n.parse().ok()).unwrap_or(100_000);
     let doc = serde_json::json!({ "preset": preset });
     let job = parse_job_spec(&doc).and_then(|s| s.validate()).expect("a valid preset");
-    let config = job.config.with_engine(engine);
+    let config = job.config().with_engine(engine);
     let observed = run(&config, 1, 0..iterations).pooled().merges;
     let expected = merges(&config, 1, 0..iterations);
     println!("{preset}, {}, {iterations} iterations:", engine.id());

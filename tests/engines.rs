@@ -45,7 +45,7 @@ fn assert_equivalent(scene: &str, (name_a, a): (&str, &Figures), (name_b, b): (&
 
 fn check_scene(scene: &str, doc: serde_json::Value) {
     let job = parse_job_spec(&doc).unwrap().validate().unwrap();
-    let figures = |engine| measure(&job.config.with_engine(engine), SEED, 0, BLOCKS, BLOCK_LEN);
+    let figures = |engine| measure(&job.config().with_engine(engine), SEED, 0, BLOCKS, BLOCK_LEN);
     let brute = figures(Engine::Brute);
     let auto = figures(Engine::Restricted(Proposals::Auto));
     let reverse = figures(Engine::Restricted(Proposals::Reverse));
@@ -81,9 +81,9 @@ fn plane2_and_plane3_merges_match_their_exact_expectation() {
     let iterations = 1000;
     for preset in ["paper-table1", "uniform-illumination"] {
         let job = parse_job_spec(&small(preset)).unwrap().validate().unwrap();
-        let expected = merges(&job.config, SEED, 0..iterations);
+        let expected = merges(job.config(), SEED, 0..iterations);
         for engine in [Engine::Brute, Engine::Restricted(Proposals::Auto)] {
-            let config = job.config.with_engine(engine);
+            let config = job.config().with_engine(engine);
             let observed = run(&config, SEED, 0..iterations).pooled().merges;
             for (plane, expected, observed) in [(2, expected.plane2, observed[1]), (3, expected.plane3, observed[2])] {
                 let (mean, sd) = (expected.mean, expected.variance_bound.sqrt());

@@ -26,7 +26,7 @@ fn as_format_2(moments: &Moments, job: &ValidJob) -> Moments {
     let k = moments.cells;
     let (n_old, n_new) = (2 * k + 1, moments.layout().dimension());
     old.format_version = 2;
-    old.fingerprint = job.config.fingerprint_of_format(2);
+    old.fingerprint = job.config().fingerprint_of_format(2);
     for fold in &mut old.folds {
         fold.sum_y.truncate(n_old);
         let full = std::mem::take(&mut fold.sum_yy);
@@ -45,12 +45,12 @@ fn as_format_2(moments: &Moments, job: &ValidJob) -> Moments {
 #[test]
 fn format_2_documents_report_and_refuse_to_merge_with_format_3() {
     let job = job();
-    let config = &job.config;
+    let config = &job.config();
     let new = run(config, 7, 0..400);
     let old = as_format_2(&new, &job);
 
     // The document an earlier build wrote verifies with its format's fingerprint.
-    let doc = MomentsDocument::new(job.spec.clone(), old.clone());
+    let doc = MomentsDocument::new(job.spec().clone(), old.clone());
     let read = MomentsDocument::from_json(&doc.to_json()).expect("a format-2 document reads");
     assert_eq!(read.moments, old);
 
@@ -58,8 +58,8 @@ fn format_2_documents_report_and_refuse_to_merge_with_format_3() {
     // they are missing.
     let inputs = ReportInputs::default();
     let (r_old, r_new) = (
-        build_report(&old, &config.cells, &job.spec.solver, &inputs),
-        build_report(&new, &config.cells, &job.spec.solver, &inputs),
+        build_report(&old, config.cells(), &job.spec().solver, &inputs),
+        build_report(&new, config.cells(), &job.spec().solver, &inputs),
     );
     let row = |r: &optimis::sim::solve::report::RunReport, name: &str| {
         r.noise_table.iter().find(|x| x.strategy.name() == name).unwrap().clone()
@@ -95,7 +95,7 @@ fn format_2_documents_report_and_refuse_to_merge_with_format_3() {
 #[test]
 fn a_format_2_checkpoint_resumes_in_format_2() {
     let job = job();
-    let config = &job.config;
+    let config = &job.config();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
     let mut resumed = as_format_2(&run(config, 7, 0..150), &job);
     let cancel = AtomicBool::new(false);

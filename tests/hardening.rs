@@ -320,7 +320,7 @@ async fn forged_empty_and_oversized_statistics_are_refused() {
         let spec = d.spec.clone();
         *d = MomentsDocument::new(
             spec.clone(),
-            optimis::sim::stats::moments::Moments::new(&spec.validate().unwrap().config),
+            optimis::sim::stats::moments::Moments::new(spec.validate().unwrap().config()),
         );
     });
     let problem = assert_problem(server.study(&json!({ "sources": [empty] })).await, 422);

@@ -22,7 +22,7 @@ fn exported(index: u64) -> MomentsDocument {
         "cells": { "r2_edges": [0, 0.5], "r3_edges": [0, 0.01, 0.02] } }))
     .unwrap();
     let job = spec.validate().unwrap();
-    let moments = run(&job.config, spec.seed, spec.iteration_range());
+    let moments = run(job.config(), spec.seed, spec.iteration_range());
     MomentsDocument::new(spec, moments)
 }
 

@@ -20,7 +20,7 @@ fn job(light_paths: u64, camera_paths: u64, components: bool, seed: u64, iterati
 
 fn run_job(job: &ValidJob) -> Moments {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    pool.install(|| run(&job.config, job.spec.seed, 0..job.spec.iterations))
+    pool.install(|| run(job.config(), job.spec().seed, 0..job.spec().iterations))
 }
 
 fn row<'a>(rows: &'a [NoiseRow], name: &str) -> &'a NoiseRow {
@@ -42,8 +42,8 @@ fn at_the_measured_budget_the_prediction_is_the_measured_table() {
         let moments = run_job(&job);
         assert!(moments.has_components());
         let budget = Budget { light_paths: light, camera_paths: camera };
-        let p = predict(&moments, &job.config.cells, &job.spec.solver, budget, budget).unwrap();
-        let measured = noise_table(&moments, &job.config.cells, &job.spec.solver).rows;
+        let p = predict(&moments, job.config().cells(), &job.spec().solver, budget, budget).unwrap();
+        let measured = noise_table(&moments, job.config().cells(), &job.spec().solver).rows;
         for name in FIXED.iter().chain(&["correlation_aware"]) {
             let (a, b) = (row(&p.noise_table, name).rms_percent, row(&measured, name).rms_percent);
             match (a, b) {
@@ -72,9 +72,9 @@ fn predictions_match_direct_runs_at_other_budgets() {
     let from = Budget { light_paths: 1_000_000, camera_paths: 20 };
     for (seed, (light_paths, camera_paths)) in [(5, (2_000_000, 10)), (6, (500_000, 40)), (7, (1_000_000, 100))] {
         let to = Budget { light_paths, camera_paths };
-        let p = predict(&moments, &source.config.cells, &source.spec.solver, from, to).unwrap();
+        let p = predict(&moments, source.config().cells(), &source.spec().solver, from, to).unwrap();
         let direct_job = job(light_paths, camera_paths, false, seed, 40_000);
-        let direct = noise_table(&run_job(&direct_job), &direct_job.config.cells, &direct_job.spec.solver).rows;
+        let direct = noise_table(&run_job(&direct_job), direct_job.config().cells(), &direct_job.spec().solver).rows;
         for name in FIXED {
             let (pr, dr) = (row(&p.noise_table, name), row(&direct, name));
             let (a, sa) = (pr.rms_percent.unwrap(), pr.rms_percent_stderr.unwrap());
@@ -93,7 +93,7 @@ fn predictions_match_direct_runs_at_other_budgets() {
         // The re-fitted table of the recommended row, for every cell — or none when the guard
         // recommends a per-path strategy at that budget (no fitted row beat it beyond 1.645 SE).
         let recommended = p.recommended.as_ref().expect("a recommendation");
-        let expected = if recommended.lambda.is_some() { source.config.cells.len() } else { 0 };
+        let expected = if recommended.lambda.is_some() { source.config().cells().len() } else { 0 };
         eprintln!("({light_paths}, {camera_paths}) recommended {}", recommended.strategy);
         assert_eq!(p.weights.len(), expected, "re-fitted weights for every cell of a fitted recommendation");
     }

@@ -28,24 +28,24 @@ fn pool() -> rayon::ThreadPool {
 #[test]
 fn the_recommendation_delivers_what_it_reports_on_an_independent_run() {
     let long_job = job(1000, 100_000);
-    let config = &long_job.config;
+    let config = &long_job.config();
     let long = pool().install(|| run(config, 1000, 0..100_000));
     let switch_delivered = {
         let given = GivenWeights { recommended: Some(named("switch")), ..GivenWeights::default() };
-        evaluate(&long, &config.cells, &given).unwrap().evaluated.rms_percent.unwrap()
+        evaluate(&long, config.cells(), &given).unwrap().evaluated.rms_percent.unwrap()
     };
     let (mut covered, mut scored) = (0, 0);
     for seed in 1..=8 {
         let short = job(seed, 2000);
-        let moments = pool().install(|| run(&short.config, seed, 0..2000));
-        let table = noise_table(&moments, &short.config.cells, &short.spec.solver);
+        let moments = pool().install(|| run(short.config(), seed, 0..2000));
+        let table = noise_table(&moments, short.config().cells(), &short.spec().solver);
         let recommended = table.recommended.as_ref().expect("a recommendation");
         // Every honest fitted row, and the recommended row, scored on the long run.
         let mut rows: Vec<(String, f64, f64, GivenWeights)> = Vec::new();
         for f in &table.fitted {
             let row = table.rows.iter().find(|r| r.strategy == f.strategy).unwrap();
             let (Some(rms), Some(se)) = (row.rms_percent, row.rms_percent_stderr) else { continue };
-            let cells = weight_rows(&short.config.cells, &f.scored.all, None)
+            let cells = weight_rows(short.config().cells(), &f.scored.all, None)
                 .into_iter()
                 .map(|w| GivenCell { r2: w.r2, r3: w.r3, phi: w.phi, w0: w.w0, w1: w.w1, w2: w.w2 })
                 .collect();
@@ -78,7 +78,7 @@ fn the_recommendation_delivers_what_it_reports_on_an_independent_run() {
             ));
         }
         for (name, rms, se, given) in &rows {
-            let delivered = evaluate(&long, &config.cells, given).unwrap().evaluated.rms_percent.unwrap();
+            let delivered = evaluate(&long, config.cells(), given).unwrap().evaluated.rms_percent.unwrap();
             let inside = (rms - delivered).abs() <= 2.5 * se;
             eprintln!(
                 "seed {seed}: {name:<40} reported {rms:6.2} ± {se:5.2}, delivered {delivered:6.2} {}",

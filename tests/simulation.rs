@@ -43,10 +43,10 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 /// quadrature value.
 fn check_means_against_quadrature(doc: Value, strategies: &[&str]) {
     let job = job(doc);
-    let config: &SimConfig = &job.config;
-    let moments = pool(2).install(|| run(config, job.spec.seed, 0..job.spec.iterations));
-    let reference = reference_luminance(&config.scene).expect("the reference converges");
-    let table = noise_table(&moments, &config.cells, &job.spec.solver);
+    let config: &SimConfig = job.config();
+    let moments = pool(2).install(|| run(config, job.spec().seed, 0..job.spec().iterations));
+    let reference = reference_luminance(config.scene()).expect("the reference converges");
+    let table = noise_table(&moments, config.cells(), &job.spec().solver);
     for name in strategies {
         let row = table.rows.iter().find(|r| r.strategy.name() == *name).expect("strategy in the table");
         let (l, se) = (row.luminance.unwrap(), row.luminance_stderr.unwrap());
@@ -105,7 +105,7 @@ fn small_brute_job() -> ValidJob {
 fn moments_do_not_depend_on_the_thread_count() {
     for (job, iterations) in [(small_brute_job(), 12), (small_job(), 600)] {
         let runs: Vec<Moments> =
-            [1, 2, 8].iter().map(|&t| pool(t).install(|| run(&job.config, 5, 0..iterations))).collect();
+            [1, 2, 8].iter().map(|&t| pool(t).install(|| run(job.config(), 5, 0..iterations))).collect();
         assert!(runs[0].pooled().merges.iter().sum::<u64>() > 100, "the run must have merges to compare");
         let json0 = serde_json::to_string(&runs[0]).unwrap();
         for other in &runs[1..] {
@@ -125,7 +125,7 @@ fn split_and_merge_is_bit_identical() {
 }
 
 fn split_and_merge_of(job: &ValidJob) {
-    let config = &job.config;
+    let config = &job.config();
     let whole = pool(2).install(|| run(config, 5, 0..12));
     for k in [1, 5, 11] {
         let (head, tail) = pool(2).install(|| (run(config, 5, 0..k), run(config, 5, k..12)));
@@ -156,13 +156,13 @@ fn split_and_merge_of(job: &ValidJob) {
 #[test]
 fn incompatible_merges_are_refused() {
     let job = small_job();
-    let config = &job.config;
+    let config = &job.config();
     let mut target = run(config, 5, 0..4);
     let before = target.clone();
 
     let other = self::job(json!({ "preset": "paper-table1", "light_paths": 140_000, "camera_paths": 300,
         "merge_radius": 0.021, "iterations": 4, "seed": 5 }));
-    let foreign = run(&other.config, 5, 4..6);
+    let foreign = run(other.config(), 5, 4..6);
     assert!(matches!(target.merge(&foreign), Err(MergeError::Fingerprint { .. })));
 
     let overlapping = run(config, 5, 3..6);
@@ -186,17 +186,17 @@ fn incompatible_merges_are_refused() {
 fn fitted_weights_minimise_the_sample_variance() {
     let job = job(json!({ "preset": "paper-table1", "light_paths": 100_000, "camera_paths": 1000,
         "merge_radius": 0.02, "iterations": 400, "seed": 13 }));
-    let config = &job.config;
+    let config = &job.config();
     let moments = pool(2).install(|| run(config, 13, 0..400));
     let stats = YStats::from_fold(&moments.pooled(), moments.layout());
-    let fitted = fit(&stats, &config.cells, &job.spec.solver.fixed, 0.0, &[]).unwrap();
+    let fitted = fit(&stats, config.cells(), &job.spec().solver.fixed, 0.0, &[]).unwrap();
     let w = fitted.coefficients(stats.layout);
     let variance = |w: &nalgebra::DVector<f64>| {
         let (s1, s2) = stats.evaluate(w);
         s2 / stats.m - (s1 / stats.m).powi(2)
     };
     let best = variance(&w);
-    let k = config.cells.len();
+    let k = config.cells().len();
     // Perturb only fitted w1 entries (w0 = 0 is fixed; w2 follows).
     let fitted_cells: Vec<usize> = (0..k).filter(|&a| fitted.cells[a].samples > 0).collect();
     assert!(fitted_cells.len() > 5);
@@ -210,7 +210,7 @@ fn fitted_weights_minimise_the_sample_variance() {
             assert!(variance(&p) >= best * (1.0 - 1e-12), "perturbing cell {a} by {eps} lowered the variance");
         }
     }
-    let table = noise_table(&moments, &config.cells, &job.spec.solver);
+    let table = noise_table(&moments, config.cells(), &job.spec().solver);
     let rms = |name: &str| table.rows.iter().find(|r| r.strategy.name() == name).unwrap().rms_percent.unwrap();
     assert!(rms("optimal") <= rms("switch") * (1.0 + 1e-9), "optimal {} vs switch {}", rms("optimal"), rms("switch"));
 }
@@ -225,9 +225,9 @@ fn fitted_weights_minimise_the_sample_variance() {
 #[test]
 fn recommended_weights_are_the_guarded_honest_best_within_the_fixed_weights() {
     let job = job(json!({ "preset": "paper-table1", "iterations": 10_000, "seed": 1 }));
-    let config = &job.config;
+    let config = &job.config();
     let moments = pool(2).install(|| run(config, 1, 0..10_000));
-    let table = noise_table(&moments, &config.cells, &job.spec.solver);
+    let table = noise_table(&moments, config.cells(), &job.spec().solver);
     let row = |name: &str| table.rows.iter().find(|r| r.strategy.name() == name).unwrap();
     for (name, inside) in [("plane1", false), ("plane2", true), ("plane3", true), ("switch", true)].into_iter().chain([
         ("optimal_cv", true),
@@ -272,7 +272,7 @@ fn recommended_weights_are_the_guarded_honest_best_within_the_fixed_weights() {
     let se = cv.cross_fit.weight_stderr().expect("jackknife SE of the weights");
     let mut tails = Vec::new();
     for (a, cell) in cv.all.cells.iter().enumerate() {
-        let bounds = config.cells.bounds(a);
+        let bounds = config.cells().bounds(a);
         let (w1, s) = (cell.w[1], se[a][1]);
         if bounds.r3[1].is_some_and(|hi| hi <= 0.02) && cell.samples >= 30 && cell.status.from_data() {
             assert!((0.7 - 2.0 * s..=0.9 + 2.0 * s).contains(&w1), "cell {a}: w1 = {w1} ± {s}");
@@ -291,7 +291,7 @@ fn pieces() -> &'static (Vec<Moments>, Moments) {
     PIECES.get_or_init(|| {
         let job = small_job();
         let parts = [(5, 0..3), (5, 3..4), (5, 4..9), (6, 0..2), (6, 2..5)];
-        let pieces: Vec<Moments> = parts.iter().map(|(seed, r)| run(&job.config, *seed, r.clone())).collect();
+        let pieces: Vec<Moments> = parts.iter().map(|(seed, r)| run(job.config(), *seed, r.clone())).collect();
         let mut whole = pieces[0].clone();
         for p in &pieces[1..] {
             whole.merge(p).unwrap();

@@ -122,3 +122,73 @@ pub struct SolverPatch {
     #[schema(min_items = 1, max_items = 32, nullable = false)]
     cv_lambdas: Option<Vec<f64>>,
 }
+
+#[cfg(test)]
+mod tests {
+    //! The ranges these schemas publish are literals (utoipa's attributes take no constants); the
+    //! validator's constants are the one declaration, and this test holds the schemas to them.
+    use serde_json::Value;
+    use utoipa::PartialSchema;
+
+    use super::*;
+    use crate::api::jobs::ExtendRequest;
+    use crate::sim::model::params::{
+        MAX_BETA_DEG, MAX_CAMERA_PATHS, MAX_LENGTH, MAX_LEVEL, MAX_LIGHT_PATHS, MAX_PHI_BINS, MAX_RINGS, MIN_BETA_DEG,
+        MIN_LENGTH,
+    };
+    use crate::sim::solve::options::{MAX_CV_LAMBDAS, MAX_LAMBDA};
+    use crate::sim::spec::MAX_ITERATIONS;
+
+    /// `keyword` of property `name` in the JSON form of `schema`.
+    fn bound(schema: &Value, name: &str, keyword: &str) -> f64 {
+        let property = &schema["properties"][name];
+        property[keyword].as_f64().unwrap_or_else(|| panic!("{name} has no {keyword}: {property}"))
+    }
+
+    fn json<T: PartialSchema>() -> Value {
+        serde_json::to_value(T::schema()).unwrap()
+    }
+
+    #[test]
+    fn the_published_ranges_are_the_validators() {
+        let job = json::<JobSubmission>();
+        for (name, lo, hi) in [
+            ("merge_radius", MIN_LENGTH, MAX_LENGTH),
+            ("light_paths", 1.0, MAX_LIGHT_PATHS as f64),
+            ("camera_paths", 1.0, MAX_CAMERA_PATHS as f64),
+            ("iterations", 1.0, MAX_ITERATIONS as f64),
+        ] {
+            assert_eq!((bound(&job, name, "minimum"), bound(&job, name, "maximum")), (lo, hi), "{name}");
+        }
+        let scene = json::<ScenePatch>();
+        for name in ["l2", "l3"] {
+            assert_eq!((bound(&scene, name, "minimum"), bound(&scene, name, "maximum")), (MIN_LENGTH, MAX_LENGTH));
+        }
+        assert_eq!(
+            (bound(&scene, "beta_deg", "minimum"), bound(&scene, "beta_deg", "maximum")),
+            (MIN_BETA_DEG, MAX_BETA_DEG)
+        );
+        let light = json::<IlluminationPatch>();
+        for name in ["a", "r_ls"] {
+            assert_eq!((bound(&light, name, "minimum"), bound(&light, name, "maximum")), (MIN_LENGTH, MAX_LENGTH));
+        }
+        assert_eq!(bound(&light, "contrast", "exclusiveMinimum"), 0.0);
+        assert_eq!(bound(&light, "contrast", "maximum"), MAX_LEVEL);
+        assert_eq!(bound(&light, "rings", "maxItems"), MAX_RINGS as f64);
+        let ring = json::<RingSpec>();
+        assert_eq!(
+            (bound(&ring, "outer_radius", "minimum"), bound(&ring, "outer_radius", "maximum")),
+            (MIN_LENGTH, MAX_LENGTH)
+        );
+        assert_eq!((bound(&ring, "level", "minimum"), bound(&ring, "level", "maximum")), (0.0, MAX_LEVEL));
+        let cells = json::<CellPatch>();
+        assert_eq!(bound(&cells, "phi_bins", "maximum"), f64::from(MAX_PHI_BINS));
+        let solver = json::<SolverPatch>();
+        assert_eq!((bound(&solver, "lambda", "minimum"), bound(&solver, "lambda", "maximum")), (0.0, MAX_LAMBDA));
+        assert_eq!(bound(&solver, "cv_lambdas", "maxItems"), MAX_CV_LAMBDAS as f64);
+        let extend = json::<ExtendRequest>();
+        for name in ["iterations", "total"] {
+            assert_eq!(bound(&extend, name, "maximum"), MAX_ITERATIONS as f64, "{name}");
+        }
+    }
+}

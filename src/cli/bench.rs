@@ -66,8 +66,8 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
     let mut results: Vec<(BenchEngine, Value)> = Vec::new();
     for engine in engines {
         let (config, iterations) = match engine {
-            BenchEngine::Brute => (job.config.with_engine(Engine::Brute), base),
-            BenchEngine::Restricted => (job.config.with_engine(Engine::Restricted(Proposals::Auto)), base * 1000),
+            BenchEngine::Brute => (job.config().with_engine(Engine::Brute), base),
+            BenchEngine::Restricted => (job.config().with_engine(Engine::Restricted(Proposals::Auto)), base * 1000),
         };
         let seconds = pool.install(|| time_iterations(&config, iterations));
         let per_second = iterations as f64 / seconds;
@@ -90,7 +90,7 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
     let rate =
         |e: BenchEngine| results.iter().find(|(x, _)| *x == e).and_then(|(_, v)| v["iterations_per_second"].as_f64());
     let speedup = rate(BenchEngine::Restricted).zip(rate(BenchEngine::Brute)).map(|(r, b)| r / b);
-    let config = &job.config;
+    let config = &job.config();
     // Written with `?`, not println!: a closed pipe (`optimis bench | head -1`) is the reader
     // leaving, which main() treats as success instead of a panic.
     let mut out = std::io::stdout().lock();

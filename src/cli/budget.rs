@@ -48,7 +48,7 @@ fn measure_costs(spec: &JobSpec) -> Result<[f64; 3], CliError> {
         s.light_paths = light;
         s.camera_paths = camera;
         s.noise_components = false;
-        let config = s.validate()?.config.with_engine(Engine::Brute);
+        let config = s.validate()?.config().with_engine(Engine::Brute);
         let iterations = 20;
         Ok(pool.install(|| time_iterations(&config, iterations)) / iterations as f64)
     };
@@ -83,7 +83,7 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     }
     let costs = Costs { light_path: t_f, camera_path: t_b, iteration: t_0, pixels: args.pixels };
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
-    let p = plan(&doc.moments, &job.config.cells, &solver, measured, costs, args.target_rms)
+    let p = plan(&doc.moments, &job.config().cells, &solver, measured, costs, args.target_rms)
         .map_err(|e| SpecError::new("document", e.to_string()))?;
     let mut out = std::io::stdout().lock();
     if args.json {

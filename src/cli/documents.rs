@@ -14,6 +14,7 @@ use crate::sim::document::{MomentsDocument, merge_documents_at};
 use crate::sim::model::params::check;
 use crate::sim::solve::crossfit::{CrossFitting, nested_selection};
 use crate::sim::solve::noise::NoiseRow;
+use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
@@ -118,22 +119,22 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
     let job = doc.spec.validate()?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
-    let reference = reference_luminance(&job.config.scene).ok();
+    let reference = reference_luminance(&job.config().scene).ok();
     if let Some(l) = args.weights_lambda {
-        check(l.is_finite() && (0.0..=1e12).contains(&l), "--weights-lambda", || {
-            format!("must be in [0, 1e12], got {l}")
+        check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--weights-lambda", || {
+            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
         })?;
     }
-    let expected = expected_luminances(&job.config);
+    let expected = expected_luminances(job.config());
     let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-    let report = build_report(&doc.moments, &job.config.cells, &solver, &inputs);
+    let report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
     write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.nested_cv {
         let cf = CrossFitting::new(&doc.moments, &doc.moments.pooled());
-        let [m, s1, s2] = nested_selection(&cf, &job.config.cells, &solver.fixed, &solver.cv_lambdas, &[])
+        let [m, s1, s2] = nested_selection(&cf, &job.config().cells, &solver.fixed, &solver.cv_lambdas, &[])
             .map_err(|e| SpecError::new("--nested-cv", e))?;
         let nested = NoiseRow::from_sums(Strategy::OptimalCv, m, s1, s2, None);
         let selected = report.noise_table.iter().find(|r| r.strategy == Strategy::OptimalCv);

@@ -32,7 +32,7 @@ pub fn evaluate(args: EvaluateArgs) -> Result<(), CliError> {
     let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
     let given: GivenWeights =
         serde_json::from_slice(&bytes).map_err(|source| CliError::Json { path: path.clone(), source })?;
-    let evaluation = score(&doc.moments, &job.config.cells, &given)
+    let evaluation = score(&doc.moments, &job.config().cells, &given)
         .map_err(|e| CliError::Invalid { what: "weights", source: SpecError::new(e.field, e.message) })?;
     let mut out = std::io::stdout().lock();
     if args.json {

@@ -40,7 +40,7 @@ pub fn predict(args: PredictArgs) -> Result<(), CliError> {
         camera_paths: args.camera_paths.unwrap_or(measured.camera_paths),
     };
     check_path_counts(to.light_paths, to.camera_paths, ["--light-paths", "--camera-paths"])?;
-    let prediction = predict_budget(&doc.moments, &job.config.cells, &solver, measured, to)
+    let prediction = predict_budget(&doc.moments, &job.config().cells, &solver, measured, to)
         .map_err(|e| SpecError::new("document", e.to_string()))?;
     let mut out = std::io::stdout().lock();
     if args.json {

@@ -152,15 +152,15 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
 pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool, progress: &ProgressArgs, label: &str) -> Moments {
-    let config = &job.config;
-    let range = job.spec.iteration_range();
+    let config = &job.config();
+    let range = job.spec().iteration_range();
     let total = range.end - range.start;
     let mut shown = Progress::new(progress, label, total, config.light_paths);
     let started = Instant::now();
     let mut moments = Moments::new(config);
     let never = AtomicBool::new(false);
     pool.install(|| {
-        run_iterations(config, job.spec.seed, range.clone(), &mut moments, &never, |_, next| {
+        run_iterations(config, job.spec().seed, range.clone(), &mut moments, &never, |_, next| {
             shown.update(next - range.start, started, config.light_paths);
             std::ops::ControlFlow::Continue(())
         })
@@ -173,24 +173,24 @@ pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool, progress: &P
 pub fn run(args: RunArgs) -> Result<(), CliError> {
     let job = job_from_args(&args)?;
     let pool = thread_pool(args.threads)?;
-    let config = &job.config;
+    let config = &job.config();
     let started = Instant::now();
     let moments = run_moments(&job, &pool, &args.progress, "");
     let seconds = started.elapsed().as_secs_f64();
     if let Some(path) = &args.out {
-        write_atomically(path, &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
+        write_atomically(path, &MomentsDocument::new(job.spec().clone(), moments.clone()).to_json())?;
     }
     let expected = expected_luminances(config);
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
-    let report = build_report(&moments, &config.cells, &job.spec.solver, &inputs);
+    let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
     write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
         writeln!(out)?;
     } else {
-        table::write_report(&mut out, &job.spec, &report, Some((seconds, pool.current_num_threads())))?;
+        table::write_report(&mut out, job.spec(), &report, Some((seconds, pool.current_num_threads())))?;
     }
     Ok(())
 }

@@ -138,7 +138,7 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
         let label = format!("run {r} of {} ({}): ", plan.runs.len(), plan.describe_run(r));
         let moments = run_moments(&job, &pool, &args.progress, &label);
         if let Some(dir) = &args.out {
-            write_atomically(&run_file(dir, r), &MomentsDocument::new(job.spec.clone(), moments.clone()).to_json())?;
+            write_atomically(&run_file(dir, r), &MomentsDocument::new(job.spec().clone(), moments.clone()).to_json())?;
         }
         figures.extend(run_figures(&plan, r, &moments)?);
     }
@@ -152,11 +152,11 @@ fn run_sweep(args: SweepRunArgs) -> Result<(), CliError> {
 /// The figures of every point run `r` answers, from its moments.
 fn run_figures(plan: &SweepPlan, r: usize, moments: &Moments) -> Result<Vec<(usize, PointFigures)>, CliError> {
     let job = plan.runs[r].spec.validate()?;
-    let reference = reference_luminance(&job.config.scene).ok();
-    let expected = expected_luminances(&job.config);
+    let reference = reference_luminance(&job.config().scene).ok();
+    let expected = expected_luminances(job.config());
     let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, &inputs);
-    Ok(point_figures(plan, r, moments, &job.config.cells, &report, false))
+    let report = build_report(moments, &job.config().cells, &job.spec().solver, &inputs);
+    Ok(point_figures(plan, r, moments, &job.config().cells, &report, false))
 }
 
 fn collect(args: CollectArgs) -> Result<(), CliError> {

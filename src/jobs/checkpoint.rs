@@ -114,7 +114,7 @@ pub(crate) fn decode_checkpoint(
         .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
     moments.check_well_formed().map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
     // A job an earlier build started keeps its checkpoint's format (and resumes in it).
-    if moments.fingerprint != job.config.fingerprint_of_format(moments.format_version) {
+    if moments.fingerprint != job.config().fingerprint_of_format(moments.format_version) {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));
     }
     if moments.iterations() != checkpoint.iterations_done {
@@ -125,8 +125,8 @@ pub(crate) fn decode_checkpoint(
         )));
     }
     if own_run {
-        let start = job.spec.iteration_range().start;
-        let expected = Coverage::range(job.spec.seed, start, start + checkpoint.iterations_done);
+        let start = job.spec().iteration_range().start;
+        let expected = Coverage::range(job.spec().seed, start, start + checkpoint.iterations_done);
         if moments.coverage != expected {
             return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
         }
@@ -137,9 +137,9 @@ pub(crate) fn decode_checkpoint(
 /// A checkpoint of `moments`: their bytes and checksum, and the result document computed from
 /// them with the job's solver options.
 pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
-    let expected = expected_luminances(&job.config);
+    let expected = expected_luminances(job.config());
     let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
-    let report = build_report(moments, &job.config.cells, &job.spec.solver, &inputs);
+    let report = build_report(moments, &job.config().cells, &job.spec().solver, &inputs);
     let best = best_strategy(&report.noise_table, report.recommended.as_ref().map(|r| r.strategy));
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
     let history: Vec<StrategyPoint> = report

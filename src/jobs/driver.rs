@@ -52,8 +52,8 @@ pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
 fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     let rt = &inner.runtime;
     let valid = &job.job;
-    let config = &valid.config;
-    let seed = valid.spec.seed;
+    let config = &valid.config();
+    let seed = valid.spec().seed;
     let mut moments = match rt.block_on(inner.store.load_checkpoint(job.id))? {
         Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid, true)?,
         None => Moments::new(config),
@@ -195,7 +195,7 @@ fn publish_progress(job: &ActiveJob, moments: &Moments, next: u64, start: u64, s
     let elapsed = started.elapsed().as_secs_f64();
     let per_second = (next - start) as f64 / elapsed.max(1e-9);
     let total = job.total.load(Ordering::SeqCst);
-    let best = best_strategy(&path_rows(moments, &job.job.spec.solver.fixed), None);
+    let best = best_strategy(&path_rows(moments, &job.job.spec().solver.fixed), None);
     job.view.send_modify(|r| {
         r.progress.iterations_done = next;
         r.progress.iterations_total = total;

@@ -155,17 +155,17 @@ impl JobManager {
         let (job, reference, request_hash) = self
             .compute(move || -> Result<_, JobError> {
                 let job = parse_job_spec(&document)?.validate()?;
-                check_budget(&policy, &job.spec, range_len(&job.spec))?;
+                check_budget(&policy, job.spec(), range_len(job.spec()))?;
                 check_iteration_work(&policy, &job)?;
-                let reference = scene_reference(&job.config.scene);
+                let reference = scene_reference(&job.config().scene);
                 let hash = hash_body.then(|| sha256_hex(document.to_string().as_bytes()));
                 Ok((job, reference, hash))
             })
             .await??;
         let new = NewJob {
-            spec: spec_json(&job.spec)?,
-            fingerprint: job.config.fingerprint().to_string(),
-            iterations_total: range_len(&job.spec),
+            spec: spec_json(job.spec())?,
+            fingerprint: job.config().fingerprint().to_string(),
+            iterations_total: range_len(job.spec()),
             reference_luminance: reference,
             idempotency_key,
             request_hash,
@@ -286,10 +286,10 @@ impl JobManager {
         self.refuse_while_held(id)?;
         let now = now_ms();
         if let Some(job) = self.active(id) {
-            refuse_shard_extension(id, &job.job.spec)?;
+            refuse_shard_extension(id, job.job.spec())?;
             let current = job.total.load(Ordering::SeqCst);
             let new_total = target_total(current, current, more, total)?;
-            check_budget(&self.inner.policy, &job.job.spec, new_total)?;
+            check_budget(&self.inner.policy, job.job.spec(), new_total)?;
             let mut spec = job.view.borrow().spec.clone();
             spec.iterations = new_total;
             self.inner.store.set_total(id, new_total, &spec_json(&spec)?, job.state(), now).await?;

@@ -228,7 +228,7 @@ impl Statistics {
                 let job = spec.validate()?;
                 let mut moments = match checkpoint {
                     Some(checkpoint) => decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
-                    None => Moments::new(&job.config),
+                    None => Moments::new(job.config()),
                 };
                 moments.merge(&doc.moments).map_err(DocumentError::from)?;
                 moments.check_bounded().map_err(DocumentError::from)?;
@@ -305,12 +305,12 @@ impl Statistics {
                     spec.solver = spec.solver.patched(patch)?;
                 }
                 let job = spec.validate()?;
-                check_budget(&policy, &job.spec, moments.iterations())?;
-                let reference = scene_reference(&job.config.scene);
+                check_budget(&policy, job.spec(), moments.iterations())?;
+                let reference = scene_reference(&job.config().scene);
                 let checkpoint = checkpoint_of(&moments, &job, reference)?;
                 let new = NewJob {
-                    spec: spec_json(&job.spec)?,
-                    fingerprint: job.config.fingerprint().to_string(),
+                    spec: spec_json(job.spec())?,
+                    fingerprint: job.config().fingerprint().to_string(),
                     iterations_total: checkpoint.iterations_done,
                     reference_luminance: reference,
                     idempotency_key: None,

@@ -88,7 +88,7 @@ pub(super) fn check_budget(policy: &RunPolicy, spec: &JobSpec, iterations: u64) 
 /// allows (the check behind "a job that cannot be cancelled": an iteration of 10¹⁷ light-path
 /// equivalents once ran for ever). CPU work: call it on the request pool.
 pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobError> {
-    let work = iteration_work(&job.config);
+    let work = iteration_work(job.config());
     let total = work.total();
     if total.is_finite() && total <= policy.max_iteration_work {
         return Ok(());
@@ -96,7 +96,7 @@ pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result
     // The brute force traces N_F paths; the restricted engine's candidates and every engine's merges
     // grow with the merge discs (R²).
     let traced_dominates = work.light_paths >= MERGE_WEIGHT * work.merges;
-    let field = if job.spec.engine == EngineName::Brute && traced_dominates { "light_paths" } else { "merge_radius" };
+    let field = if job.spec().engine == EngineName::Brute && traced_dominates { "light_paths" } else { "merge_radius" };
     Err(SpecError::new(
         field,
         format!(
@@ -116,7 +116,7 @@ pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result
 /// The new total of an extension: `more` beyond `base`, or `total` outright (which must exceed
 /// `done`); at most 10⁹.
 pub(super) fn target_total(base: u64, done: u64, more: Option<u64>, total: Option<u64>) -> Result<u64, JobError> {
-    const MAX: u64 = 1_000_000_000;
+    const MAX: u64 = crate::sim::spec::MAX_ITERATIONS;
     match (more, total) {
         (Some(add), None) => match base.checked_add(add) {
             Some(t) if add >= 1 && t <= MAX => Ok(t),

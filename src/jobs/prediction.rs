@@ -58,16 +58,16 @@ impl Predictions {
         check_path_counts(request.light_paths, request.camera_paths, ["light_paths", "camera_paths"])?;
         let Latest { state, partial, job, moments, .. } = self.statistics.latest(id).await?;
         let solver = match &request.solver {
-            Some(patch) => job.spec.solver.patched(patch)?,
-            None => job.spec.solver.clone(),
+            Some(patch) => job.spec().solver.patched(patch)?,
+            None => job.spec().solver.clone(),
         };
-        let measured = Budget { light_paths: job.spec.light_paths, camera_paths: job.spec.camera_paths };
+        let measured = Budget { light_paths: job.spec().light_paths, camera_paths: job.spec().camera_paths };
         let to = Budget { light_paths: request.light_paths, camera_paths: request.camera_paths };
         let prediction = self
             .statistics
             .jobs
             .compute_heavy(move |_| -> Result<Prediction, JobError> {
-                predict(&moments, &job.config.cells, &solver, measured, to)
+                predict(&moments, &job.config().cells, &solver, measured, to)
                     .map_err(|e| JobError::Conflict(e.to_string()))
             })
             .await??;

@@ -93,7 +93,7 @@ mod tests {
     fn a_scene_reference_is_computed_once_and_kept() {
         // A scene no other test uses, so that the cache starts without it.
         let job = parse_job_spec(&serde_json::json!({ "scene": { "l3": 3.125 } })).unwrap().validate().unwrap();
-        let scene = &job.config.scene;
+        let scene = &job.config().scene;
         assert_eq!(cached_scene_reference(scene), None);
         let first = scene_reference(scene);
         assert_eq!(cached_scene_reference(scene), Some(first));

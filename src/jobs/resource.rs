@@ -13,8 +13,9 @@ use crate::store::JobRow;
 
 pub use crate::store::JobState;
 
-/// The strategy with the lowest RMS so far, on honest figures: the per-path strategies and the
-/// cross-fitted optima (the in-sample `optimal` row is optimistic and left out).
+/// The strategy to show as "best" so far: at a checkpoint, the recommended row; between
+/// checkpoints, the per-path strategy with the lowest RMS among those that keep the fixed weights
+/// (the in-sample `optimal` row is optimistic and never shown).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BestStrategy {
     /// The noise-table row: the recommended one when the checkpoint names one, otherwise the

@@ -227,8 +227,8 @@ mod tests {
     fn document() -> MomentsDocument {
         let doc = serde_json::json!({ "iterations": 3, "light_paths": 1000, "camera_paths": 10 });
         let job = crate::sim::spec::parse_job_spec(&doc).unwrap().validate().unwrap();
-        let moments = crate::sim::runner::run(&job.config, job.spec.seed, 0..3);
-        MomentsDocument::new(job.spec.clone(), moments)
+        let moments = crate::sim::runner::run(job.config(), job.spec().seed, 0..3);
+        MomentsDocument::new(job.spec().clone(), moments)
     }
 
     #[test]

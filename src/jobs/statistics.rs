@@ -17,6 +17,7 @@ use super::signing::Provenance;
 use super::toolbox::JobManager;
 use crate::sim::document::{MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
+use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::ValidJob;
@@ -130,7 +131,9 @@ impl Statistics {
     /// table is the in-sample fit at that λ instead of the recommended weights.
     pub async fn solve(&self, id: i64, patch: &Value, weights_lambda: Option<f64>) -> Result<JobResult, JobError> {
         if let Some(l) = weights_lambda {
-            check(l.is_finite() && (0.0..=1e12).contains(&l), "lambda", || format!("must be in [0, 1e12], got {l}"))?;
+            check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "lambda", || {
+                format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
+            })?;
         }
         let solver = self.jobs.get(id).await?.spec.solver.patched(patch)?;
         let Latest { state, partial, reference, job, moments, .. } = self.latest(id).await?;
@@ -138,9 +141,9 @@ impl Statistics {
             .jobs
             .compute_heavy(move |_| -> RunReport {
                 let weights = weights_lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
-                let expected = expected_luminances(&job.config);
+                let expected = expected_luminances(job.config());
                 let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-                build_report(&moments, &job.config.cells, &solver, &inputs)
+                build_report(&moments, &job.config().cells, &solver, &inputs)
             })
             .await?;
         Ok(JobResult { job_id: id, partial, state, report })
@@ -154,7 +157,7 @@ impl Statistics {
         let provenance = self.provenance.clone();
         self.jobs
             .compute(move || {
-                let spec = if merged { merged_spec(&job.spec, &moments) } else { job.spec.clone() };
+                let spec = if merged { merged_spec(job.spec(), &moments) } else { job.spec().clone() };
                 provenance.sign(MomentsDocument::new(spec, moments)).to_json()
             })
             .await

@@ -171,7 +171,7 @@ impl Sweeps {
                         )),
                         other => other,
                     };
-                    check_budget(&policy, &job.spec, range_len(&job.spec)).map_err(at_run)?;
+                    check_budget(&policy, job.spec(), range_len(job.spec())).map_err(at_run)?;
                     check_iteration_work(&policy, &job).map_err(at_run)?;
                     valid.push(job);
                 }
@@ -179,7 +179,7 @@ impl Sweeps {
             })
             .await??;
         self.check_room_for(valid.len())?;
-        let scenes: Vec<Scene> = valid.iter().map(|job| job.config.scene.clone()).collect();
+        let scenes: Vec<Scene> = valid.iter().map(|job| job.config().scene.clone()).collect();
         let references = self
             .jobs
             .compute_heavy(move |stop| {
@@ -204,9 +204,9 @@ impl Sweeps {
             .zip(references)
             .map(|(job, reference)| -> Result<NewJob, JobError> {
                 Ok(NewJob {
-                    spec: spec_json(&job.spec)?,
-                    fingerprint: job.config.fingerprint().to_string(),
-                    iterations_total: range_len(&job.spec),
+                    spec: spec_json(job.spec())?,
+                    fingerprint: job.config().fingerprint().to_string(),
+                    iterations_total: range_len(job.spec()),
                     reference_luminance: reference,
                     idempotency_key: None,
                     request_hash: None,
@@ -454,7 +454,7 @@ impl Sweeps {
         let figures = self
             .jobs
             .compute_heavy(move |_| {
-                point_figures(&plan, r, &latest.moments, &latest.job.config.cells, &result.report, partial)
+                point_figures(&plan, r, &latest.moments, &latest.job.config().cells, &result.report, partial)
             })
             .await?;
         let mut cache = self.predictions.lock().expect("prediction cache");

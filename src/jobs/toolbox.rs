@@ -94,7 +94,7 @@ impl JobManager {
         let total = resource.progress.iterations_total;
         let active = Arc::new(ActiveJob {
             id,
-            start: job.spec.iteration_range().start,
+            start: job.spec().iteration_range().start,
             job,
             stop: AtomicBool::new(false),
             stop_reason: AtomicU8::new(0),

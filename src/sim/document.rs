@@ -190,7 +190,7 @@ impl MomentsDocument {
         }
         let job = self.spec.validate().map_err(|e| DocumentError::Inconsistent(format!("invalid spec: {e}")))?;
         // A document an earlier build wrote carries its format's fingerprint.
-        if job.config.fingerprint_of_format(self.moments.format_version) != self.fingerprint {
+        if job.config().fingerprint_of_format(self.moments.format_version) != self.fingerprint {
             return Err(DocumentError::Inconsistent("the spec does not describe the moments' configuration".into()));
         }
         self.check_spec_covers()?;
@@ -291,7 +291,7 @@ mod tests {
             "iterations": 6, "seed": 2, "shard": { "index": k, "count": n }, "folds": folds }))
         .unwrap();
         let job = spec.validate().unwrap();
-        let moments = run(&job.config, spec.seed, spec.iteration_range());
+        let moments = run(job.config(), spec.seed, spec.iteration_range());
         MomentsDocument::new(spec, moments)
     }
 
@@ -352,7 +352,7 @@ mod tests {
         assert!(matches!(refused(short), DocumentError::Inconsistent(m) if m.contains("only 2")));
         // No iterations at all (once a 500 from the database's CHECK constraint).
         let spec = doc.spec.clone();
-        let empty = MomentsDocument::new(spec.clone(), Moments::new(&spec.validate().unwrap().config));
+        let empty = MomentsDocument::new(spec.clone(), Moments::new(spec.validate().unwrap().config()));
         assert_eq!(MomentsDocument::from_json(&empty.to_json()), Err(DocumentError::Empty));
         // A coverage whose counts once wrapped: four ranges [0, 2^63).
         let mut wrapped = serde_json::to_value(&doc).unwrap();
@@ -417,7 +417,7 @@ mod tests {
             let spec = parse_job_spec(&json!({ "light_paths": 20_000, "camera_paths": 100, "merge_radius": 0.02,
                 "iterations": 6, "seed": 2 }))
             .unwrap();
-            run(&spec.validate().unwrap().config, 2, 0..6)
+            run(spec.validate().unwrap().config(), 2, 0..6)
         };
         let merged = merge_documents(&[shard(1, 3), shard(0, 3), shard(2, 3)]).unwrap();
         merged.verify().unwrap();

@@ -199,13 +199,33 @@ pub fn parse_job_spec(document: &Value) -> Result<JobSpec, SpecError> {
     })
 }
 
+/// Most iterations of one job (the message of its check says 10^9).
+pub const MAX_ITERATIONS: u64 = 1_000_000_000;
+
 /// A specification that passed validation, with the simulation configuration built from it.
+/// Only [`JobSpec::validate`] makes one, and its parts cannot be changed afterwards: holding a
+/// `ValidJob` means holding values that were checked together.
 #[derive(Debug, Clone)]
 pub struct ValidJob {
+    spec: JobSpec,
+    config: Arc<SimConfig>,
+}
+
+impl ValidJob {
     /// The specification as validated.
-    pub spec: JobSpec,
+    pub fn spec(&self) -> &JobSpec {
+        &self.spec
+    }
+
     /// The simulation configuration built from it, shared by every iteration.
-    pub config: Arc<SimConfig>,
+    pub fn config(&self) -> &Arc<SimConfig> {
+        &self.config
+    }
+
+    /// The specification as validated, the configuration dropped.
+    pub fn into_spec(self) -> JobSpec {
+        self.spec
+    }
 }
 
 impl JobSpec {
@@ -222,7 +242,7 @@ impl JobSpec {
             || format!("must be in [{MIN_LENGTH:e}, min(l2, l3) = {max_r}), got {}", self.merge_radius),
         )?;
         check_path_counts(self.light_paths, self.camera_paths, ["light_paths", "camera_paths"])?;
-        check((1..=1_000_000_000).contains(&self.iterations), "iterations", || {
+        check((1..=MAX_ITERATIONS).contains(&self.iterations), "iterations", || {
             format!("must be in [1, 10^9], got {}", self.iterations)
         })?;
         validate_range(self)?;

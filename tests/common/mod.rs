@@ -107,7 +107,8 @@ impl Drop for TestServer {
 pub fn uninterrupted_moments(spec: &Value) -> Value {
     let job = optimis::sim::spec::parse_job_spec(spec).unwrap().validate().unwrap();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    let moments = pool.install(|| optimis::sim::runner::run(&job.config, job.spec.seed, job.spec.iteration_range()));
+    let moments =
+        pool.install(|| optimis::sim::runner::run(job.config(), job.spec().seed, job.spec().iteration_range()));
     serde_json::to_value(&moments).unwrap()
 }
 

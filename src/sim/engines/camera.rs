@@ -209,19 +209,19 @@ mod tests {
             .unwrap()
             .validate()
             .unwrap();
-        let config = job.config;
-        let mut a = CameraSet::generate(&config, 3, 4);
-        let fresh = CameraSet::generate(&config, 3, 5);
-        a.regenerate(&config, 3, 5);
+        let config = job.config();
+        let mut a = CameraSet::generate(config, 3, 4);
+        let fresh = CameraSet::generate(config, 3, 5);
+        a.regenerate(config, 3, 5);
         let bits = |s: &CameraSet| {
             s.paths.iter().map(|p| (p.x2, p.cos1, p.to_pixel, p.x3, p.energy3.to_bits())).collect::<Vec<_>>()
         };
         assert_eq!(bits(&a), bits(&fresh));
         let mut rng = stream(3, 5, CAMERA_STREAM);
         let mut block = Block::empty();
-        trace(&config, &mut rng, &mut block, BLOCK);
+        trace(config, &mut rng, &mut block, BLOCK);
         let x3 = block.x3;
-        trace_block(&config, &mut block);
+        trace_block(config, &mut block);
         assert_eq!(x3.map(|r| r.map(f64::to_bits)), block.x3.map(|r| r.map(f64::to_bits)));
     }
 }

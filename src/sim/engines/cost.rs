@@ -120,7 +120,7 @@ mod tests {
     use serde_json::json;
 
     fn config(doc: serde_json::Value) -> SimConfig {
-        (*parse_job_spec(&doc).unwrap().validate().unwrap().config).clone()
+        (**parse_job_spec(&doc).unwrap().validate().unwrap().config()).clone()
     }
 
     /// The predicted merges per iteration against a run's observed mean (the pilot uses other

@@ -78,27 +78,29 @@ impl Engine {
     }
 }
 
-/// A validated configuration, shared read-only by every iteration.
+/// A validated configuration, shared read-only by every iteration. Its fields are readable through
+/// the accessors below and writable only inside the core (built by `JobSpec::validate` through
+/// [`SimConfig::new`]), so that the fingerprint always matches what it describes.
 #[derive(Debug, Clone)]
 pub struct SimConfig {
     /// The scene: distances, lobe and illumination.
-    pub scene: Scene,
+    pub(crate) scene: Scene,
     /// Merge radius R.
-    pub merge_radius: f64,
+    pub(crate) merge_radius: f64,
     /// N_F.
-    pub light_paths: u64,
+    pub(crate) light_paths: u64,
     /// N_B.
-    pub camera_paths: u64,
+    pub(crate) camera_paths: u64,
     /// The grid of cells α the weights are tabulated over.
-    pub cells: CellGrid,
+    pub(crate) cells: CellGrid,
     /// How an iteration's light paths are drawn.
-    pub engine: Engine,
+    pub(crate) engine: Engine,
     /// K: iteration s is summed into fold s mod K (cross-fitting, `solve::noise`).
-    pub folds: usize,
+    pub(crate) folds: usize,
     /// Whether the moments also keep the noise components of every iteration (light and camera
     /// paths split in halves, `stats::components`), from which `solve::predict` predicts the noise
     /// at any other N_F and N_B.
-    pub noise_components: bool,
+    pub(crate) noise_components: bool,
     fingerprint: String,
 }
 
@@ -123,7 +125,7 @@ struct FingerprintInput<'a> {
 
 impl SimConfig {
     /// Builds the configuration from validated parts.
-    pub fn new(
+    pub(crate) fn new(
         scene: Scene,
         merge_radius: f64,
         light_paths: u64,
@@ -145,6 +147,46 @@ impl SimConfig {
         };
         config.fingerprint = config.compute_fingerprint();
         config
+    }
+
+    /// The scene: distances, lobe and illumination.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Merge radius R.
+    pub fn merge_radius(&self) -> f64 {
+        self.merge_radius
+    }
+
+    /// N_F: light paths per iteration.
+    pub fn light_paths(&self) -> u64 {
+        self.light_paths
+    }
+
+    /// N_B: camera paths per iteration.
+    pub fn camera_paths(&self) -> u64 {
+        self.camera_paths
+    }
+
+    /// The grid of cells α the weights are tabulated over.
+    pub fn cells(&self) -> &CellGrid {
+        &self.cells
+    }
+
+    /// How an iteration's light paths are drawn.
+    pub fn engine(&self) -> Engine {
+        self.engine
+    }
+
+    /// K, the cross-fitting folds.
+    pub fn folds(&self) -> usize {
+        self.folds
+    }
+
+    /// Whether the moments keep the noise components.
+    pub fn noise_components(&self) -> bool {
+        self.noise_components
     }
 
     /// This configuration with noise components kept (or not): another fingerprint.
@@ -223,7 +265,7 @@ mod tests {
     use serde_json::json;
 
     fn fp(doc: serde_json::Value) -> String {
-        parse_job_spec(&doc).unwrap().validate().unwrap().config.fingerprint().to_string()
+        parse_job_spec(&doc).unwrap().validate().unwrap().config().fingerprint().to_string()
     }
 
     #[test]

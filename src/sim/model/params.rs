@@ -158,6 +158,14 @@ pub const MIN_LENGTH: f64 = 1e-9;
 /// Smallest lobe width β in degrees: the lobe's density grows as 1/β², and below this its
 /// contributions' fourth powers (the noise table's standard errors) leave the doubles.
 pub const MIN_BETA_DEG: f64 = 1e-6;
+/// Widest plane-2 lobe β, in degrees.
+pub const MAX_BETA_DEG: f64 = 45.0;
+/// Largest illumination level (a spot's contrast, a ring's level; unnormalised).
+pub const MAX_LEVEL: f64 = 1e12;
+/// Most rings of a `rings` profile.
+pub const MAX_RINGS: usize = 64;
+/// Most φ bins of the cell grid.
+pub const MAX_PHI_BINS: u32 = 360;
 
 /// `x` is finite and in [lo, hi].
 pub(crate) fn in_closed(x: f64, lo: f64, hi: f64) -> bool {
@@ -173,8 +181,8 @@ pub fn validate_scene(s: &SceneSpec) -> Result<(), SpecError> {
             format!("must be a distance in [{MIN_LENGTH:e}, {MAX_LENGTH:e}], got {v}")
         })?;
     }
-    check(in_closed(s.beta_deg, MIN_BETA_DEG, 45.0), "scene.beta_deg", || {
-        format!("must be in [{MIN_BETA_DEG:e}, 45] degrees, got {}", s.beta_deg)
+    check(in_closed(s.beta_deg, MIN_BETA_DEG, MAX_BETA_DEG), "scene.beta_deg", || {
+        format!("must be in [{MIN_BETA_DEG:e}, {MAX_BETA_DEG}] degrees, got {}", s.beta_deg)
     })?;
     validate_profile(&s.illumination)
 }
@@ -193,8 +201,8 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
             check(in_open_closed(r_ls, a, MAX_LENGTH), &format!("{f}.r_ls"), || {
                 format!("must be a radius in (a = {a}, {MAX_LENGTH:e}], got {r_ls}")
             })?;
-            check(in_open_closed(contrast, 0.0, 1e12), &format!("{f}.contrast"), || {
-                format!("must be in (0, 1e12], got {contrast}")
+            check(in_open_closed(contrast, 0.0, MAX_LEVEL), &format!("{f}.contrast"), || {
+                format!("must be in (0, {MAX_LEVEL:e}], got {contrast}")
             })
         }
         IlluminationSpec::Uniform { r_ls } => {
@@ -203,8 +211,8 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
             })
         }
         IlluminationSpec::Rings { ref rings } => {
-            check((1..=64).contains(&rings.len()), &format!("{f}.rings"), || {
-                format!("must list 1 to 64 rings, got {}", rings.len())
+            check((1..=MAX_RINGS).contains(&rings.len()), &format!("{f}.rings"), || {
+                format!("must list 1 to {MAX_RINGS} rings, got {}", rings.len())
             })?;
             let mut inner = 0.0;
             let mut flux = 0.0;
@@ -218,9 +226,11 @@ fn validate_profile(ill: &IlluminationSpec) -> Result<(), SpecError> {
                         ring.outer_radius
                     )
                 })?;
-                check(ring.level.is_finite() && (0.0..=1e12).contains(&ring.level), &format!("{field}.level"), || {
-                    format!("must be in [0, 1e12], got {}", ring.level)
-                })?;
+                check(
+                    ring.level.is_finite() && (0.0..=MAX_LEVEL).contains(&ring.level),
+                    &format!("{field}.level"),
+                    || format!("must be in [0, {MAX_LEVEL:e}], got {}", ring.level),
+                )?;
                 flux += ring.level * (ring.outer_radius.powi(2) - inner * inner);
                 inner = ring.outer_radius;
             }
@@ -253,8 +263,8 @@ fn validate_edges(edges: &[f64], field: &str) -> Result<(), SpecError> {
 pub fn validate_cells(cells: &CellSpec) -> Result<CellGrid, SpecError> {
     validate_edges(&cells.r2_edges, "cells.r2_edges")?;
     validate_edges(&cells.r3_edges, "cells.r3_edges")?;
-    check((1..=360).contains(&cells.phi_bins), "cells.phi_bins", || {
-        format!("must be in [1, 360], got {}", cells.phi_bins)
+    check((1..=MAX_PHI_BINS).contains(&cells.phi_bins), "cells.phi_bins", || {
+        format!("must be in [1, {MAX_PHI_BINS}], got {}", cells.phi_bins)
     })?;
     let total = cells.r2_edges.len() * cells.r3_edges.len() * cells.phi_bins as usize;
     check(total <= MAX_CELLS, "cells", || {

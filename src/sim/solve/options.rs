@@ -12,6 +12,9 @@ use crate::sim::model::params::{SpecError, check, merge_patch};
 /// Most λ values a cross-validation grid may try.
 pub const MAX_CV_LAMBDAS: usize = 32;
 
+/// Largest gradient penalty λ.
+pub const MAX_LAMBDA: f64 = 1e12;
+
 /// How the optimal weights are fitted.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
@@ -82,15 +85,15 @@ pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
             format!("w0 + w1 + w2 must equal 1 when all three are fixed, got {}", a + b + c)
         })?;
     }
-    check(solver.lambda.is_finite() && (0.0..=1e12).contains(&solver.lambda), "solver.lambda", || {
-        format!("must be in [0, 1e12], got {}", solver.lambda)
+    check(solver.lambda.is_finite() && (0.0..=MAX_LAMBDA).contains(&solver.lambda), "solver.lambda", || {
+        format!("must be in [0, {MAX_LAMBDA:e}], got {}", solver.lambda)
     })?;
     check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
         format!("must list 1 to {MAX_CV_LAMBDAS} values, got {}", solver.cv_lambdas.len())
     })?;
     for (i, &l) in solver.cv_lambdas.iter().enumerate() {
-        check(l.is_finite() && (0.0..=1e12).contains(&l), &format!("solver.cv_lambdas[{i}]"), || {
-            format!("must be in [0, 1e12], got {l}")
+        check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), &format!("solver.cv_lambdas[{i}]"), || {
+            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
         })?;
     }
     Ok(())

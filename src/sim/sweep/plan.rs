@@ -190,7 +190,7 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
                 let job = parse_job_spec(&run_doc)
                     .and_then(|s| s.validate())
                     .map_err(|e| blame(&spec, &picks, &e, &describe()))?;
-                runs.push(PlannedRun { index: runs.len(), spec: job.spec });
+                runs.push(PlannedRun { index: runs.len(), spec: job.into_spec() });
                 run_keys.push(run_key);
                 runs.len() - 1
             }
@@ -209,10 +209,10 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
             let job = parse_job_spec(&point_doc)
                 .and_then(|s| s.validate())
                 .map_err(|e| blame(&spec, &picks, &e, &describe()))?;
-            let budget = Budget { light_paths: job.spec.light_paths, camera_paths: job.spec.camera_paths };
+            let budget = Budget { light_paths: job.spec().light_paths, camera_paths: job.spec().camera_paths };
             if spec.measure_predictions {
                 measured_run = Some(runs.len());
-                runs.push(PlannedRun { index: runs.len(), spec: job.spec });
+                runs.push(PlannedRun { index: runs.len(), spec: job.into_spec() });
                 // Never shared: no other point's run key can name it.
                 run_keys.push(vec![Value::String(format!("measure point {index}"))]);
             }

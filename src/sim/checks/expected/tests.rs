@@ -5,7 +5,7 @@ use crate::sim::spec::parse_job_spec;
 use serde_json::{Value, json};
 
 fn config(doc: Value) -> SimConfig {
-    (*parse_job_spec(&doc).unwrap().validate().unwrap().config).clone()
+    (**parse_job_spec(&doc).unwrap().validate().unwrap().config()).clone()
 }
 
 fn values(rows: &[StrategyExpectation]) -> Vec<f64> {
@@ -223,7 +223,7 @@ fn monte_carlo_means_match_the_expectation_at_the_merge_radius() {
     .unwrap()
     .validate()
     .unwrap();
-    let config = &job.config;
+    let config = &job.config();
     let expected = values(&expected_luminances(config));
     let reference = reference_luminance(&config.scene).unwrap();
     let moments = crate::sim::runner::run(config, 23, 0..iterations);
@@ -262,7 +262,8 @@ fn unresolvable_configurations_return_errors() {
     let (rows, used) = expected_within(&paper, 100_000);
     assert!(rows.iter().all(|r| r.luminance == Err(ReferenceError::NotConverged)), "{rows:?}");
     assert!(used < 200_000, "{used}");
-    let start = std::time::Instant::now();
+    // Bounded by the evaluation count, not by the clock (a wall-clock limit would fail on a slow
+    // or busy machine, or in a debug build, without anything being wrong).
     for (case, doc) in [
         json!({ "preset": "paper-table1", "scene": { "beta_deg": 1e-4 }, "merge_radius": 1e-9 }),
         json!({ "preset": "paper-table1", "scene": { "l2": 1e-6, "beta_deg": 45.0 }, "merge_radius": 1e-7 }),
@@ -280,7 +281,6 @@ fn unresolvable_configurations_return_errors() {
         eprintln!("case {case}: {:?} after {used} evaluations, {:.2?}", rows[0].luminance, begin.elapsed());
         assert!(used < 2 * EVALUATION_BUDGET, "{used}");
     }
-    assert!(start.elapsed().as_secs_f64() < 20.0, "{:?}", start.elapsed());
 }
 
 /// The strategies of today read the light's start at plane 3 only through its ring's level, and

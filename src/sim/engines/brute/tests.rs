@@ -69,7 +69,7 @@ fn simd_and_portable_loops_agree() {
         }),
     ] {
         let job = parse_job_spec(&doc).unwrap().validate().unwrap();
-        let config = &job.config;
+        let config = &job.config();
         let mut scratch = ChunkScratch::new(config.cells.len());
         for iteration in 0..4 {
             let cameras = CameraSet::generate(config, 7, iteration);

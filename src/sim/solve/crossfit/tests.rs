@@ -21,7 +21,7 @@ fn config() -> SimConfig {
         "folds": 10
     }))
     .unwrap();
-    (*spec.validate().unwrap().config).clone()
+    (**spec.validate().unwrap().config()).clone()
 }
 
 /// The true luminance of each cell: every technique estimates it without bias.

@@ -22,7 +22,7 @@ fn packed_index_enumerates_the_upper_triangle() {
 #[test]
 fn old_formats_and_foreign_fold_layouts_are_refused() {
     let spec = crate::sim::spec::parse_job_spec(&serde_json::json!({ "folds": 3 })).unwrap();
-    let config = spec.validate().unwrap().config;
+    let config = spec.validate().unwrap().config().clone();
     let mut old = Moments::new(&config);
     old.format_version = 1;
     let message = old.check_well_formed().unwrap_err().to_string();
