@@ -80,7 +80,7 @@ impl Engine {
 
 /// A validated configuration, shared read-only by every iteration. Its fields are readable through
 /// the accessors below and writable only inside the core (built by `JobSpec::validate` through
-/// [`SimConfig::new`]), so that the fingerprint always matches what it describes.
+/// `SimConfig::new`), so that the fingerprint always matches what it describes.
 #[derive(Debug, Clone)]
 pub struct SimConfig {
     /// The scene: distances, lobe and illumination.
