@@ -93,6 +93,7 @@ pub struct Metrics {
     iterations: Counter,
     light_paths: Counter<f64, AtomicU64>,
     sweep_refits: Counter,
+    cluster_tasks: Family<StateLabels, Gauge>,
 }
 
 impl Default for Metrics {
@@ -148,6 +149,12 @@ impl Metrics {
             "Re-fits of a sweep run's predicted points (one per checkpoint read, single flight)",
             sweep_refits.clone(),
         );
+        let cluster_tasks = Family::<StateLabels, Gauge>::default();
+        registry.register(
+            "cluster_tasks",
+            "Tasks of the jobs followed on a cluster (--executor slurm) by state",
+            cluster_tasks.clone(),
+        );
         let build = Family::<BuildLabels, Gauge>::default();
         build.get_or_create(&BuildLabels { version: env!("CARGO_PKG_VERSION").to_string() }).set(1);
         registry.register("build_info", "The optimis version serving (always 1)", build);
@@ -162,6 +169,15 @@ impl Metrics {
             iterations,
             light_paths,
             sweep_refits,
+            cluster_tasks,
+        }
+    }
+
+    /// Sets the counts of cluster tasks by state (the states absent count none).
+    pub fn set_cluster_tasks(&self, by_state: &std::collections::BTreeMap<String, i64>) {
+        self.cluster_tasks.clear();
+        for (state, n) in by_state {
+            self.cluster_tasks.get_or_create(&StateLabels { state: state.clone() }).set(*n);
         }
     }
 
@@ -220,6 +236,7 @@ mod tests {
         m.observe_checkpoint(Duration::from_millis(20));
         m.add_iterations(3, 1_000_000);
         m.add_iterations(2, 1_000_000);
+        m.set_cluster_tasks(&[("running".to_string(), 3), ("pending".to_string(), 1)].into());
         let build = format!(r#"optimis_build_info{{version="{}"}} 1"#, env!("CARGO_PKG_VERSION"));
         let text = m.render(
             &[(JobState::Running, 1), (JobState::Succeeded, 4)],
@@ -234,6 +251,7 @@ mod tests {
             r#"optimis_job_light_paths_per_second{job_id="7"} 50000000"#,
             "optimis_iterations_total 5",
             "optimis_light_paths_total 5000000",
+            r#"optimis_cluster_tasks{state="running"} 3"#,
             build.as_str(),
             "# EOF",
         ] {

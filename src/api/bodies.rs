@@ -57,6 +57,11 @@ pub struct JobSubmission {
     /// Poisson process) or `brute` (all N_F light paths; the reference).
     #[schema(nullable = false)]
     engine: Option<crate::sim::spec::EngineName>,
+    /// Only on a server started with `--executor slurm`: how many tasks (one Slurm array task
+    /// each) the job's iterations are cut into; absent, the server's `--default-tasks`. A server
+    /// that runs its jobs on its own pool refuses it (422). Not part of the computation.
+    #[schema(nullable = false)]
+    execution: Option<crate::sim::spec::Execution>,
 }
 
 /// Scene fields to override.

@@ -140,7 +140,7 @@ impl From<JobError> for ApiError {
             // A corrupted checkpoint is reported for that job; it says nothing about internals.
             JobError::Store(e @ StoreError::Corrupt { .. }) => ApiError::Conflict(e.to_string()),
             JobError::Store(e) => ApiError::Internal(e.to_string()),
-            JobError::Internal(m) | JobError::Simulation(m) => ApiError::Internal(m),
+            JobError::Internal(m) | JobError::Simulation(m) | JobError::Execution(m) => ApiError::Internal(m),
         }
     }
 }

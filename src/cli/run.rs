@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use clap::Args;
 use serde_json::{Value, json};
@@ -59,9 +59,19 @@ pub struct RunArgs {
     #[arg(long)]
     pub json: bool,
     /// Write the run's statistics as a moments document (for `optimis merge`, `optimis report`
-    /// or `POST /v1/jobs/{id}/merge`).
+    /// or `POST /v1/jobs/{id}/merge`). `{shard}` in the name is replaced by the shard index (one
+    /// file per task of a job array).
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// With `--out`: also write the document every S seconds while the run goes on (each write
+    /// atomic), so that a crash or a cluster's preemption loses at most S seconds of work.
+    #[arg(long, value_name = "S", requires = "out", value_parser = checkpoint_seconds)]
+    pub checkpoint_seconds: Option<f64>,
+    /// With `--out`: if the file already holds the first iterations of this run (a run of the
+    /// same configuration and seed, interrupted), continue from them instead of starting over.
+    /// The result is bit-identical to an uninterrupted run.
+    #[arg(long, requires = "out")]
+    pub resume: bool,
     /// Set any field of the job document, by its dotted path (repeatable; applied after the spec
     /// file and the flags). VALUE is JSON if it parses (`0.01`, `true`, `null`, `{"w0": null}`),
     /// else a string: `--set scene.l3=9 --set solver.fixed.w0=null --set engine=brute`.
@@ -133,9 +143,6 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
     let mut spec = parse_job_spec(&doc)?;
     let environment: HashMap<String, String> = std::env::vars().collect();
     spec.shard = resolve_shard(args.shard, args.shard_count, spec.shard, &environment)?;
-    if spec.shard.is_some() {
-        spec.first_iteration = None;
-    }
     Ok(spec.validate()?)
 }
 
@@ -152,22 +159,97 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
 pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool, progress: &ProgressArgs, label: &str) -> Moments {
+    run_moments_from(job, pool, progress, label, Moments::new(job.config()), None)
+        .expect("a fresh run writes no checkpoints")
+}
+
+/// A document written while the run goes on: where, and how often.
+struct Checkpoints<'a> {
+    path: &'a Path,
+    every: Duration,
+}
+
+/// Runs the iterations of `job` that `moments` (the first ones, or none) does not hold, writing
+/// the partial document every so often when asked.
+fn run_moments_from(
+    job: &ValidJob,
+    pool: &rayon::ThreadPool,
+    progress: &ProgressArgs,
+    label: &str,
+    mut moments: Moments,
+    checkpoints: Option<Checkpoints<'_>>,
+) -> Result<Moments, CliError> {
     let config = &job.config();
     let range = job.spec().iteration_range();
     let total = range.end - range.start;
+    let resumed = moments.iterations();
     let mut shown = Progress::new(progress, label, total, config.light_paths);
     let started = Instant::now();
-    let mut moments = Moments::new(config);
+    let mut last_write = Instant::now();
+    let mut written = Ok(());
     let never = AtomicBool::new(false);
     pool.install(|| {
-        run_iterations(config, job.spec().seed, range.clone(), &mut moments, &never, |_, next| {
+        run_iterations(config, job.spec().seed, range.start + resumed..range.end, &mut moments, &never, |m, next| {
             shown.update(next - range.start, started, config.light_paths);
+            if let Some(c) = &checkpoints
+                && last_write.elapsed() >= c.every
+            {
+                last_write = Instant::now();
+                written = write_atomically(c.path, &MomentsDocument::new(job.spec().clone(), m.clone()).to_json());
+                if written.is_err() {
+                    return std::ops::ControlFlow::Break(());
+                }
+            }
             std::ops::ControlFlow::Continue(())
         })
     })
-    .expect("a fresh run is neither cancelled nor overlapping");
+    .expect("the run is neither cancelled nor overlapping (a resumed document holds only its first iterations)");
+    written?;
     shown.finish();
-    moments
+    Ok(moments)
+}
+
+fn checkpoint_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && (0.1..=86_400.0).contains(&s) => Ok(s),
+        _ => Err(format!("expected seconds in [0.1, 86400], got {text:?}")),
+    }
+}
+
+/// `--out` with `{shard}` replaced by the shard's index.
+fn out_path(out: &Path, spec: &crate::sim::spec::JobSpec) -> PathBuf {
+    match (out.to_str(), spec.shard) {
+        (Some(text), Some(shard)) if text.contains("{shard}") => {
+            PathBuf::from(text.replace("{shard}", &shard.index.to_string()))
+        }
+        _ => out.to_path_buf(),
+    }
+}
+
+/// The moments of an interrupted run of `job` in `path` (`--resume`): none if the file does not
+/// exist; refused unless it holds exactly the first iterations of this run's range, drawn under the
+/// same configuration and seed.
+fn resume_from(path: &Path, job: &ValidJob) -> Result<Moments, CliError> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Moments::new(job.config())),
+        Err(source) => return Err(CliError::Read { path: path.to_path_buf(), source }),
+    };
+    let doc =
+        MomentsDocument::from_json(&bytes).map_err(|source| CliError::Document { path: path.to_path_buf(), source })?;
+    let range = job.spec().iteration_range();
+    let held = doc.moments.iterations();
+    let prefix = crate::sim::stats::coverage::Coverage::range(job.spec().seed, range.start, range.start + held);
+    if doc.fingerprint != job.config().fingerprint() || doc.coverage != prefix || held > range.end - range.start {
+        return Err(CliError::Config(format!(
+            "--resume: {} does not hold the first iterations of this run (seed {}, iterations [{}, {})) under its configuration; remove it to start over",
+            path.display(),
+            job.spec().seed,
+            range.start,
+            range.end
+        )));
+    }
+    Ok(doc.moments)
 }
 
 pub fn run(args: RunArgs) -> Result<(), CliError> {
@@ -175,9 +257,18 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let pool = thread_pool(args.threads)?;
     let config = &job.config();
     let started = Instant::now();
-    let moments = run_moments(&job, &pool, &args.progress, "");
+    let out = args.out.as_deref().map(|p| out_path(p, job.spec()));
+    let resumed = match &out {
+        Some(path) if args.resume => resume_from(path, &job)?,
+        _ => Moments::new(config),
+    };
+    let checkpoints = out
+        .as_deref()
+        .zip(args.checkpoint_seconds)
+        .map(|(path, s)| Checkpoints { path, every: Duration::from_secs_f64(s) });
+    let moments = run_moments_from(&job, &pool, &args.progress, "", resumed, checkpoints)?;
     let seconds = started.elapsed().as_secs_f64();
-    if let Some(path) = &args.out {
+    if let Some(path) = &out {
         write_atomically(path, &MomentsDocument::new(job.spec().clone(), moments.clone()).to_json())?;
     }
     let expected = expected_luminances(config);

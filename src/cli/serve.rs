@@ -9,6 +9,7 @@ use clap::{Args, ValueEnum};
 use super::{CliError, cores};
 use crate::api::{BearerToken, HttpLimits};
 use crate::jobs::RunPolicy;
+use crate::jobs::cluster::SlurmOptions;
 use crate::jobs::peers::{Peer, check_owner_only, read_secret};
 use crate::server::{ConnectionLimits, ServerConfig, TlsFiles, serve, termination_signal};
 
@@ -121,6 +122,107 @@ pub struct ServeArgs {
     /// Log format on stderr.
     #[arg(long, value_enum, default_value = "text")]
     pub log_format: LogFormat,
+    #[command(flatten)]
+    pub cluster: ClusterArgs,
+}
+
+/// Where jobs run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExecutorName {
+    /// The server's own simulation pool (--threads).
+    Local,
+    /// A Slurm cluster: each job as job arrays (see --cluster-dir).
+    Slurm,
+}
+
+/// The flags of `--executor slurm`.
+#[derive(Debug, Args)]
+pub struct ClusterArgs {
+    /// Where jobs run: `local` (the server's own pool) or `slurm` (a job array per job; then
+    /// --workers is how many jobs are followed on the cluster at once).
+    #[arg(long, value_enum, default_value = "local")]
+    pub executor: ExecutorName,
+    /// With --executor slurm: a directory the server and the nodes share (task specifications,
+    /// documents and logs); created if missing; others must not be able to write to it.
+    #[arg(long, value_name = "DIR", required_if_eq("executor", "slurm"))]
+    pub cluster_dir: Option<PathBuf>,
+    /// The optimis binary the tasks run, as a path on the nodes (default: this server's own).
+    #[arg(long, value_name = "PATH")]
+    pub slurm_binary: Option<PathBuf>,
+    /// sbatch --partition of the tasks.
+    #[arg(long, value_name = "NAME")]
+    pub slurm_partition: Option<String>,
+    /// sbatch --account of the tasks.
+    #[arg(long, value_name = "NAME")]
+    pub slurm_account: Option<String>,
+    /// sbatch --cpus-per-task (also each task's --threads).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub slurm_cpus_per_task: u32,
+    /// sbatch --time of each task (e.g. 02:00:00).
+    #[arg(long, value_name = "TIME")]
+    pub slurm_time: Option<String>,
+    /// A further sbatch option for every task, one argument (e.g. --sbatch-option=--qos=long);
+    /// repeatable. Passed as an argument, never through a shell.
+    #[arg(long = "sbatch-option", value_name = "OPTION", allow_hyphen_values = true)]
+    pub sbatch_options: Vec<String>,
+    /// Tasks of a job whose document gives no `execution.tasks`.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=crate::sim::spec::MAX_TASKS))]
+    pub default_tasks: u64,
+    /// Most tasks of one job (`execution.tasks` above it: 422).
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=crate::sim::spec::MAX_TASKS))]
+    pub max_tasks: u64,
+    /// Resubmissions of a failed task before its job fails.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub task_retries: u32,
+    /// Seconds between two looks at a job's tasks (one squeue per job per look).
+    #[arg(long, default_value_t = 2.0, value_parser = positive_seconds)]
+    pub slurm_poll_seconds: f64,
+    /// Seconds each Slurm command (sbatch, squeue, scancel) may take.
+    #[arg(long, default_value_t = 30.0, value_parser = positive_seconds)]
+    pub slurm_command_timeout: f64,
+    /// Seconds a task may be gone from the queue without a complete document before it counts
+    /// as failed (shared filesystems lag).
+    #[arg(long, default_value_t = 60.0, value_parser = positive_seconds)]
+    pub task_grace_seconds: f64,
+    /// Seconds between two partial documents of a task (what a restart or a retry resumes from).
+    #[arg(long, default_value_t = 10.0, value_parser = positive_seconds)]
+    pub task_checkpoint_seconds: f64,
+}
+
+impl ClusterArgs {
+    /// The Slurm executor's options, if it is asked for.
+    fn slurm_options(&self) -> Result<Option<SlurmOptions>, CliError> {
+        if self.executor == ExecutorName::Local {
+            return Ok(None);
+        }
+        let binary = match &self.slurm_binary {
+            Some(path) => path.clone(),
+            None => std::env::current_exe().map_err(|e| {
+                CliError::Config(format!("--slurm-binary: this server's own path is unknown ({e}); give it"))
+            })?,
+        };
+        let dir =
+            self.cluster_dir.clone().ok_or_else(|| CliError::Config("--executor slurm needs --cluster-dir".into()))?;
+        let cluster_dir = std::path::absolute(&dir).map_err(|e| CliError::Config(format!("--cluster-dir: {e}")))?;
+        let options = SlurmOptions {
+            cluster_dir,
+            binary,
+            partition: self.slurm_partition.clone(),
+            account: self.slurm_account.clone(),
+            cpus_per_task: self.slurm_cpus_per_task,
+            time_limit: self.slurm_time.clone(),
+            sbatch_options: self.sbatch_options.clone(),
+            default_tasks: self.default_tasks,
+            max_tasks: self.max_tasks,
+            retries: self.task_retries,
+            poll_interval: Duration::from_secs_f64(self.slurm_poll_seconds),
+            command_timeout: Duration::from_secs_f64(self.slurm_command_timeout),
+            missing_grace: Duration::from_secs_f64(self.task_grace_seconds),
+            task_checkpoint_seconds: self.task_checkpoint_seconds,
+        };
+        options.validate().map_err(CliError::Config)?;
+        Ok(Some(options))
+    }
 }
 
 fn positive_number(s: &str) -> Result<f64, String> {
@@ -184,6 +286,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         // The key is a secret like the token: refuse one that other users can read.
         check_owner_only(key).map_err(|e| CliError::Config(format!("--tls-key: {e}")))?;
     }
+    let slurm = args.cluster.slurm_options()?;
     let config = ServerConfig {
         bind: args.bind,
         database: args.database,
@@ -219,6 +322,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         signing_key: args.signing_key,
         trust: args.trust,
         allowed_hosts: args.allowed_hosts,
+        slurm,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async {

@@ -94,7 +94,7 @@ pub(crate) fn spec_json(spec: &JobSpec) -> Result<String, JobError> {
 }
 
 /// The moments of a checkpoint, verified: checksum, format and configuration must match the job,
-/// and for a job's own run (`own_run`) the coverage must be the start of its range — or the
+/// and for a job's own run (`own_run`) the coverage must lie within its range — or the
 /// checkpoint is reported corrupted (never silently resumed from).
 pub(crate) fn decode_checkpoint(
     id: i64,
@@ -125,10 +125,12 @@ pub(crate) fn decode_checkpoint(
         )));
     }
     if own_run {
-        let start = job.spec().iteration_range().start;
-        let expected = Coverage::range(job.spec().seed, start, start + checkpoint.iterations_done);
-        if moments.coverage != expected {
-            return Err(corrupt(format!("checkpoint covers {:?}, expected {expected:?}", moments.coverage)));
+        // Within the job's range: its start for a run on the local pool, any of its iterations
+        // for one on a cluster (whose tasks finish in any order).
+        let range = job.spec().iteration_range();
+        let expected = Coverage::range(job.spec().seed, range.start, range.end);
+        if !moments.coverage.is_within(&expected) {
+            return Err(corrupt(format!("checkpoint covers {:?}, outside {expected:?}", moments.coverage)));
         }
     }
     Ok(moments)

@@ -1,5 +1,5 @@
 //! Runs one job: on a blocking thread (never a tokio worker), asking the executor (`executor`: the
-//! local rayon pool today) for one segment of iterations at a time, with a checkpoint after every
+//! local rayon pool, or a Slurm cluster) for one segment of iterations at a time, with a checkpoint after every
 //! segment.
 //!
 //! A segment ends when a checkpoint is due (every K iterations or T seconds), when the job is
@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use super::checkpoint::{checkpoint_of, decode_checkpoint};
 use super::error::JobError;
+use super::executor::{ExecutionView, Segment, SegmentError};
 use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
 use super::state::{ActiveJob, Inner, StopReason};
 use crate::sim::runner::RunError;
@@ -53,7 +54,6 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     let rt = &inner.runtime;
     let valid = &job.job;
     let config = &valid.config();
-    let seed = valid.spec().seed;
     let mut moments = match rt.block_on(inner.store.load_checkpoint(job.id))? {
         Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid, true)?,
         None => Moments::new(config),
@@ -94,8 +94,8 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         let mut counted = done;
         let mut on_batch = |m: &Moments, next: u64| {
             let next = next - start;
-            inner.metrics.add_iterations(next - counted, config.light_paths);
-            counted = next;
+            inner.metrics.add_iterations(next.saturating_sub(counted), config.light_paths);
+            counted = counted.max(next);
             if last_publish.elapsed() >= PROGRESS_INTERVAL {
                 last_publish = Instant::now();
                 publish_progress(job, m, next, done, segment_start, config.light_paths);
@@ -105,7 +105,18 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             if due { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
         };
         let range = start + done..start + total;
-        let outcome = inner.executor.run_segment(config, seed, range, &mut moments, &job.stop, &mut on_batch);
+        let cancelled = || job.stop_reason() == Some(StopReason::Cancel);
+        let report = |view: ExecutionView| job.view.send_modify(|r| r.execution = Some(view));
+        let segment = Segment {
+            id: job.id,
+            job: valid,
+            first: start,
+            total: start + total,
+            stop: &job.stop,
+            cancelled: &cancelled,
+            report: &report,
+        };
+        let outcome = inner.executor.run_segment(&segment, range, &mut moments, &mut on_batch);
         if moments.iterations() > checkpointed {
             if !write_checkpoint(inner, job, &moments, reference)? {
                 return stopped(inner, job);
@@ -114,11 +125,12 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         }
         match outcome {
             Ok(_) => {}
-            Err(RunError::Cancelled) => return stopped(inner, job),
-            Err(RunError::Moments(e @ crate::sim::stats::moments::MergeError::Overflow(_))) => {
+            Err(SegmentError::Run(RunError::Cancelled)) => return stopped(inner, job),
+            Err(SegmentError::Run(RunError::Moments(e @ crate::sim::stats::moments::MergeError::Overflow(_)))) => {
                 return Err(JobError::Simulation(e.to_string()));
             }
-            Err(e @ RunError::Moments(_)) => return Err(JobError::Internal(e.to_string())),
+            Err(SegmentError::Run(e @ RunError::Moments(_))) => return Err(JobError::Internal(e.to_string())),
+            Err(SegmentError::Failed(reason)) => return Err(JobError::Execution(reason)),
         }
     }
 }

@@ -65,6 +65,9 @@ pub enum JobError {
     /// range); recorded as the job's error.
     #[error("the simulation stopped: {0}")]
     Simulation(String),
+    /// The job's work elsewhere (a cluster's tasks) failed for good.
+    #[error("{0}")]
+    Execution(String),
     /// A bug or an impossible state (HTTP 500).
     #[error("internal error: {0}")]
     Internal(String),

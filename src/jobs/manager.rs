@@ -149,12 +149,14 @@ impl JobManager {
         }
         self.check_queue()?;
         let policy = self.inner.policy.clone();
+        let executor = self.inner.executor.clone();
         let hash_body = idempotency_key.is_some();
         // Validation, the reference quadrature and the expected work of an iteration: CPU work,
         // each bounded, on the request pool.
         let (job, reference, request_hash) = self
             .compute(move || -> Result<_, JobError> {
                 let job = parse_job_spec(&document)?.validate()?;
+                executor.admit(job.spec())?;
                 check_budget(&policy, job.spec(), range_len(job.spec()))?;
                 check_iteration_work(&policy, &job)?;
                 let reference = scene_reference(&job.config().scene);
@@ -261,6 +263,10 @@ impl JobManager {
                 r.state = JobState::Cancelled;
                 r.updated_at = rfc3339(now_ms());
             });
+            // A queued job may still have work elsewhere (a cluster's tasks adopted at restart):
+            // stopped in the background, with the executor's own timeouts.
+            let executor = self.inner.executor.clone();
+            tokio::task::spawn_blocking(move || executor.cancel(id));
         } else {
             self.inner.store.request_cancel(id, now_ms()).await?;
             job.request_stop(StopReason::Cancel);
@@ -334,6 +340,17 @@ impl JobManager {
 
     /// Deletes a job that is not running, with its checkpoint.
     pub async fn delete(&self, id: i64) -> Result<(), JobError> {
+        let deleted = self.delete_row(id).await;
+        if deleted.is_ok() {
+            // What the executor keeps for the job (a cluster's task files), removed in the
+            // background.
+            let executor = self.inner.executor.clone();
+            tokio::task::spawn_blocking(move || executor.forget(id));
+        }
+        deleted
+    }
+
+    async fn delete_row(&self, id: i64) -> Result<(), JobError> {
         let _guard = self.inner.lifecycle.lock().await;
         self.refuse_while_held(id)?;
         if self.active(id).is_some() {

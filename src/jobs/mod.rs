@@ -1,5 +1,5 @@
 //! The job runner: queued jobs, run a bounded number at a time by an executor (the local rayon
-//! pool today), with progress in memory and checkpoints in the store; and the features built on
+//! pool, or a Slurm cluster), with progress in memory and checkpoints in the store; and the features built on
 //! them — statistics, named solves, predictions, sweeps — each a handle of its own.
 //!
 //! Imports: crate::sim, crate::store, crate::metrics
@@ -17,7 +17,8 @@
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
 //! * [`state`] — the jobs in memory (`ActiveJob`, `StopReason`) and the transitions of their state;
-//! * [`executor`] — where the iterations of a segment run (the seam a cluster executor plugs into);
+//! * [`cluster`] — the Slurm executor: a job's iterations as job arrays, followed and merged;
+//! * [`executor`] — where the iterations of a segment run: the seam, and the local pool;
 //! * [`checkpoint`] — the stored forms: spec JSON, checkpoint encoding, verified decoding, and the
 //!   memory of verified checkpoints;
 //! * [`compute`] — the pools a request's CPU work runs on: light work, and bounded heavy work;
@@ -30,6 +31,7 @@
 //!   fail with.
 
 pub mod checkpoint;
+pub mod cluster;
 pub mod compute;
 pub mod documents;
 pub mod driver;

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::JobError;
+use super::executor::ExecutionView;
 use crate::sim::solve::noise::NoiseRow;
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::solve::warnings::Warning;
@@ -79,6 +80,10 @@ pub struct JobResource {
     pub sweep_id: Option<i64>,
     /// What the data of the latest checkpoint cannot support (see the result's `warnings`).
     pub warnings: Vec<Warning>,
+    /// On a server that runs jobs on a cluster (`--executor slurm`), while the job runs: its
+    /// tasks, each with its Slurm job id, state, iterations and log. Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub execution: Option<ExecutionView>,
 }
 
 /// Unix milliseconds now.
@@ -123,6 +128,7 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
         merged: row.merged,
         sweep_id: row.sweep_id,
         warnings: row.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default(),
+        execution: None,
     })
 }
 

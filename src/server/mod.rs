@@ -18,10 +18,11 @@ use tokio::net::TcpListener;
 
 use crate::api::guard::Guard;
 use crate::api::{BearerToken, HttpLimits};
+use crate::jobs::cluster::{SlurmExecutor, SlurmOptions};
 use crate::jobs::compute::Pools;
 use crate::jobs::peers::{Peer, PeerConfigError, Peers};
 use crate::jobs::signing::{KeyError, Provenance};
-use crate::jobs::{JobManager, LocalPool, RunPolicy, Services};
+use crate::jobs::{Executor, JobManager, LocalPool, RunPolicy, Services};
 use crate::store::{Store, StoreError};
 pub use listener::ConnectionLimits;
 
@@ -56,6 +57,8 @@ pub struct ServerConfig {
     pub trust: Vec<PathBuf>,
     /// Host names this server also answers to, besides loopback ones (a proxy's public name).
     pub allowed_hosts: Vec<String>,
+    /// Where jobs run: the server's own pool (None, the default), or a Slurm cluster.
+    pub slurm: Option<SlurmOptions>,
 }
 
 /// The PEM files of the server's TLS certificate chain and private key.
@@ -96,6 +99,13 @@ pub enum ServerError {
     /// An I/O error of the listener (its local address, the accept loop).
     #[error("server error: {0}")]
     Io(#[from] std::io::Error),
+    /// The executor could not start (`--executor slurm`: the cluster directory, Slurm's
+    /// commands, the controller).
+    #[error("{0}")]
+    Executor(String),
+    /// Anything else that stopped the start-up.
+    #[error("server error: {0}")]
+    Other(String),
 }
 
 /// A started server: its address, and a way to stop it and wait.
@@ -155,7 +165,17 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
     // running job's chunks, and their light work never waits behind their heavy work.
     let pools = Pools::new()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
-    let executor = Arc::new(LocalPool::new(pool));
+    let executor: Arc<dyn Executor> = match &config.slurm {
+        None => Arc::new(LocalPool::new(pool)),
+        Some(options) => {
+            let (options, metrics) = (options.clone(), metrics.clone());
+            // Slurm's commands answer within their timeouts; off the tokio workers all the same.
+            let started = tokio::task::spawn_blocking(move || SlurmExecutor::start(options, metrics))
+                .await
+                .map_err(|e| ServerError::Other(e.to_string()))?;
+            Arc::new(started.map_err(ServerError::Executor)?)
+        }
+    };
     let jobs = JobManager::start(store, config.policy.clone(), executor, pools, metrics).await?;
     let services = Services::new(jobs.clone(), peers, provenance);
     let guard = Guard {

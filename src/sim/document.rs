@@ -138,8 +138,11 @@ fn checksum_of(body: &Body<'_>) -> String {
 }
 
 impl MomentsDocument {
-    /// Wraps moments drawn under `spec`.
-    pub fn new(spec: JobSpec, moments: Moments) -> Self {
+    /// Wraps moments drawn under `spec`. The spec's `execution` (how a server divided the work)
+    /// is dropped: the statistics do not depend on it, so documents of one job run any way are
+    /// the same bytes.
+    pub fn new(mut spec: JobSpec, moments: Moments) -> Self {
+        spec.execution = None;
         let mut doc = Self {
             kind: DOCUMENT_KIND.into(),
             format_version: DOCUMENT_VERSION,

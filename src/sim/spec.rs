@@ -56,7 +56,8 @@ pub struct JobSpec {
     /// Run only this shard of the study's `iterations` (see [`JobSpec::iteration_range`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<Shard>,
-    /// Run iterations [first_iteration, first_iteration + iterations) instead of [0, iterations).
+    /// Run iterations [first_iteration, first_iteration + iterations) instead of [0, iterations)
+    /// (with `shard`: shard k of those).
     #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "optional_count")]
     pub first_iteration: Option<u64>,
     /// The grid of cells the weights are tabulated over.
@@ -77,6 +78,25 @@ pub struct JobSpec {
     /// How light paths are drawn. Absent in documents stored before engines existed: `brute`.
     #[serde(default)]
     pub engine: EngineName,
+    /// How a server divides the job among a cluster's tasks (`optimis serve --executor slurm`).
+    /// Not part of the computation: the results do not depend on it, moments documents do not
+    /// carry it, and a local run ignores it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub execution: Option<Execution>,
+}
+
+/// Most tasks one job may be cut into (a server's `--max-tasks` may lower it).
+pub const MAX_TASKS: u64 = 10_000;
+
+/// How a server divides a job among a cluster's tasks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct Execution {
+    /// The number of tasks (shards of the job's iterations, one Slurm array task each): at least
+    /// 1, at most the job's iterations and 10,000.
+    #[serde(deserialize_with = "count")]
+    pub tasks: u64,
 }
 
 /// The engine of a job: `restricted` draws only the light paths that can merge (an exact Poisson
@@ -116,18 +136,18 @@ pub struct Shard {
 
 impl JobSpec {
     /// The iterations this job runs. Without `shard` or `first_iteration`: [0, M). With
-    /// `first_iteration` f: [f, f + M). With shard k of n: [⌊k·M/n⌋, ⌊(k+1)·M/n⌋), so that the n
-    /// shards of one study are disjoint and together exactly [0, M) of the same deterministic
-    /// sequence.
+    /// `first_iteration` f: [f, f + M). With shard k of n: [f + ⌊k·M/n⌋, f + ⌊(k+1)·M/n⌋) (f = 0
+    /// without `first_iteration`), so that the n shards of one study are disjoint and together
+    /// exactly [f, f + M) of the same deterministic sequence.
     pub fn iteration_range(&self) -> std::ops::Range<u64> {
         let m = self.iterations;
-        match (self.shard, self.first_iteration) {
-            (Some(Shard { index, count }), _) => {
-                let at = |k: u64| (u128::from(k) * u128::from(m) / u128::from(count)) as u64;
+        let first = self.first_iteration.unwrap_or(0);
+        match self.shard {
+            Some(Shard { index, count }) => {
+                let at = |k: u64| first + (u128::from(k) * u128::from(m) / u128::from(count)) as u64;
                 at(index)..at(index + 1)
             }
-            (None, Some(first)) => first..first + m,
-            (None, None) => 0..m,
+            None => first..first + m,
         }
     }
 }
@@ -248,6 +268,11 @@ impl JobSpec {
         validate_range(self)?;
         let cells = validate_cells(&self.cells)?;
         validate_solver(&self.solver)?;
+        if let Some(Execution { tasks }) = self.execution {
+            check((1..=self.iterations.min(MAX_TASKS)).contains(&tasks), "execution.tasks", || {
+                format!("must be in [1, min(iterations, {MAX_TASKS})] so that every task has iterations, got {tasks}")
+            })?;
+        }
         if self.noise_components {
             for (field, n) in [("light_paths", self.light_paths), ("camera_paths", self.camera_paths)] {
                 check(n % 2 == 0, field, || {
@@ -280,9 +305,6 @@ impl JobSpec {
 
 fn validate_range(spec: &JobSpec) -> Result<(), SpecError> {
     if let Some(Shard { index, count }) = spec.shard {
-        check(spec.first_iteration.is_none(), "first_iteration", || {
-            "cannot be combined with shard: a shard's range follows from the study's iterations".to_string()
-        })?;
         check((1..=spec.iterations).contains(&count), "shard.count", || {
             format!("must be in [1, iterations = {}] so that every shard has iterations, got {count}", spec.iterations)
         })?;
@@ -439,11 +461,15 @@ mod tests {
         let spec = parse(json!({ "iterations": 10, "first_iteration": 100 })).unwrap();
         assert_eq!(spec.iteration_range(), 100..110);
         assert_eq!(parse(json!({ "iterations": 10 })).unwrap().iteration_range(), 0..10);
+        // A shard of [f, f + M): how a cluster's tasks cut a job's added iterations.
+        let later = parse(json!({ "iterations": 10, "first_iteration": 100, "shard": { "index": 1, "count": 3 } }));
+        assert_eq!(later.unwrap().iteration_range(), 103..106);
         for (doc, field) in [
             (json!({ "iterations": 3, "shard": { "index": 3, "count": 3 } }), "shard.index"),
             (json!({ "iterations": 3, "shard": { "index": 0, "count": 4 } }), "shard.count"),
             (json!({ "iterations": 3, "shard": { "index": 0, "count": 0 } }), "shard.count"),
-            (json!({ "shard": { "index": 0, "count": 2 }, "first_iteration": 5 }), "first_iteration"),
+            (json!({ "iterations": 3, "execution": { "tasks": 4 } }), "execution.tasks"),
+            (json!({ "iterations": 3, "execution": { "tasks": 0 } }), "execution.tasks"),
             (json!({ "first_iteration": 4_611_686_018_427_387_904u64 }), "first_iteration"),
         ] {
             assert_eq!(invalid(doc.clone()).field, field, "{doc}");

@@ -37,6 +37,7 @@ export function showJob(app, id) {
     updateProgress(refs.progress, job);
     renderStats(refs, job);
     renderSpec(refs.spec, job);
+    renderTasks(refs, job);
     renderActions(refs, job);
     showMessage(refs['job-error'], job.error ? `The job failed: ${job.error}` : '');
     const { iterations_done: done, iterations_total: total } = job.progress;
@@ -169,6 +170,20 @@ function renderSpec(dl, job) {
   if (spec.first_iteration !== undefined) rows.push(['First iteration', formatCount(spec.first_iteration)]);
   if (job.merged) rows.push(['Merged', 'yes: the moments of several jobs added together']);
   dl.replaceChildren(...rows.map(([term, value]) => h('div', {}, h('dt', {}, term), h('dd', {}, value))));
+}
+
+/** The job's cluster tasks (`execution`, on a server with --executor slurm), while it runs. */
+function renderTasks(refs, job) {
+  const tasks = job.execution ? job.execution.tasks : [];
+  refs.tasks.hidden = tasks.length === 0;
+  refs['tasks-body'].replaceChildren(...tasks.map((t) => h('tr', {},
+    h('td', {}, String(t.index)),
+    h('td', {}, `${formatCount(t.first_iteration)} – ${formatCount(t.first_iteration + t.iterations)}`),
+    h('td', {}, `${formatCount(t.iterations_done)} of ${formatCount(t.iterations)}`),
+    h('td', {}, badge(t.state)),
+    h('td', {}, t.slurm_job_id || '—'),
+    h('td', {}, String(t.attempts)),
+    h('td', {}, h('code', {}, t.log)))));
 }
 
 /** A variable of the paper, such as N_F, in italics with its subscript. */

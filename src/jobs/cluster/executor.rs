@@ -1,0 +1,383 @@
+//! The Slurm executor: a job's iterations as one Slurm job array per round (the job's first
+//! iterations; each extension's), followed from the server until every task's document is
+//! complete.
+//!
+//! One look at a job (every `--slurm-poll-seconds`, on the job's driver thread — a blocking
+//! thread, never a tokio worker): plan a round for iterations no round covers yet and submit it
+//! (its intent recorded first, so a restart finds the array by its name instead of submitting it
+//! again); ask `squeue` once for all of the job's tasks; read the documents that changed; judge
+//! each task, resubmitting one that ended without its iterations (same shard, so the same
+//! iterations, up to `--task-retries` times, then the job fails naming the task, its Slurm job id
+//! and its log); merge the tasks' latest documents and hand them to the driver, which checkpoints
+//! them as it does a local run's. Because each document holds only its task's iterations and
+//! merges are exact, the merged statistics never count an iteration twice, whatever ran twice.
+//!
+//! A shutdown leaves the tasks running (the next start adopts them); a cancel `scancel`s them.
+
+use std::collections::{BTreeMap, HashMap};
+use std::ops::Range;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use super::files::{ClusterDir, JobDir, Round};
+use super::options::SlurmOptions;
+use super::slurm::{QueueEntry, Slurm, SlurmError};
+use super::tracking::{Tracking, round_spec};
+use crate::jobs::executor::{Executor, OnBatch, Segment, SegmentError};
+use crate::metrics::Metrics;
+use crate::sim::runner::RunError;
+use crate::sim::spec::{JobSpec, SpecError};
+use crate::sim::stats::moments::Moments;
+
+/// Runs jobs as Slurm job arrays.
+pub struct SlurmExecutor {
+    options: SlurmOptions,
+    dir: ClusterDir,
+    slurm: Slurm,
+    metrics: Arc<Metrics>,
+    /// What is known of each followed job between two segments; std Mutex, map operations only.
+    tracking: Mutex<HashMap<i64, Tracking>>,
+    /// Tasks by state of each followed job (for the metrics).
+    counts: Mutex<HashMap<i64, BTreeMap<String, i64>>>,
+}
+
+impl SlurmExecutor {
+    /// Checks the options, the cluster directory and that Slurm answers: a clear error at
+    /// start-up rather than failed jobs later.
+    pub fn start(options: SlurmOptions, metrics: Arc<Metrics>) -> Result<Self, String> {
+        options.validate()?;
+        let dir = ClusterDir::open(&options.cluster_dir)?;
+        let slurm = Slurm { timeout: options.command_timeout };
+        let version = slurm.check().map_err(|e| format!("--executor slurm: Slurm does not answer: {e}"))?;
+        if !options.binary.exists() {
+            tracing::warn!(binary = %options.binary.display(),
+                "--slurm-binary does not exist on this machine; it must on the nodes");
+        }
+        tracing::info!(%version, cluster_dir = %options.cluster_dir.display(), binary = %options.binary.display(),
+            "running jobs on Slurm (squeue and the task documents are followed; sacct is not needed)");
+        Ok(Self { options, dir, slurm, metrics, tracking: Mutex::default(), counts: Mutex::default() })
+    }
+
+    /// The tasks of round `r` for `spec`: its options and the task command.
+    fn submit_round(&self, dir: &JobDir, r: usize, round: &Round) -> Result<String, SlurmError> {
+        let mut options = self.options.common_sbatch_options();
+        options.push(format!("--job-name={}", dir.round_name(r)));
+        options.push(format!("--array=0-{}", round.tasks - 1));
+        options.push(format!("--output={}", path(&dir.log(r, "%a"))));
+        let shards = ["--shard-count".to_string(), round.tasks.to_string()];
+        self.slurm.submit(&options, &path(&self.dir.script()), &self.task_command(dir, r, "{shard}", &shards))
+    }
+
+    /// Task `k` of round `r` again, on its own (same shard: the same iterations).
+    fn resubmit_task(&self, dir: &JobDir, r: usize, round: &Round, k: u64) -> Result<String, SlurmError> {
+        let mut options = self.options.common_sbatch_options();
+        options.push(format!("--job-name={}", dir.task_name(r, k)));
+        options.push(format!("--output={}", path(&dir.log(r, &k.to_string()))));
+        let shard = ["--shard".to_string(), format!("{k}/{}", round.tasks)];
+        self.slurm.submit(&options, &path(&self.dir.script()), &self.task_command(dir, r, &k.to_string(), &shard))
+    }
+
+    /// `optimis run` for a task: the round's spec, its shard, a document written every few
+    /// seconds and resumed from if a retry finds one.
+    fn task_command(&self, dir: &JobDir, r: usize, k: &str, shard: &[String]) -> Vec<String> {
+        let mut argv = vec![path(&self.options.binary), "run".into(), "--spec".into(), path(&dir.spec(r))];
+        argv.extend(shard.iter().cloned());
+        argv.extend([
+            "--threads".into(),
+            self.options.cpus_per_task.to_string(),
+            "--out".into(),
+            path(&dir.document(r, k)),
+            "--checkpoint-seconds".into(),
+            self.options.task_checkpoint_seconds.to_string(),
+            "--resume".into(),
+        ]);
+        argv
+    }
+
+    /// Every Slurm id the job's record holds (arrays whole, resubmissions).
+    fn submitted_ids(tracking: &Tracking) -> Vec<String> {
+        let mut ids = Vec::new();
+        for round in &tracking.record.rounds {
+            ids.extend(round.array.iter().cloned());
+            ids.extend(round.resubmits.values().flatten().flatten().cloned());
+        }
+        ids
+    }
+
+    /// Cancels every task of a job, those whose id is not recorded yet included (by name).
+    fn cancel_all(&self, dir: &JobDir, tracking: &Tracking) {
+        let mut ids = Self::submitted_ids(tracking);
+        if let Ok(queue) = self.slurm.queue(&dir.prefix) {
+            ids.extend(queue.into_iter().map(|e| e.key));
+        }
+        if let Err(e) = self.slurm.cancel(&ids) {
+            tracing::error!(prefix = %dir.prefix, error = %e, "scancel failed; the tasks may still run");
+        }
+    }
+
+    /// Updates the metrics' counts of tasks by state.
+    fn count(&self, id: i64, tracking: Option<&Tracking>) {
+        let mut counts = self.counts.lock().expect("counts");
+        match tracking {
+            Some(t) => {
+                let mut by_state = BTreeMap::new();
+                for task in &t.tasks {
+                    *by_state.entry(task.state.clone()).or_insert(0) += 1;
+                }
+                counts.insert(id, by_state);
+            }
+            None => {
+                counts.remove(&id);
+            }
+        }
+        let mut totals: BTreeMap<String, i64> = BTreeMap::new();
+        for by_state in counts.values() {
+            for (state, n) in by_state {
+                *totals.entry(state.clone()).or_insert(0) += n;
+            }
+        }
+        self.metrics.set_cluster_tasks(&totals);
+    }
+
+    /// The number of tasks for a job's round of `iterations`.
+    fn tasks_for(&self, spec: &JobSpec, iterations: u64) -> u64 {
+        let asked = spec.execution.map_or(self.options.default_tasks, |e| e.tasks);
+        asked.min(self.options.max_tasks).min(iterations).max(1)
+    }
+
+    /// One look at the job: rounds planned and submitted, the queue, the documents, the tasks
+    /// judged. Ok(true) if the merged statistics changed.
+    fn look(&self, segment: &Segment<'_>, dir: &JobDir, t: &mut Tracking) -> Result<bool, SegmentError> {
+        let spec = segment.job.spec();
+        let end = t.covered_end(segment.first);
+        if end < segment.total {
+            let r = t.record.rounds.len();
+            let iterations = segment.total - end;
+            let round = Round {
+                first: end,
+                iterations,
+                tasks: self.tasks_for(spec, iterations),
+                array: None,
+                resubmits: BTreeMap::new(),
+            };
+            let text =
+                serde_json::to_vec_pretty(&round_spec(spec, round.first, round.iterations)).expect("a spec serialises");
+            std::fs::create_dir_all(dir.round_dir(r))
+                .and_then(|()| super::files::write_atomically(&dir.spec(r), &text))
+                .map_err(|e| {
+                    SegmentError::Failed(format!(
+                        "cannot write the tasks' specification under {}: {e}",
+                        dir.dir.display()
+                    ))
+                })?;
+            t.record.rounds.push(round);
+            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+            t.add_tasks(spec);
+        }
+        let queue = match self.slurm.queue(&dir.prefix) {
+            Ok(entries) => {
+                Some(entries.into_iter().map(|e| (e.key.clone(), e)).collect::<HashMap<String, QueueEntry>>())
+            }
+            Err(e) => {
+                tracing::warn!(job = segment.id, error = %e, "squeue did not answer; the tasks are judged at the next look");
+                None
+            }
+        };
+        self.submit_pending(segment.id, dir, t, queue.as_ref())?;
+        let changed = t.read_documents(dir, segment.job);
+        for (i, why) in t.judge(queue.as_ref(), self.options.missing_grace) {
+            let task = &t.tasks[i];
+            let (r, k, attempts) = (task.round, task.k, t.attempts(task));
+            let key = t.key(task).unwrap_or_default();
+            let log = dir.log(r, &k.to_string());
+            if attempts > self.options.retries {
+                self.cancel_all(dir, t);
+                return Err(SegmentError::Failed(format!(
+                    "task {i} (iterations [{}, {})) failed: Slurm job {key} {why}, after {attempts} attempts; its log: {}",
+                    task.range.start,
+                    task.range.end,
+                    log.display()
+                )));
+            }
+            tracing::warn!(job = segment.id, task = i, slurm_job = %key, %why, log = %log.display(), "resubmitting a task");
+            t.record.rounds[r].resubmits.entry(k).or_default().push(None);
+            t.tasks[i].missing_since = None;
+            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+            let id = self.resubmit_task(dir, r, &t.record.rounds[r], k).map_err(|e| self.refused(e))?;
+            t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()).map(|last| *last = Some(id));
+            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+        }
+        Ok(changed)
+    }
+
+    /// Submits what the record says is to be submitted: a round or a resubmission whose intent
+    /// was recorded without sbatch's answer (a restart, or a timeout) — unless the queue shows
+    /// it under its name, then it is adopted.
+    fn submit_pending(
+        &self,
+        id: i64,
+        dir: &JobDir,
+        t: &mut Tracking,
+        queue: Option<&HashMap<String, QueueEntry>>,
+    ) -> Result<(), SegmentError> {
+        let Some(queue) = queue else { return Ok(()) };
+        let named = |name: &str| queue.values().find(|e| e.name == name).map(|e| e.key.clone());
+        for r in 0..t.record.rounds.len() {
+            if t.record.rounds[r].array.is_none() {
+                let adopted =
+                    named(&dir.round_name(r)).map(|key| key.split('_').next().unwrap_or_default().to_string());
+                let array = match adopted {
+                    Some(array) => array,
+                    None => match self.submit_round(dir, r, &t.record.rounds[r]) {
+                        Ok(array) => array,
+                        Err(e) if e.is_transient() => {
+                            tracing::warn!(job = id, round = r, error = %e, "sbatch: retrying at the next look");
+                            continue;
+                        }
+                        Err(e) => return Err(self.refused(e)),
+                    },
+                };
+                tracing::info!(job = id, round = r, array = %array, tasks = t.record.rounds[r].tasks, "array submitted");
+                t.record.rounds[r].array = Some(array);
+                dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+            }
+            let waiting: Vec<u64> = t.record.rounds[r]
+                .resubmits
+                .iter()
+                .filter(|(_, ids)| ids.last().is_some_and(Option::is_none))
+                .map(|(k, _)| *k)
+                .collect();
+            for k in waiting {
+                let id = match named(&dir.task_name(r, k)) {
+                    Some(key) => key,
+                    None => match self.resubmit_task(dir, r, &t.record.rounds[r], k) {
+                        Ok(id) => id,
+                        Err(e) if e.is_transient() => continue,
+                        Err(e) => return Err(self.refused(e)),
+                    },
+                };
+                if let Some(last) = t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()) {
+                    *last = Some(id);
+                }
+                dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn refused(&self, e: SlurmError) -> SegmentError {
+        SegmentError::Failed(format!("Slurm refused the job's tasks: {e}"))
+    }
+
+    /// Sleeps for the poll interval in short steps; true if the job was asked to stop meanwhile.
+    fn pause(&self, segment: &Segment<'_>) -> bool {
+        let until = Instant::now() + self.options.poll_interval;
+        while Instant::now() < until {
+            if segment.stop.load(Ordering::SeqCst) {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        segment.stop.load(Ordering::SeqCst)
+    }
+}
+
+/// A path as an argument (the options checked it is UTF-8).
+fn path(p: &std::path::Path) -> String {
+    p.to_string_lossy().into_owned()
+}
+
+impl Executor for SlurmExecutor {
+    fn admit(&self, spec: &JobSpec) -> Result<(), SpecError> {
+        match spec.execution {
+            Some(e) if e.tasks > self.options.max_tasks => Err(SpecError::new(
+                "execution.tasks",
+                format!("must be at most {} on this server (--max-tasks), got {}", self.options.max_tasks, e.tasks),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    fn run_segment(
+        &self,
+        segment: &Segment<'_>,
+        _range: Range<u64>,
+        moments: &mut Moments,
+        on_batch: &mut OnBatch<'_>,
+    ) -> Result<u64, SegmentError> {
+        let dir = self.dir.job(segment.id);
+        let taken = self.tracking.lock().expect("tracking").remove(&segment.id);
+        let mut t = match taken {
+            Some(t) => t,
+            None => Tracking::new(segment.job.spec(), dir.load_record().map_err(SegmentError::Failed)?),
+        };
+        let outcome = self.follow(segment, &dir, &mut t, moments, on_batch);
+        match &outcome {
+            // Between two segments (a checkpoint) the tracking is kept.
+            Ok(next) if *next < segment.total => {
+                self.tracking.lock().expect("tracking").insert(segment.id, t);
+            }
+            _ => self.count(segment.id, None),
+        }
+        outcome
+    }
+
+    fn cancel(&self, id: i64) {
+        let dir = self.dir.job(id);
+        let record = dir.load_record().unwrap_or_default();
+        let t = Tracking { record, tasks: Vec::new() };
+        self.cancel_all(&dir, &t);
+        self.tracking.lock().expect("tracking").remove(&id);
+        self.count(id, None);
+    }
+
+    fn forget(&self, id: i64) {
+        self.cancel(id);
+        let dir = self.dir.job(id);
+        if let Err(e) = dir.remove() {
+            tracing::warn!(job = id, dir = %dir.dir.display(), error = %e, "could not remove the job's cluster files");
+        }
+    }
+}
+
+impl SlurmExecutor {
+    /// Looks at the job until it is complete, a checkpoint is due or it is asked to stop.
+    fn follow(
+        &self,
+        segment: &Segment<'_>,
+        dir: &JobDir,
+        t: &mut Tracking,
+        moments: &mut Moments,
+        on_batch: &mut OnBatch<'_>,
+    ) -> Result<u64, SegmentError> {
+        let mut first_look = true;
+        loop {
+            if segment.stop.load(Ordering::SeqCst) {
+                if (segment.cancelled)() {
+                    self.cancel_all(dir, t);
+                }
+                return Err(RunError::Cancelled.into());
+            }
+            let changed = self.look(segment, dir, t)?;
+            (segment.report)(t.view(dir));
+            self.count(segment.id, Some(t));
+            if changed || first_look {
+                first_look = false;
+                let merged = t.merged(segment.job).map_err(RunError::from)?;
+                // Never back: a checkpoint may hold more than the documents (a directory wiped).
+                if merged.iterations() >= moments.iterations() {
+                    *moments = merged;
+                }
+                let next = segment.first + moments.iterations();
+                if next >= segment.total {
+                    return Ok(next);
+                }
+                if changed && on_batch(moments, next).is_break() {
+                    return Ok(next);
+                }
+            }
+            self.pause(segment);
+        }
+    }
+}
