@@ -65,7 +65,7 @@ pub enum Command {
     Sweep(sweep::SweepArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
-    Serve(serve::ServeArgs),
+    Serve(Box<serve::ServeArgs>),
     /// Print the server's OpenAPI description (YAML).
     #[cfg(feature = "server")]
     Openapi,
@@ -161,7 +161,7 @@ pub fn main() -> ExitCode {
         Command::Budget(args) => budget::budget(args),
         Command::Sweep(args) => sweep::sweep(args),
         #[cfg(feature = "server")]
-        Command::Serve(args) => serve::serve_command(args),
+        Command::Serve(args) => serve::serve_command(*args),
         #[cfg(feature = "server")]
         Command::Openapi => {
             use std::io::Write;

@@ -183,14 +183,15 @@ fn run_moments_from(
     let range = job.spec().iteration_range();
     let total = range.end - range.start;
     let resumed = moments.iterations();
-    let mut shown = Progress::new(progress, label, total, config.light_paths);
+    // Progress and throughput count this run's own iterations (a resumed run's are not redone).
+    let mut shown = Progress::new(progress, label, total - resumed, config.light_paths);
     let started = Instant::now();
     let mut last_write = Instant::now();
     let mut written = Ok(());
     let never = AtomicBool::new(false);
     pool.install(|| {
         run_iterations(config, job.spec().seed, range.start + resumed..range.end, &mut moments, &never, |m, next| {
-            shown.update(next - range.start, started, config.light_paths);
+            shown.update(next - range.start - resumed, started, config.light_paths);
             if let Some(c) = &checkpoints
                 && last_write.elapsed() >= c.every
             {

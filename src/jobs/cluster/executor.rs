@@ -205,7 +205,9 @@ impl SlurmExecutor {
             t.tasks[i].missing_since = None;
             dir.save_record(&t.record).map_err(SegmentError::Failed)?;
             let id = self.resubmit_task(dir, r, &t.record.rounds[r], k).map_err(|e| self.refused(e))?;
-            t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()).map(|last| *last = Some(id));
+            if let Some(last) = t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()) {
+                *last = Some(id);
+            }
             dir.save_record(&t.record).map_err(SegmentError::Failed)?;
         }
         Ok(changed)

@@ -223,3 +223,96 @@ impl Tracking {
         ExecutionView { executor: "slurm".into(), tasks }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::time::Duration;
+
+    use serde_json::json;
+
+    use super::*;
+    use crate::jobs::cluster::files::ClusterDir;
+    use crate::sim::runner::run;
+    use crate::sim::spec::parse_job_spec;
+
+    fn job(seed: u64) -> ValidJob {
+        let doc =
+            json!({ "light_paths": 20_000, "camera_paths": 100, "merge_radius": 0.02, "iterations": 8, "seed": seed });
+        parse_job_spec(&doc).unwrap().validate().unwrap()
+    }
+
+    fn record() -> Record {
+        let round = Round {
+            first: 0,
+            iterations: 8,
+            tasks: 4,
+            array: Some("7".into()),
+            resubmits: BTreeMap::from([(2, vec![Some("9".into())])]),
+        };
+        Record { rounds: vec![round] }
+    }
+
+    fn entry(key: &str, state: &str) -> (String, QueueEntry) {
+        (key.to_string(), QueueEntry { key: key.into(), state: state.into(), name: "optimis-x-1-r0".into() })
+    }
+
+    #[test]
+    fn tasks_are_judged_from_the_queue_with_a_grace_for_missing_documents() {
+        let job = job(3);
+        let mut t = Tracking::new(job.spec(), record());
+        let ranges: Vec<_> = t.tasks.iter().map(|t| t.range.clone()).collect();
+        assert_eq!(ranges, [0..2, 2..4, 4..6, 6..8]);
+        let keys: Vec<_> = t.tasks.iter().map(|task| t.key(task)).collect();
+        assert_eq!(keys, [Some("7_0".into()), Some("7_1".into()), Some("9".into()), Some("7_3".into())]);
+        assert_eq!(t.attempts(&t.tasks[2]), 2);
+        let queue: HashMap<_, _> = [entry("7_0", "RUNNING"), entry("7_1", "FAILED"), entry("9", "COMPLETED")].into();
+        // Slurm did not answer: nothing is judged.
+        assert!(t.judge(None, Duration::ZERO).is_empty());
+        // A long grace: only what Slurm says failed fails.
+        let failed = t.judge(Some(&queue), Duration::from_secs(3600));
+        assert_eq!(failed, [(1, "ended FAILED".to_string())]);
+        let states: Vec<_> = t.tasks.iter().map(|t| t.state.as_str()).collect();
+        assert_eq!(states, ["running", "failed", "completed", "submitted"]);
+        // Past the grace, a task completed or gone without its document fails too.
+        let failed: Vec<usize> = t.judge(Some(&queue), Duration::ZERO).into_iter().map(|(i, _)| i).collect();
+        assert_eq!(failed, [1, 2, 3]);
+    }
+
+    #[test]
+    fn documents_are_verified_merged_exactly_and_foreign_ones_ignored() {
+        let job = job(3);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = ClusterDir::open(tmp.path()).unwrap().job(1);
+        let mut t = Tracking::new(job.spec(), record());
+        std::fs::create_dir_all(dir.round_dir(0)).unwrap();
+        let write = |k: u64, seed: u64, range: Range<u64>| {
+            let other = super::super::tracking::tests::job(seed);
+            let moments = run(other.config(), seed, range);
+            std::fs::write(
+                dir.document(0, &k.to_string()),
+                MomentsDocument::new(other.spec().clone(), moments).to_json(),
+            )
+            .unwrap();
+        };
+        write(0, 3, 0..2);
+        write(1, 3, 2..3); // partial
+        write(2, 4, 4..6); // another seed: not the task's iterations
+        write(3, 3, 0..2); // another task's iterations
+        assert!(t.read_documents(&dir, &job));
+        let done: Vec<u64> = t.tasks.iter().map(|t| t.moments.as_ref().map_or(0, Moments::iterations)).collect();
+        assert_eq!(done, [2, 1, 0, 0]);
+        assert!(t.tasks[0].complete() && !t.tasks[1].complete());
+        assert!(!t.read_documents(&dir, &job), "unchanged files are not read again");
+        write(1, 3, 2..4);
+        write(2, 3, 4..6);
+        write(3, 3, 6..8);
+        assert!(t.read_documents(&dir, &job));
+        assert!(t.tasks.iter().all(Task::complete));
+        let whole = run(job.config(), 3, 0..8);
+        assert_eq!(serde_json::to_vec(&t.merged(&job).unwrap()).unwrap(), serde_json::to_vec(&whole).unwrap());
+        let view = t.view(&dir);
+        assert_eq!(view.tasks.iter().map(|t| t.iterations_done).sum::<u64>(), 8);
+        assert!(view.tasks[3].log.ends_with("round-0/task-3.log"));
+    }
+}
