@@ -338,3 +338,70 @@ fn set_progress_csv_and_exit_codes() {
     assert_eq!(missing.status.code(), Some(5));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("missing.json"));
 }
+
+/// What a cluster task does (`optimis serve --executor slurm`): a shard of [f, f + M) whose
+/// document path holds `{shard}`, resumed from the partial document an interrupted attempt left —
+/// the same bytes as an uninterrupted run; a document of another run is refused, not resumed.
+#[test]
+fn a_task_resumes_its_shard_from_its_partial_document() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = r#"{"light_paths": 40000, "camera_paths": 200, "merge_radius": 0.02, "iterations": 24, "first_iteration": 100, "seed": 8}"#;
+    std::fs::write(dir.path().join("job.json"), spec).unwrap();
+    let read = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    // Shard 1 of 3 of [100, 124) is [108, 116).
+    ok(optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--shard", "1/3", "--out", "task-{shard}.json", "--json"],
+        &[],
+    ));
+    let whole: Value = serde_json::from_slice(&read("task-1.json")).unwrap();
+    assert_eq!(whole["coverage"], serde_json::json!([{ "seed": 8, "ranges": [[108, 116]] }]));
+    // An attempt interrupted after 3 iterations left [108, 111).
+    let first3 = ["--set", "first_iteration=108", "--set", "iterations=3"];
+    ok(optimis(
+        dir.path(),
+        &[&["run", "--spec", "job.json", "--out", "resumed-1.json", "--json"][..], &first3].concat(),
+        &[],
+    ));
+    let resume = [
+        "run",
+        "--spec",
+        "job.json",
+        "--shard",
+        "1/3",
+        "--out",
+        "resumed-{shard}.json",
+        "--resume",
+        "--checkpoint-seconds",
+        "0.1",
+        "--json",
+    ];
+    ok(optimis(dir.path(), &resume, &[]));
+    assert_eq!(read("resumed-1.json"), read("task-1.json"), "a resumed task is bit-identical to an uninterrupted one");
+    // Nothing to resume from: a fresh start.
+    ok(optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--shard", "1/3", "--out", "fresh-{shard}.json", "--resume", "--json"],
+        &[],
+    ));
+    assert_eq!(read("fresh-1.json"), read("task-1.json"));
+    // Another seed's document in its place: refused, and left as it was.
+    ok(optimis(
+        dir.path(),
+        &[&["run", "--spec", "job.json", "--out", "other-1.json", "--set", "seed=9", "--json"][..], &first3].concat(),
+        &[],
+    ));
+    let before = read("other-1.json");
+    let refused = optimis(
+        dir.path(),
+        &["run", "--spec", "job.json", "--shard", "1/3", "--out", "other-{shard}.json", "--resume"],
+        &[],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("--resume"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    assert_eq!(read("other-1.json"), before);
+}

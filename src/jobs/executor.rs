@@ -147,3 +147,22 @@ impl Executor for LocalPool {
         Ok(self.pool.install(|| run_iterations(config, seed, range, moments, segment.stop, on_batch))?)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use serde_json::json;
+
+    use super::*;
+    use crate::sim::spec::parse_job_spec;
+
+    #[test]
+    fn the_local_pool_refuses_a_division_into_tasks() {
+        let pool = LocalPool::new(Arc::new(rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap()));
+        let plain = parse_job_spec(&json!({ "iterations": 10 })).unwrap();
+        assert!(pool.admit(&plain).is_ok());
+        let divided = parse_job_spec(&json!({ "iterations": 10, "execution": { "tasks": 2 } })).unwrap();
+        let refused = pool.admit(&divided).unwrap_err();
+        assert_eq!(refused.field, "execution");
+        assert!(refused.message.contains("--executor slurm"), "{refused}");
+    }
+}

@@ -20,7 +20,7 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use super::files::{ClusterDir, JobDir, Round};
+use super::files::{ClusterDir, JobDir, Record, Round};
 use super::options::SlurmOptions;
 use super::slurm::{QueueEntry, Slurm, SlurmError};
 use super::tracking::{Tracking, round_spec};
@@ -96,9 +96,9 @@ impl SlurmExecutor {
     }
 
     /// Every Slurm id the job's record holds (arrays whole, resubmissions).
-    fn submitted_ids(tracking: &Tracking) -> Vec<String> {
+    fn submitted_ids(record: &Record) -> Vec<String> {
         let mut ids = Vec::new();
-        for round in &tracking.record.rounds {
+        for round in &record.rounds {
             ids.extend(round.array.iter().cloned());
             ids.extend(round.resubmits.values().flatten().flatten().cloned());
         }
@@ -106,8 +106,8 @@ impl SlurmExecutor {
     }
 
     /// Cancels every task of a job, those whose id is not recorded yet included (by name).
-    fn cancel_all(&self, dir: &JobDir, tracking: &Tracking) {
-        let mut ids = Self::submitted_ids(tracking);
+    fn cancel_all(&self, dir: &JobDir, record: &Record) {
+        let mut ids = Self::submitted_ids(record);
         if let Ok(queue) = self.slurm.queue(&dir.prefix) {
             ids.extend(queue.into_iter().map(|e| e.key));
         }
@@ -185,14 +185,14 @@ impl SlurmExecutor {
             }
         };
         self.submit_pending(segment.id, dir, t, queue.as_ref())?;
-        let changed = t.read_documents(dir, segment.job);
+        let changed = t.read_documents(dir, segment.job).map_err(RunError::from)?;
         for (i, why) in t.judge(queue.as_ref(), self.options.missing_grace) {
             let task = &t.tasks[i];
             let (r, k, attempts) = (task.round, task.k, t.attempts(task));
             let key = t.key(task).unwrap_or_default();
             let log = dir.log(r, &k.to_string());
             if attempts > self.options.retries {
-                self.cancel_all(dir, t);
+                self.cancel_all(dir, &t.record);
                 return Err(SegmentError::Failed(format!(
                     "task {i} (iterations [{}, {})) failed: Slurm job {key} {why}, after {attempts} attempts; its log: {}",
                     task.range.start,
@@ -327,9 +327,7 @@ impl Executor for SlurmExecutor {
 
     fn cancel(&self, id: i64) {
         let dir = self.dir.job(id);
-        let record = dir.load_record().unwrap_or_default();
-        let t = Tracking { record, tasks: Vec::new() };
-        self.cancel_all(&dir, &t);
+        self.cancel_all(&dir, &dir.load_record().unwrap_or_default());
         self.tracking.lock().expect("tracking").remove(&id);
         self.count(id, None);
     }
@@ -357,7 +355,7 @@ impl SlurmExecutor {
         loop {
             if segment.stop.load(Ordering::SeqCst) {
                 if (segment.cancelled)() {
-                    self.cancel_all(dir, t);
+                    self.cancel_all(dir, &t.record);
                 }
                 return Err(RunError::Cancelled.into());
             }

@@ -19,8 +19,11 @@ pub(super) struct Task {
     pub round: usize,
     pub k: u64,
     pub range: Range<u64>,
-    /// Its latest verified document's moments (the one with the most iterations seen).
-    pub moments: Option<Moments>,
+    /// Iterations of its latest verified document (the one with the most seen).
+    pub done: u64,
+    /// That document's moments while the task is incomplete; a complete task's are added to
+    /// `Tracking::completed` and dropped, so memory holds the incomplete tasks' only.
+    moments: Option<Moments>,
     /// Modification time and length of the document last read.
     stamp: Option<(SystemTime, u64)>,
     /// Its state as last judged (lower case).
@@ -32,7 +35,7 @@ pub(super) struct Task {
 impl Task {
     /// Whether its document holds all its iterations.
     pub fn complete(&self) -> bool {
-        self.moments.as_ref().is_some_and(|m| m.iterations() == self.range.end - self.range.start)
+        self.done == self.range.end - self.range.start
     }
 }
 
@@ -40,6 +43,8 @@ impl Task {
 pub(super) struct Tracking {
     pub record: Record,
     pub tasks: Vec<Task>,
+    /// The sum of the complete tasks' moments (None before the first).
+    completed: Option<Moments>,
 }
 
 /// The specification of a round: the job's, for iterations [first, first + iterations), cut into
@@ -63,7 +68,7 @@ fn shard_range(job: &JobSpec, round: &Round, k: u64) -> Range<u64> {
 impl Tracking {
     /// The tasks of `record`'s rounds, nothing read yet.
     pub fn new(job: &JobSpec, record: Record) -> Self {
-        let mut tracking = Self { record, tasks: Vec::new() };
+        let mut tracking = Self { record, tasks: Vec::new(), completed: None };
         tracking.add_tasks(job);
         tracking
     }
@@ -77,6 +82,7 @@ impl Tracking {
                     round: r,
                     k,
                     range: shard_range(job, round, k),
+                    done: 0,
                     moments: None,
                     stamp: None,
                     state: "submitting".into(),
@@ -109,7 +115,7 @@ impl Tracking {
     /// Reads every incomplete task's document if it changed; true if any brought iterations.
     /// A document that does not verify, or holds iterations outside its task, is logged and
     /// ignored (the task then counts as missing once it leaves the queue).
-    pub fn read_documents(&mut self, dir: &JobDir, job: &ValidJob) -> bool {
+    pub fn read_documents(&mut self, dir: &JobDir, job: &ValidJob) -> Result<bool, MergeError> {
         let mut changed = false;
         for task in self.tasks.iter_mut().filter(|t| !t.complete()) {
             let path = dir.document(task.round, &task.k.to_string());
@@ -130,21 +136,27 @@ impl Tracking {
                     Ok(doc.moments)
                 });
             match checked {
-                Ok(moments) if moments.iterations() > task.moments.as_ref().map_or(0, Moments::iterations) => {
-                    task.moments = Some(moments);
+                Ok(moments) if moments.iterations() > task.done => {
+                    task.done = moments.iterations();
                     changed = true;
+                    if task.complete() {
+                        self.completed.get_or_insert_with(|| Moments::new(job.config())).merge(&moments)?;
+                        task.moments = None;
+                    } else {
+                        task.moments = Some(moments);
+                    }
                 }
                 Ok(_) => {}
                 Err(e) => tracing::warn!(document = %path.display(), error = %e, "a task's document is ignored"),
             }
         }
-        changed
+        Ok(changed)
     }
 
     /// The merge of every task's latest document: exact sums over disjoint coverage, so the same
     /// bits in any order and however the iterations were divided.
     pub fn merged(&self, job: &ValidJob) -> Result<Moments, MergeError> {
-        let mut merged = Moments::new(job.config());
+        let mut merged = self.completed.clone().unwrap_or_else(|| Moments::new(job.config()));
         for moments in self.tasks.iter().filter_map(|t| t.moments.as_ref()) {
             merged.merge(moments)?;
         }
@@ -213,7 +225,7 @@ impl Tracking {
                 index: index as u64,
                 first_iteration: t.range.start,
                 iterations: t.range.end - t.range.start,
-                iterations_done: t.moments.as_ref().map_or(0, Moments::iterations),
+                iterations_done: t.done,
                 state: t.state.clone(),
                 slurm_job_id: self.key(t),
                 attempts: self.attempts(t),
@@ -299,15 +311,15 @@ mod tests {
         write(1, 3, 2..3); // partial
         write(2, 4, 4..6); // another seed: not the task's iterations
         write(3, 3, 0..2); // another task's iterations
-        assert!(t.read_documents(&dir, &job));
-        let done: Vec<u64> = t.tasks.iter().map(|t| t.moments.as_ref().map_or(0, Moments::iterations)).collect();
+        assert!(t.read_documents(&dir, &job).unwrap());
+        let done: Vec<u64> = t.tasks.iter().map(|t| t.done).collect();
         assert_eq!(done, [2, 1, 0, 0]);
         assert!(t.tasks[0].complete() && !t.tasks[1].complete());
-        assert!(!t.read_documents(&dir, &job), "unchanged files are not read again");
+        assert!(!t.read_documents(&dir, &job).unwrap(), "unchanged files are not read again");
         write(1, 3, 2..4);
         write(2, 3, 4..6);
         write(3, 3, 6..8);
-        assert!(t.read_documents(&dir, &job));
+        assert!(t.read_documents(&dir, &job).unwrap());
         assert!(t.tasks.iter().all(Task::complete));
         let whole = run(job.config(), 3, 0..8);
         assert_eq!(serde_json::to_vec(&t.merged(&job).unwrap()).unwrap(), serde_json::to_vec(&whole).unwrap());
