@@ -149,6 +149,9 @@ pub struct ClusterArgs {
     /// The optimis binary the tasks run, as a path on the nodes (default: this server's own).
     #[arg(long, value_name = "PATH")]
     pub slurm_binary: Option<PathBuf>,
+    /// The directory of sbatch, squeue and scancel (default: found on the PATH).
+    #[arg(long, value_name = "DIR")]
+    pub slurm_bin_dir: Option<PathBuf>,
     /// sbatch --partition of the tasks.
     #[arg(long, value_name = "NAME")]
     pub slurm_partition: Option<String>,
@@ -207,6 +210,7 @@ impl ClusterArgs {
         let options = SlurmOptions {
             cluster_dir,
             binary,
+            slurm_bin_dir: self.slurm_bin_dir.clone(),
             partition: self.slurm_partition.clone(),
             account: self.slurm_account.clone(),
             cpus_per_task: self.slurm_cpus_per_task,

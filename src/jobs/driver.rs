@@ -43,6 +43,8 @@ pub(crate) fn drive(inner: &Inner, job: &ActiveJob) {
     let outcome = run(inner, job);
     if let Err(e) = outcome {
         tracing::error!(job = job.id, error = %e, "job failed");
+        // Work elsewhere (a cluster's tasks) stops with the job.
+        inner.executor.cancel(job.id);
         let reason = e.to_string();
         if let Err(e) = inner.runtime.block_on(inner.fail(job.id, &reason)) {
             tracing::error!(job = job.id, error = %e, "could not record the failure");
@@ -139,6 +141,11 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
 /// the database cannot store, a cancel is retried until it can (or the server stops); the cancel
 /// itself is already stored (`cancel_requested`), so a restart ends the job cancelled either way.
 fn stopped(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
+    if job.stop_reason() == Some(StopReason::Cancel) {
+        // The stop may have been seen between two segments, outside the executor: work elsewhere
+        // (a cluster's tasks) is stopped here too (idempotent). A shutdown leaves it running.
+        inner.executor.cancel(job.id);
+    }
     let mut pause = Duration::from_millis(100);
     loop {
         let outcome = if job.stop_reason() == Some(StopReason::Cancel) {

@@ -4,6 +4,7 @@
 
 use std::io::Read;
 use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -52,8 +53,9 @@ pub fn run(program: &str, args: &[String], timeout: Duration) -> Result<String, 
         .stderr(Stdio::piped())
         .spawn()
         .map_err(|source| CommandError::Spawn { program: program.to_string(), source })?;
-    let stdout = capture(child.stdout.take());
-    let stderr = capture(child.stderr.take());
+    let started = Instant::now();
+    let stdout = Captured::start(child.stdout.take());
+    let stderr = Captured::start(child.stderr.take());
     let status = match wait(&mut child, timeout) {
         Some(status) => status,
         None => {
@@ -62,8 +64,11 @@ pub fn run(program: &str, args: &[String], timeout: Duration) -> Result<String, 
             return Err(CommandError::Timeout { program: program.to_string(), seconds: timeout.as_secs_f64() });
         }
     };
-    let stdout = stdout.join().unwrap_or_default();
-    let stderr = stderr.join().unwrap_or_default();
+    // A command may leave children holding its pipes open: wait for the end of its output only
+    // until the deadline, then take what arrived.
+    let deadline = Instant::now().max(started + timeout);
+    let stdout = stdout.take_by(deadline);
+    let stderr = stderr.take_by(deadline);
     if !status.success() {
         return Err(CommandError::Failed {
             program: program.to_string(),
@@ -91,16 +96,40 @@ fn wait(child: &mut Child, timeout: Duration) -> Option<std::process::ExitStatus
     }
 }
 
-/// Reads a pipe to its end on a thread of its own, keeping the first [`MAX_OUTPUT`] bytes.
-fn capture(pipe: Option<impl Read + Send + 'static>) -> JoinHandle<String> {
-    std::thread::spawn(move || {
-        let Some(pipe) = pipe else { return String::new() };
-        let mut kept = Vec::new();
-        let mut limited = pipe.take(MAX_OUTPUT);
-        let _ = limited.read_to_end(&mut kept);
-        let _ = std::io::copy(&mut limited.into_inner(), &mut std::io::sink());
+/// A pipe read to its end on a thread of its own, keeping the first [`MAX_OUTPUT`] bytes.
+struct Captured {
+    kept: Arc<Mutex<Vec<u8>>>,
+    reader: JoinHandle<()>,
+}
+
+impl Captured {
+    fn start(pipe: Option<impl Read + Send + 'static>) -> Self {
+        let kept = Arc::new(Mutex::new(Vec::new()));
+        let into = kept.clone();
+        let reader = std::thread::spawn(move || {
+            let Some(pipe) = pipe else { return };
+            let mut limited = pipe.take(MAX_OUTPUT);
+            let mut buffer = [0u8; 8192];
+            while let Ok(n) = limited.read(&mut buffer) {
+                if n == 0 {
+                    break;
+                }
+                into.lock().expect("captured output").extend_from_slice(&buffer[..n]);
+            }
+            let _ = std::io::copy(&mut limited.into_inner(), &mut std::io::sink());
+        });
+        Self { kept, reader }
+    }
+
+    /// What arrived once the pipe closed, or by `deadline` if it stays open (the reader thread
+    /// then ends when the last holder closes it).
+    fn take_by(self, deadline: Instant) -> String {
+        while !self.reader.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let kept = self.kept.lock().expect("captured output");
         String::from_utf8_lossy(&kept).into_owned()
-    })
+    }
 }
 
 /// The last 500 characters of a message, trimmed.
@@ -124,6 +153,11 @@ mod tests {
         assert!(matches!(slow, CommandError::Timeout { .. }), "{slow}");
         let missing = run("/nonexistent/sbatch", &[], Duration::from_secs(1)).unwrap_err();
         assert!(matches!(missing, CommandError::Spawn { .. }));
+        // A child that keeps the pipe open costs the deadline, not a hang.
+        let started = Instant::now();
+        let out = run("sh", &args(&["-c", "(sleep 30 &) ; echo 7"]), Duration::from_millis(500)).unwrap();
+        assert_eq!(out, "7\n");
+        assert!(started.elapsed() < Duration::from_secs(20));
         // Output beyond the bound is read and dropped, not waited on.
         let big = run("sh", &args(&["-c", "head -c 6000000 /dev/zero"]), Duration::from_secs(20)).unwrap();
         assert_eq!(big.len() as u64, MAX_OUTPUT);

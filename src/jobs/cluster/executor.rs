@@ -48,7 +48,7 @@ impl SlurmExecutor {
     pub fn start(options: SlurmOptions, metrics: Arc<Metrics>) -> Result<Self, String> {
         options.validate()?;
         let dir = ClusterDir::open(&options.cluster_dir)?;
-        let slurm = Slurm { timeout: options.command_timeout };
+        let slurm = Slurm { timeout: options.command_timeout, bin_dir: options.slurm_bin_dir.clone() };
         let version = slurm.check().map_err(|e| format!("--executor slurm: Slurm does not answer: {e}"))?;
         if !options.binary.exists() {
             tracing::warn!(binary = %options.binary.display(),

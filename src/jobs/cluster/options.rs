@@ -15,6 +15,8 @@ pub struct SlurmOptions {
     pub cluster_dir: PathBuf,
     /// The `optimis` binary the tasks run (a path valid on the nodes).
     pub binary: PathBuf,
+    /// Where `sbatch`, `squeue` and `scancel` are (None: on the PATH).
+    pub slurm_bin_dir: Option<PathBuf>,
     /// `--partition`, if any.
     pub partition: Option<String>,
     /// `--account`, if any.
@@ -112,6 +114,7 @@ mod tests {
         SlurmOptions {
             cluster_dir: "/shared/optimis".into(),
             binary: "/opt/optimis/bin/optimis".into(),
+            slurm_bin_dir: None,
             partition: Some("batch".into()),
             account: None,
             cpus_per_task: 2,

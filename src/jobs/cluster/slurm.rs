@@ -60,6 +60,8 @@ impl SlurmError {
 pub struct Slurm {
     /// Deadline of each command.
     pub timeout: Duration,
+    /// Where the commands are (None: on the PATH).
+    pub bin_dir: Option<std::path::PathBuf>,
 }
 
 /// One line of `squeue -r`: a job, or one task of an array.
@@ -74,10 +76,18 @@ pub struct QueueEntry {
 }
 
 impl Slurm {
+    /// The path of command `name`.
+    fn program(&self, name: &str) -> String {
+        match &self.bin_dir {
+            Some(dir) => dir.join(name).to_string_lossy().into_owned(),
+            None => name.to_string(),
+        }
+    }
+
     /// `sbatch --version`, and `squeue` answering: that Slurm is installed and its controller
     /// reachable.
     pub fn check(&self) -> Result<String, SlurmError> {
-        let version = run("sbatch", &["--version".to_string()], self.timeout)?;
+        let version = run(&self.program("sbatch"), &["--version".to_string()], self.timeout)?;
         self.queue("optimis-check-")?;
         Ok(version.trim().to_string())
     }
@@ -89,14 +99,14 @@ impl Slurm {
         argv.extend(options.iter().cloned());
         argv.push(script.to_string());
         argv.extend(args.iter().cloned());
-        parse_submission(&run("sbatch", &argv, self.timeout)?)
+        parse_submission(&run(&self.program("sbatch"), &argv, self.timeout)?)
     }
 
     /// This user's jobs (array tasks one per line, finished ones while Slurm keeps them) whose
     /// names start with `prefix`.
     pub fn queue(&self, prefix: &str) -> Result<Vec<QueueEntry>, SlurmError> {
         let args = ["--me", "--noheader", "--array", "--states=all", "--format=%A|%F|%K|%T|%j"];
-        let out = run("squeue", &args.map(str::to_string), self.timeout)?;
+        let out = run(&self.program("squeue"), &args.map(str::to_string), self.timeout)?;
         Ok(parse_queue(&out, prefix))
     }
 
@@ -104,7 +114,7 @@ impl Slurm {
     /// has forgotten are not an error.
     pub fn cancel(&self, ids: &[String]) -> Result<(), SlurmError> {
         for batch in ids.chunks(CANCEL_BATCH) {
-            match run("scancel", batch, self.timeout) {
+            match run(&self.program("scancel"), batch, self.timeout) {
                 Ok(_) => {}
                 Err(CommandError::Failed { stderr, .. }) if stderr.contains("Invalid job id") => {}
                 Err(e) => return Err(e.into()),

@@ -1,0 +1,178 @@
+//! The Slurm executor (`--executor slurm`) against stand-ins of sbatch, squeue and scancel
+//! (`tests/cluster/`: each task runs at once as a local process), so that `cargo test` exercises
+//! submission, following, merging, retries and failure without a cluster. The real thing — Slurm
+//! itself, kill -9, scancel, sweeps — is `.ci/slurm/server`, on CI's single-node cluster.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use optimis::jobs::cluster::SlurmOptions;
+use serde_json::{Value, json};
+
+use crate::common::{TestServer, small_job, uninterrupted_moments};
+
+/// A copy of the stand-ins in `dir/bin` (their state beside them) and the executor's options.
+fn options(dir: &Path, binary: PathBuf, retries: u32) -> SlurmOptions {
+    let bin = dir.join("bin");
+    std::fs::create_dir_all(bin.join("state")).unwrap();
+    for name in ["sbatch", "squeue", "scancel"] {
+        let to = bin.join(name);
+        std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cluster").join(name), &to).unwrap();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&to, std::fs::Permissions::from_mode(0o755)).unwrap();
+        }
+    }
+    SlurmOptions {
+        cluster_dir: dir.join("cluster"),
+        binary,
+        slurm_bin_dir: Some(bin),
+        partition: None,
+        account: None,
+        cpus_per_task: 1,
+        time_limit: None,
+        sbatch_options: vec!["--qos=test".into()],
+        default_tasks: 1,
+        max_tasks: 8,
+        retries,
+        poll_interval: Duration::from_millis(200),
+        command_timeout: Duration::from_secs(20),
+        missing_grace: Duration::from_secs(30),
+        task_checkpoint_seconds: 0.2,
+    }
+}
+
+async fn start(retries: u32, binary: PathBuf) -> TestServer {
+    let dir = tempfile::tempdir().unwrap();
+    let slurm = options(dir.path(), binary, retries);
+    TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await
+}
+
+fn optimis() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_optimis"))
+}
+
+/// Waits for a final state (the executor looks every 200 ms; a task takes well under a second).
+async fn settle(server: &TestServer, id: i64) -> Value {
+    for _ in 0..600 {
+        let job = server.job(id).await;
+        if ["succeeded", "failed", "cancelled"].contains(&job["state"].as_str().unwrap()) {
+            return job;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("job {id} did not finish: {}", server.job(id).await);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_cut_into_tasks_merges_into_exactly_the_uninterrupted_run() {
+    let server = start(1, optimis()).await;
+    let mut spec = small_job(30, 5);
+    spec["execution"] = json!({ "tasks": 3 });
+    let id = server.submit(&spec).await;
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    let document = server.moments(id).await;
+    let mut plain = spec.clone();
+    plain.as_object_mut().unwrap().remove("execution");
+    assert_eq!(document["moments"], uninterrupted_moments(&plain), "merged tasks = one run, bit for bit");
+    assert!(document["spec"].get("execution").is_none(), "documents do not carry the division");
+    // The record says one array of 3 tasks; sbatch got argv (no shell), a clean environment, the
+    // operator's options and the task command.
+    let record: Value = serde_json::from_slice(
+        &std::fs::read(server.dir.path().join(format!("cluster/job-{id}/record.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(record["rounds"][0]["tasks"], 3);
+    // Extended: the added iterations run as a second array, and the whole is still exact.
+    assert_eq!(server.extend(id, &json!({ "iterations": 10 })).await.status, 202);
+    assert_eq!(settle(&server, id).await["state"], "succeeded");
+    let mut longer = plain.clone();
+    longer["iterations"] = json!(40);
+    assert_eq!(server.moments(id).await["moments"], uninterrupted_moments(&longer));
+    let record: Value = serde_json::from_slice(
+        &std::fs::read(server.dir.path().join(format!("cluster/job-{id}/record.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(record["rounds"][1]["first"], 30);
+    // Too many tasks for this server: refused at submission, naming the field.
+    let mut many = small_job(30, 5);
+    many["execution"] = json!({ "tasks": 9 });
+    let refused = server.post("/v1/jobs", &many).await;
+    assert_eq!(refused.status, 422);
+    assert!(refused.text().contains("execution.tasks"), "{}", refused.text());
+    // Deleted: its files go too.
+    assert_eq!(server.request(reqwest::Method::DELETE, &format!("/v1/jobs/{id}"), None).await.status, 204);
+    for _ in 0..100 {
+        if !server.dir.path().join(format!("cluster/job-{id}")).exists() {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("the job's cluster files were not removed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_task_that_cannot_start_fails_the_job_after_its_retries_naming_its_log() {
+    let server = start(1, PathBuf::from("/nonexistent/optimis")).await;
+    let mut spec = small_job(4, 5);
+    spec["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&spec).await;
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "failed", "{job}");
+    let error = job["error"].as_str().unwrap();
+    assert!(error.contains("after 2 attempts") && error.contains("ended FAILED"), "{error}");
+    let log = error.rsplit("its log: ").next().unwrap();
+    assert!(log.ends_with(".log") && std::fs::read_to_string(log).unwrap().contains("/nonexistent/optimis"), "{error}");
+}
+
+/// Waits until job `id` has a task in `state`.
+async fn until_a_task_is(server: &TestServer, id: i64, state: &str) {
+    for _ in 0..600 {
+        let job = server.job(id).await;
+        let tasks = job["execution"]["tasks"].as_array().cloned().unwrap_or_default();
+        if tasks.iter().any(|t| t["state"] == state) {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("job {id} never had a task {state}: {}", server.job(id).await);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarted_server_adopts_the_running_tasks_and_a_cancel_stops_them() {
+    let server = start(1, optimis()).await;
+    let mut spec = small_job(2000, 6);
+    spec["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&spec).await;
+    until_a_task_is(&server, id, "running").await;
+    // A shutdown leaves the tasks running; the next start finds them and merges what they wrote.
+    let dir = server.stop().await;
+    let slurm = options(dir.path(), optimis(), 1);
+    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    let mut plain = spec.clone();
+    plain.as_object_mut().unwrap().remove("execution");
+    assert_eq!(server.moments(id).await["moments"], uninterrupted_moments(&plain));
+    let state = server.dir.path().join("bin/state");
+    let submitted = std::fs::read_dir(&state)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension() == Some("name".as_ref()))
+        .count();
+    assert_eq!(submitted, 2, "the restart submitted nothing again");
+
+    // A cancel through the API stops the tasks (scancel) and ends the job cancelled.
+    let mut long = small_job(1_000_000, 7);
+    long["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&long).await;
+    until_a_task_is(&server, id, "running").await;
+    assert_eq!(server.cancel(id).await.status, 202);
+    assert_eq!(settle(&server, id).await["state"], "cancelled");
+    let cancelled = std::fs::read_dir(&state)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension() == Some("cancelled".as_ref()))
+        .count();
+    assert_eq!(cancelled, 2, "both tasks were stopped");
+}
