@@ -405,3 +405,21 @@ fn a_task_resumes_its_shard_from_its_partial_document() {
     );
     assert_eq!(read("other-1.json"), before);
 }
+
+/// Counts on the command line read as the JSON API reads them (`1e4`), and a negative one is
+/// refused naming the flag, not taken for an unknown option.
+#[test]
+fn counts_take_the_json_forms_and_negative_ones_name_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |counts: [&str; 3], out: &str| {
+        let args = ["run", "--iterations", counts[0], "--light-paths", counts[1], "--camera-paths", counts[2]];
+        let rest = ["--set", "merge_radius=0.02", "--out", out, "--quiet"];
+        ok(optimis(dir.path(), &[&args[..], &rest].concat(), &[]));
+        std::fs::read(dir.path().join(out)).unwrap()
+    };
+    assert_eq!(run(["2e1", "2e4", "1e2"], "short.json"), run(["20", "20000", "100"], "plain.json"));
+    let negative = optimis(dir.path(), &["run", "--iterations", "-5"], &[]);
+    assert!(!negative.status.success());
+    let stderr = String::from_utf8_lossy(&negative.stderr);
+    assert!(stderr.contains("--iterations") && stderr.contains("non-negative whole number"), "{stderr}");
+}

@@ -11,6 +11,7 @@ use serde_json::{Value, json};
 use super::{CliError, cores, thread_pool};
 use crate::sim::model::config::Proposals;
 use crate::sim::model::config::{Engine, SimConfig};
+use crate::sim::model::params::parse_count;
 use crate::sim::runner::run_iterations;
 use crate::sim::spec::parse_job_spec;
 use crate::sim::stats::moments::Moments;
@@ -31,7 +32,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 10)]
     pub iterations: u64,
     /// Light paths per iteration (default: the paper's 10⁷).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_count, allow_hyphen_values = true)]
     pub light_paths: Option<u64>,
     /// Worker threads (default: one per core).
     #[arg(long)]

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 
+use crate::sim::model::params::parse_count;
+
 use super::documents::{read_document, solver_options};
 use super::{CliError, table};
 use crate::sim::model::params::check_path_counts;
@@ -17,10 +19,10 @@ pub struct PredictArgs {
     /// A moments document of a job run with `"noise_components": true`.
     pub document: PathBuf,
     /// N_F to predict for (default: the run's).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = parse_count, allow_hyphen_values = true)]
     pub light_paths: Option<u64>,
     /// N_B to predict for (default: the run's).
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", value_parser = parse_count, allow_hyphen_values = true)]
     pub camera_paths: Option<u64>,
     /// Print the prediction as JSON instead of tables.
     #[arg(long)]

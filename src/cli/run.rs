@@ -7,6 +7,8 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use clap::Args;
+
+use crate::sim::model::params::parse_count;
 use serde_json::{Value, json};
 
 use super::progress::{Progress, ProgressArgs};
@@ -31,16 +33,16 @@ pub struct RunArgs {
     #[arg(long)]
     pub preset: Option<String>,
     /// Iterations M.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_count, allow_hyphen_values = true)]
     pub iterations: Option<u64>,
     /// Light paths per iteration N_F.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_count, allow_hyphen_values = true)]
     pub light_paths: Option<u64>,
     /// Camera paths per iteration N_B.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_count, allow_hyphen_values = true)]
     pub camera_paths: Option<u64>,
     /// Seed of the random streams.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_count, allow_hyphen_values = true)]
     pub seed: Option<u64>,
     /// Engine: `restricted` (the presets' default) or `brute` (all N_F light paths, the reference).
     #[arg(long, value_parser = ["restricted", "brute"])]

@@ -103,10 +103,25 @@ pub fn count<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
     if let Some(n) = v.as_u64() {
         return Ok(n);
     }
-    match v.as_f64() {
-        Some(x) if x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0 => Ok(x as u64),
-        _ => Err(D::Error::custom(format!("expected a non-negative integer, got {v}"))),
-    }
+    v.as_f64()
+        .and_then(whole_number)
+        .ok_or_else(|| D::Error::custom(format!("expected a non-negative integer, got {v}")))
+}
+
+/// A count written as a number: a non-negative whole number up to 2^53 (so `1e4` is 10,000, as
+/// in JSON).
+fn whole_number(x: f64) -> Option<u64> {
+    (x >= 0.0 && x.fract() == 0.0 && x <= 9_007_199_254_740_992.0).then_some(x as u64)
+}
+
+/// A count on a command line, read as the JSON API reads one: `10000`, `1e4` and `1.5e8` are
+/// accepted, `-5`, `2.5` and `ten` are not.
+pub fn parse_count(text: &str) -> Result<u64, String> {
+    let text = text.trim();
+    text.parse::<u64>()
+        .ok()
+        .or_else(|| text.parse::<f64>().ok().and_then(whole_number))
+        .ok_or_else(|| format!("expected a non-negative whole number (e.g. 10000 or 1e4), got {text:?}"))
 }
 
 /// [`count`] for an optional field (use with `#[serde(default)]`).
@@ -328,5 +343,22 @@ fn kind_differs(a: &Value, b: &Value) -> bool {
     match (a.get("kind"), b.get("kind")) {
         (Some(x), Some(y)) => x != y,
         _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_count;
+
+    #[test]
+    fn counts_on_a_command_line_read_as_in_json() {
+        assert_eq!(parse_count("10000"), Ok(10_000));
+        assert_eq!(parse_count("1e4"), Ok(10_000));
+        assert_eq!(parse_count("1.5e8"), Ok(150_000_000));
+        assert_eq!(parse_count("18446744073709551615"), Ok(u64::MAX));
+        for bad in ["-5", "2.5", "ten", "", "1e300", "-0.5"] {
+            let e = parse_count(bad).unwrap_err();
+            assert!(e.contains("non-negative whole number"), "{bad}: {e}");
+        }
     }
 }
