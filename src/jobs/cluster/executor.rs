@@ -184,7 +184,6 @@ impl SlurmExecutor {
                 None
             }
         };
-        self.submit_pending(segment.id, dir, t, queue.as_ref())?;
         let changed = t.read_documents(dir, segment.job).map_err(RunError::from)?;
         for (i, why) in t.judge(queue.as_ref(), self.options.missing_grace) {
             let task = &t.tasks[i];
@@ -201,15 +200,13 @@ impl SlurmExecutor {
                 )));
             }
             tracing::warn!(job = segment.id, task = i, slurm_job = %key, %why, log = %log.display(), "resubmitting a task");
+            // The intent first (a restart adopts or repeats it); `submit_pending` submits it, with
+            // the same retry of transient sbatch errors as a round's.
             t.record.rounds[r].resubmits.entry(k).or_default().push(None);
             t.tasks[i].missing_since = None;
             dir.save_record(&t.record).map_err(SegmentError::Failed)?;
-            let id = self.resubmit_task(dir, r, &t.record.rounds[r], k).map_err(|e| self.refused(e))?;
-            if let Some(last) = t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()) {
-                *last = Some(id);
-            }
-            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
         }
+        self.submit_pending(segment.id, dir, t, queue.as_ref())?;
         Ok(changed)
     }
 
