@@ -24,7 +24,8 @@ pub async fn healthz() -> Json<Health> {
     Json(Health { status: "ok".into() })
 }
 
-/// The database answers and every migration is applied.
+/// The database answers, every migration is applied, a write commits and 1 MiB of room is left
+/// (under the database's page limit and on its filesystem).
 #[utoipa::path(
     get, operation_id = "readyz", path = "/readyz", tag = "operations",
     responses(

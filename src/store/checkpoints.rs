@@ -72,8 +72,7 @@ async fn upsert_checkpoint(
 impl Store {
     /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
     pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        let result = self.write_checkpoint_tx(id, checkpoint, now).await;
-        self.track(result)
+        self.write_checkpoint_tx(id, checkpoint, now).await
     }
 
     async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
@@ -96,34 +95,29 @@ impl Store {
     /// with `iterations_total = iterations_done` = the iterations now covered, and its spec
     /// (`spec`: iterations set to that total) says so. One transaction.
     pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
-        let result = async {
-            self.transaction(async |tx| {
-                upsert_checkpoint(tx, id, checkpoint, now).await?;
-                sqlx::query(
-                    "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
-                     updated_at = ?4, warnings = ?6 WHERE id = ?5",
-                )
-                .bind(checkpoint.iterations_done as i64)
-                .bind(&checkpoint.best)
-                .bind(spec)
-                .bind(now)
-                .bind(id)
-                .bind(&checkpoint.warnings)
-                .execute(&mut *tx)
-                .await?;
-                Ok(())
-            })
-            .await
-        }
-        .await;
-        self.track(result)
+        self.transaction(async |tx| {
+            upsert_checkpoint(tx, id, checkpoint, now).await?;
+            sqlx::query(
+                "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
+                 updated_at = ?4, warnings = ?6 WHERE id = ?5",
+            )
+            .bind(checkpoint.iterations_done as i64)
+            .bind(&checkpoint.best)
+            .bind(spec)
+            .bind(now)
+            .bind(id)
+            .bind(&checkpoint.warnings)
+            .execute(&mut *tx)
+            .await?;
+            Ok(())
+        })
+        .await
     }
 
     /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
     /// transaction.
     pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
-        let result = self.insert_study_tx(job, checkpoint).await;
-        self.track(result)
+        self.insert_study_tx(job, checkpoint).await
     }
 
     async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {

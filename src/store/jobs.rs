@@ -158,7 +158,7 @@ impl Store {
         {
             return Ok(found);
         }
-        let result = self.track(self.insert_queued(job).await);
+        let result = self.insert_queued(job).await;
         match result {
             Ok(row) => Ok(Inserted::Created(row)),
             // A concurrent request with the same key won the race: answer as a replay.
@@ -246,7 +246,7 @@ impl Store {
             .bind(id)
             .execute(self.pool())
             .await;
-        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+        Ok(done?.rows_affected() == 1)
     }
 
     /// Records that a cancel of the job was acknowledged (before the running job stops), so that
@@ -257,7 +257,7 @@ impl Store {
             .bind(id)
             .execute(self.pool())
             .await;
-        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+        Ok(done?.rows_affected() == 1)
     }
 
     /// Sets a job's total iterations with its updated spec (and state), clearing any error and
@@ -281,13 +281,13 @@ impl Store {
         .bind(id)
         .execute(self.pool())
         .await;
-        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+        Ok(done?.rows_affected() == 1)
     }
 
     /// Deletes a job and its checkpoint, returning whether it existed.
     pub async fn delete_job(&self, id: i64) -> Result<bool, StoreError> {
         let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.pool()).await;
-        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+        Ok(done?.rows_affected() == 1)
     }
 
     /// Number of jobs in each state (every state listed, zero included).

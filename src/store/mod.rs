@@ -9,8 +9,8 @@
 //! `iterations_done`, so the two never disagree.
 //!
 //! Every write is a transaction whose commit is awaited: a write that the database could not store
-//! (disk full, I/O error) is an error, never a success that was not kept. The store remembers the
-//! last such failure for a while so that `/readyz` reports it.
+//! (disk full, I/O error) is an error, never a success that was not kept. `/readyz` asks the
+//! database itself whether it has room for more (see [`Store::ready`]).
 //!
 //! Imports: nothing from the crate
 
@@ -21,9 +21,10 @@ mod solves;
 mod state;
 mod sweeps;
 
+use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use sqlx::SqlitePool;
@@ -89,18 +90,16 @@ impl StoreError {
     }
 }
 
-/// How long a storage failure keeps `/readyz` failing after it happened (unless a later write
-/// succeeds first).
-const FAILURE_MEMORY_MS: i64 = 30_000;
+/// The room `/readyz` asks for: one allocation of this many bytes must fit under the database's
+/// page limit, and the filesystem must have it free. Small enough to stay in SQLite's page cache
+/// (2 MiB by default), so that a probe of an unauthenticated route writes nothing to disk.
+const HEADROOM_BYTES: u64 = 1 << 20;
 
-/// What the store knows of the database's health, shared by every clone.
+/// Fault injection for tests, shared by every clone of a store.
 #[derive(Debug, Default)]
 struct Health {
-    /// Unix milliseconds of the last write that failed for lack of storage; 0 if none since the
-    /// last successful write.
-    last_failure_ms: AtomicI64,
-    /// Fault injection for tests: a `max_page_count` every connection applies (0: none set; the
-    /// generation makes connections that applied an older value apply the new one).
+    /// A `max_page_count` every connection applies (0: none set; the generation makes connections
+    /// that applied an older value apply the new one).
     page_limit: AtomicU64,
     page_limit_generation: AtomicU64,
 }
@@ -110,6 +109,8 @@ struct Health {
 pub struct Store {
     pool: SqlitePool,
     health: Arc<Health>,
+    /// The database file, for the filesystem's free space (an in-memory database has none).
+    path: Arc<PathBuf>,
 }
 
 impl Store {
@@ -122,6 +123,7 @@ impl Store {
             .synchronous(SqliteSynchronous::Full)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
+        let path = Arc::new(options.get_filename().to_path_buf());
         let health = Arc::new(Health::default());
         let hook = health.clone();
         let pool = SqlitePoolOptions::new()
@@ -146,11 +148,16 @@ impl Store {
             .connect_with(options)
             .await?;
         MIGRATOR.run(&pool).await?;
-        Ok(Self { pool, health })
+        Ok(Self { pool, health, path })
     }
 
-    /// Whether the database answers, every embedded migration is applied, and it takes writes: a
-    /// one-row write now, and no write refused for lack of storage in the last 30 seconds.
+    /// Whether the database answers, every embedded migration is applied, a write commits, and
+    /// there is room for more: [`HEADROOM_BYTES`] must fit under the database's page limit (an
+    /// allocation inside a transaction that is rolled back) and be free on the filesystem.
+    ///
+    /// Why not remember failed writes instead: a write that fits in pages a previous write freed
+    /// succeeds on a database that cannot grow, and a memory cleared by it reported such a
+    /// database ready while every new submission was refused.
     pub async fn ready(&self) -> Result<(), String> {
         let applied: Vec<i64> = sqlx::query_scalar("SELECT version FROM _sqlx_migrations WHERE success = 1")
             .fetch_all(&self.pool)
@@ -160,22 +167,41 @@ impl Store {
         if !missing.is_empty() {
             return Err(format!("migrations not applied: {missing:?}"));
         }
-        let now = jobs::now_ms();
         sqlx::query(
             "INSERT INTO readiness (id, checked_at) VALUES (1, ?1) ON CONFLICT (id) DO UPDATE SET checked_at = ?1",
         )
-        .bind(now)
+        .bind(jobs::now_ms())
         .execute(&self.pool)
         .await
         .map_err(|e| format!("the database does not take writes: {e}"))?;
-        let failed = self.health.last_failure_ms.load(Ordering::SeqCst);
-        if failed != 0 && now - failed < FAILURE_MEMORY_MS {
-            return Err(format!(
-                "a write was refused for lack of storage {} s ago (disk full or I/O error)",
-                (now - failed) / 1000
-            ));
+        let room = format!("the database has less than {} MiB of room for writes", HEADROOM_BYTES >> 20);
+        // The allocation is rolled back, never kept.
+        let mut conn = self.pool.acquire().await.map_err(|e| format!("database unreachable: {e}"))?;
+        let probe = async {
+            sqlx::query("BEGIN IMMEDIATE").execute(&mut *conn).await?;
+            sqlx::query("INSERT INTO readiness_headroom (filler) VALUES (zeroblob(?))")
+                .bind(HEADROOM_BYTES as i64)
+                .execute(&mut *conn)
+                .await
         }
-        Ok(())
+        .await
+        .map_err(StoreError::from);
+        // SQLite may have rolled back already (after SQLITE_FULL); that error is moot.
+        let _ = sqlx::query("ROLLBACK").execute(&mut *conn).await;
+        drop(conn);
+        match probe {
+            Err(e) if e.is_storage_failure() => return Err(format!("{room} (page limit or disk): {e}")),
+            Err(e) => return Err(format!("the database does not take writes: {e}")),
+            Ok(_) => {}
+        }
+        // A missing file is an in-memory database; anything else the filesystem says counts.
+        match rustix::fs::statvfs(self.path.as_path()) {
+            Ok(fs) if fs.f_bavail.saturating_mul(fs.f_frsize) < HEADROOM_BYTES => {
+                Err(format!("{room}: the filesystem has {} bytes free", fs.f_bavail.saturating_mul(fs.f_frsize)))
+            }
+            Ok(_) | Err(rustix::io::Errno::NOENT) => Ok(()),
+            Err(e) => Err(format!("cannot tell the filesystem's free space: {e}")),
+        }
     }
 
     /// Runs `steps` as one write transaction (`BEGIN IMMEDIATE` … `COMMIT`) on one connection. If a
@@ -200,18 +226,6 @@ impl Store {
         result
     }
 
-    /// Records the outcome of a write for [`Store::ready`].
-    fn track<T>(&self, result: Result<T, StoreError>) -> Result<T, StoreError> {
-        match &result {
-            Ok(_) => self.health.last_failure_ms.store(0, Ordering::SeqCst),
-            Err(e) if e.is_storage_failure() => {
-                self.health.last_failure_ms.store(jobs::now_ms().max(1), Ordering::SeqCst);
-            }
-            Err(_) => {}
-        }
-        result
-    }
-
     /// Fault injection for tests: makes every connection refuse to grow the database beyond
     /// `pages` pages (`PRAGMA max_page_count`), as a full disk would; `None` lifts the limit.
     #[doc(hidden)]
@@ -230,5 +244,47 @@ impl Store {
 
     pub(crate) fn pool(&self) -> &SqlitePool {
         &self.pool
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Inserted, NewJob, Store};
+
+    fn job(seed: u64) -> NewJob {
+        NewJob {
+            spec: format!("{{\"seed\":{seed}}}"),
+            fingerprint: format!("f{seed}"),
+            iterations_total: 1,
+            reference_luminance: None,
+            idempotency_key: None,
+            request_hash: None,
+            now: 0,
+        }
+    }
+
+    /// The CI failure this replaced: a write that fits in pages a deletion freed succeeded on a
+    /// database that could not grow, and `/readyz` (which remembered only the latest outcome)
+    /// reported ready.
+    #[tokio::test]
+    async fn ready_asks_for_room_not_for_the_latest_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&format!("sqlite://{}", dir.path().join("t.db").display())).await.unwrap();
+        store.ready().await.unwrap();
+        let mut ids = Vec::new();
+        for seed in 0..20 {
+            let Inserted::Created(row) = store.insert_job(&job(seed)).await.unwrap() else { panic!("inserted") };
+            ids.push(row.id);
+        }
+        for id in &ids[..10] {
+            assert!(store.delete_job(*id).await.unwrap());
+        }
+        store.limit_pages(Some(store.page_count().await.unwrap()));
+        // Fits in the freed pages: stored, yet the database cannot grow by a megabyte.
+        store.insert_job(&job(100)).await.unwrap();
+        let err = store.ready().await.unwrap_err();
+        assert!(err.contains("less than 1 MiB of room"), "{err}");
+        store.limit_pages(None);
+        store.ready().await.unwrap();
     }
 }

@@ -23,30 +23,28 @@ impl Store {
     /// Stores (or replaces) a named solve of a job, if the job has fewer than `max` other ones;
     /// false when it has `max` already. One transaction: the count and the write agree.
     pub async fn put_solve(&self, job: i64, name: &str, patch: &str, now: i64, max: i64) -> Result<bool, StoreError> {
-        let result = self
-            .transaction(async |tx| {
-                let others: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM solves WHERE job_id = ? AND name <> ?")
-                    .bind(job)
-                    .bind(name)
-                    .fetch_one(&mut *tx)
-                    .await?;
-                if others >= max {
-                    return Ok(false);
-                }
-                sqlx::query(
-                    "INSERT INTO solves (job_id, name, patch, created_at) VALUES (?, ?, ?, ?) \
-                     ON CONFLICT (job_id, name) DO UPDATE SET patch = excluded.patch, created_at = excluded.created_at",
-                )
+        self.transaction(async |tx| {
+            let others: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM solves WHERE job_id = ? AND name <> ?")
                 .bind(job)
                 .bind(name)
-                .bind(patch)
-                .bind(now)
-                .execute(&mut *tx)
+                .fetch_one(&mut *tx)
                 .await?;
-                Ok(true)
-            })
-            .await;
-        self.track(result)
+            if others >= max {
+                return Ok(false);
+            }
+            sqlx::query(
+                "INSERT INTO solves (job_id, name, patch, created_at) VALUES (?, ?, ?, ?) \
+                     ON CONFLICT (job_id, name) DO UPDATE SET patch = excluded.patch, created_at = excluded.created_at",
+            )
+            .bind(job)
+            .bind(name)
+            .bind(patch)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+            Ok(true)
+        })
+        .await
     }
 
     /// A job's named solves, oldest first.
@@ -75,6 +73,6 @@ impl Store {
             .bind(name)
             .execute(self.pool())
             .await;
-        Ok(self.track(done.map_err(StoreError::from))?.rows_affected() == 1)
+        Ok(done?.rows_affected() == 1)
     }
 }

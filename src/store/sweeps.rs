@@ -22,22 +22,20 @@ pub struct SweepRow {
 impl Store {
     /// Inserts a sweep and its runs (queued jobs, in run order); committed before it returns.
     pub async fn insert_sweep(&self, spec: &str, runs: &[NewJob], now: i64) -> Result<(i64, Vec<JobRow>), StoreError> {
-        let result = self
-            .transaction(async |tx| {
-                let id: i64 = sqlx::query_scalar("INSERT INTO sweeps (spec, created_at) VALUES (?, ?) RETURNING id")
-                    .bind(spec)
-                    .bind(now)
-                    .fetch_one(&mut *tx)
-                    .await?;
-                let mut rows = Vec::with_capacity(runs.len());
-                for (run, job) in runs.iter().enumerate() {
-                    let job = NewJob { now, ..job.clone() };
-                    rows.push(insert_queued_row(tx, &job, Some((id, run))).await?);
-                }
-                Ok((id, rows))
-            })
-            .await;
-        self.track(result)
+        self.transaction(async |tx| {
+            let id: i64 = sqlx::query_scalar("INSERT INTO sweeps (spec, created_at) VALUES (?, ?) RETURNING id")
+                .bind(spec)
+                .bind(now)
+                .fetch_one(&mut *tx)
+                .await?;
+            let mut rows = Vec::with_capacity(runs.len());
+            for (run, job) in runs.iter().enumerate() {
+                let job = NewJob { now, ..job.clone() };
+                rows.push(insert_queued_row(tx, &job, Some((id, run))).await?);
+            }
+            Ok((id, rows))
+        })
+        .await
     }
 
     /// One sweep.
@@ -86,13 +84,11 @@ impl Store {
 
     /// Deletes a sweep and its jobs (with their checkpoints), returning whether it existed.
     pub async fn delete_sweep(&self, id: i64) -> Result<bool, StoreError> {
-        let result = self
-            .transaction(async |tx| {
-                sqlx::query("DELETE FROM jobs WHERE sweep_id = ?").bind(id).execute(&mut *tx).await?;
-                let done = sqlx::query("DELETE FROM sweeps WHERE id = ?").bind(id).execute(&mut *tx).await?;
-                Ok(done.rows_affected() == 1)
-            })
-            .await;
-        self.track(result)
+        self.transaction(async |tx| {
+            sqlx::query("DELETE FROM jobs WHERE sweep_id = ?").bind(id).execute(&mut *tx).await?;
+            let done = sqlx::query("DELETE FROM sweeps WHERE id = ?").bind(id).execute(&mut *tx).await?;
+            Ok(done.rows_affected() == 1)
+        })
+        .await
     }
 }
