@@ -515,6 +515,52 @@ async fn predict_answers_another_budget_from_the_noise_components() {
     assert_eq!(unknown["field"], "light_paths", "{unknown}");
 }
 
+/// Issue 25, item 6: `POST /v1/jobs/{id}/budget` is `optimis budget --json` on the job's moments
+/// (the same plan, bit for bit, for the same costs), with its fields validated.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn budget_plans_the_ray_budget_as_the_cli_does() {
+    let server = TestServer::start().await;
+    let id = server
+        .submit_and_wait(&json!({ "preset": "paper-table1", "light_paths": 1_000_000, "iterations": 2000,
+            "seed": 5, "noise_components": true }))
+        .await;
+    let costs =
+        json!({ "target_rms": 1.0, "light_cost": 2e-8, "camera_cost": 1e-7, "iteration_cost": 1e-3, "pixels": 1e6 });
+    let reply = server.post(&format!("/v1/jobs/{id}/budget"), &costs).await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    let plan = reply.json();
+    assert_eq!(plan["job_id"], id);
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("m.json"), server.get(&format!("/v1/jobs/{id}/moments")).await.text()).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_optimis"))
+        .current_dir(dir.path())
+        .args(["budget", "m.json", "--target-rms", "1", "--light-cost", "2e-8", "--camera-cost", "1e-7"])
+        .args(["--iteration-cost", "1e-3", "--pixels", "1e6", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let cli: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["best", "headline", "search", "costs", "recommended"] {
+        assert_eq!(plan[key], cli[key], "{key}");
+    }
+    let best = plan["best"].as_array().unwrap();
+    assert!(best.iter().any(|b| b["speedup"].is_number() && b["speedup_stderr"].is_number()), "{plan}");
+
+    for (body, field) in [
+        (json!({ "target_rms": 0, "light_cost": 0, "camera_cost": 0, "iteration_cost": 0 }), "target_rms"),
+        (json!({ "target_rms": 1, "light_cost": -1, "camera_cost": 0, "iteration_cost": 0 }), "light_cost"),
+        (json!({ "target_rms": 1, "light_cost": 0, "camera_cost": 0, "iteration_cost": 0, "pixels": 0.5 }), "pixels"),
+        (json!({ "target_rms": 1, "light_cost": 0, "camera_cost": 0 }), "iteration_cost"),
+    ] {
+        let problem = assert_problem(server.post(&format!("/v1/jobs/{id}/budget"), &body).await, 422);
+        assert_eq!(problem["field"], field, "{problem}");
+    }
+    let plain = server.submit_and_wait(&small_job(4, 6)).await;
+    let refused = server.post(&format!("/v1/jobs/{plain}/budget"), &costs).await;
+    assert_problem(refused, 409);
+    server.stop().await;
+}
+
 /// Another run's result scored on a job's statistics: the recommended strategy's figures on these
 /// iterations beside the job's per-path strategies; a table of another grid, a heuristic without a
 /// column or cells that do not sum to 1 − Σβ are named.

@@ -329,9 +329,11 @@ fn set_progress_csv_and_exit_codes() {
     ));
     let conflict = optimis(dir.path(), &["merge", "b.json", "a.json", "--out", "m.json"], &[]);
     assert_eq!(conflict.status.code(), Some(4));
-    assert!(
-        String::from_utf8_lossy(&conflict.stderr).starts_with("optimis: a.json: configuration fingerprints differ")
-    );
+    // The merge names the input at fault and the configuration fields that differ (a.json has
+    // l3 = 9; both keep the preset's engine and cells).
+    let stderr = String::from_utf8_lossy(&conflict.stderr);
+    assert!(stderr.starts_with("optimis: a.json: the statistics were drawn under another configuration"), "{stderr}");
+    assert!(stderr.contains("scene.l3: 9.0 vs 3.0"), "{stderr}");
     let overlap = optimis(dir.path(), &["merge", "b.json", "b.json", "--out", "m.json"], &[]);
     assert_eq!(overlap.status.code(), Some(4));
     let missing = optimis(dir.path(), &["report", "missing.json"], &[]);

@@ -6,8 +6,12 @@
 //!
 //! Substitutions, the only ones: `localhost:8080` is the test server's address and
 //! `cargo run --release --` the binary under test. Blocks run with `bash -euo pipefail` in a
-//! temporary directory that sees the repository's `examples/`; after each block the test waits until
-//! no job is queued or running, so that the next block reads finished jobs as a reader would.
+//! temporary directory that sees the repository's `examples/`, one after the other as in one
+//! terminal: the (lowercase) shell variables a block sets, such as `$job` from a `Location`
+//! header, are there in the next. After each block the test waits until no job is queued or
+//! running, so that the next block reads finished jobs as a reader would; a block that needs a
+//! job to have ended waits for it itself (`optimis wait`), or the sweep's table below would be
+//! short of rows.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -53,6 +57,13 @@ fn blocks(readme: &str) -> Vec<Block> {
     out
 }
 
+/// Runs before each block: the variables the previous blocks set.
+const CARRY_IN: &str = "if [ -f .readme-vars ]; then . ./.readme-vars; fi\n";
+
+/// Runs after each block: keeps its lowercase variables (bash's own are upper case) for the next.
+const CARRY_OUT: &str = "\nREADME_VARS=$(compgen -v | grep -E '^[a-z][a-z0-9_]*$' || true)\n\
+     if [ -n \"$README_VARS\" ]; then declare -p $README_VARS > .readme-vars; fi\n";
+
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -97,6 +108,7 @@ async fn every_readme_block_runs_as_written_or_is_marked_and_checked() {
         match (b.lang.as_str(), &b.syntax_only) {
             ("sh", None) => {
                 let script = b.text.replace("localhost:8080", &address).replace("cargo run --release --", binary);
+                let script = format!("{CARRY_IN}{script}{CARRY_OUT}");
                 let output = bash(dir.path(), &script, false);
                 assert!(
                     output.status.success(),

@@ -76,7 +76,10 @@ async fn shards_on_two_servers_merge_into_the_whole_study() {
     // A shard of another configuration (another R): 409.
     let foreign = b.submit_and_wait(&study(22, Some((0, 2)), 0.021)).await;
     let problem = assert_problem(a.merge(merged, &from(&b.base, foreign)).await, 409);
-    assert!(problem["detail"].as_str().unwrap().contains("fingerprint"), "{problem}");
+    assert!(
+        problem["detail"].as_str().unwrap().contains("merge_radius: 0.021 vs 0.02"),
+        "the field that differs: {problem}"
+    );
     assert_eq!(unchanged().await, before);
 
     // A document with one byte changed (a digit of its statistics): 422.

@@ -239,7 +239,16 @@ async fn a_jobs_tables_download_as_csv() {
         json_history["points"].as_array().unwrap().iter().map(|p| p["strategies"].as_array().unwrap().len()).sum();
     assert!(samples > 0);
     assert_eq!(history.lines().count(), 1 + samples, "one row per checkpoint and strategy");
-    assert!(history.starts_with("iterations,strategy,luminance,rms_percent\r\n"));
+    assert!(history.starts_with("iterations,strategy,luminance,luminance_stderr,rms_percent\r\n"));
+    // The SE column is the dashboard's band: |L|·RMS/√M.
+    let first: Vec<f64> = history
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').filter_map(|c| c.parse().ok()).collect::<Vec<f64>>())
+        .find(|cells| cells.len() == 4)
+        .expect("a row with every figure");
+    let (m, l, se, rms) = (first[0], first[1], first[2], first[3]);
+    assert!((se - l.abs() * rms / 100.0 / m.sqrt()).abs() <= 1e-12 * se.abs(), "{first:?}");
     assert_eq!(assert_problem(server.get(&format!("/v1/jobs/{id}/result?format=xml")).await, 422)["field"], "format");
     assert_eq!(
         assert_problem(server.get(&format!("/v1/jobs/{id}/result?format=csv&table=cells")).await, 422)["field"],

@@ -14,9 +14,12 @@ strategy is recommended (no table), the table optimum at ``optimal_cv``'s λ. Ce
 without a data standard error (``smoothed``: the gradient penalty set them) are
 drawn as open markers without error bars.
 
-Run it (Python 3.9+; ``requests`` and ``matplotlib``)::
+It talks to the server through the ``optimis_client`` package (``clients/python``:
+submit, wait with a long-poll, results, RFC 9457 problems raised as exceptions).
+Run it from the repository's root (Python 3.9+; the package, with ``requests`` and
+``pandas``, and ``matplotlib``)::
 
-    python3 -m venv .venv && .venv/bin/pip install -r examples/python/requirements.txt
+    python3 -m venv .venv && .venv/bin/pip install -r examples/python/requirements.txt ./clients/python
     optimis serve &                      # or: cargo run --release -- serve &
     .venv/bin/python examples/python/paper_table1.py --url http://127.0.0.1:8080 \\
         --iterations 10000 --seed 1 --out fig2.png --json table1.json
@@ -36,129 +39,69 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import textwrap
 import time
 from typing import Any, Dict, List, Optional
 
-import requests
-
-# The paper's Table 1 (10^4 iterations, weights fitted on the same iterations):
-# case number, L·10^5 and RMS % for the strategies that have a counterpart here.
-# `optimal` is the paper's procedure (fitted and scored in-sample, λ = 0).
-PAPER_TABLE1: Dict[str, Dict[str, float]] = {
-    "plane1": {"case": 1, "luminance_1e5": 26.484, "rms_percent": 208.0},
-    "plane2": {"case": 2, "luminance_1e5": 26.352, "rms_percent": 254.0},
-    "plane3": {"case": 3, "luminance_1e5": 25.997, "rms_percent": 146.0},
-    "switch": {"case": 4, "luminance_1e5": 26.352, "rms_percent": 61.0},
-    "optimal": {"case": 5, "luminance_1e5": 25.961, "rms_percent": 54.0},
-}
-
-# Job states after which nothing changes any more.
-FINAL_STATES = ("succeeded", "failed", "cancelled")
+from optimis_client import Client, OptimisError, WaitTimeout, paper_figures
 
 
-class ApiError(Exception):
-    """A request failed; the message carries the server's problem detail when there is one."""
+def published_rows(result: Dict[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """The paper's Table 1 rows that apply to this job, by strategy, as the server attaches them
+    to the result (``references``: the repository's references/*.json, also GET /v1/references);
+    empty when the job's configuration is not the paper's."""
+    return {
+        strategy: {
+            "case": figures["case"],
+            "luminance_1e5": figures["luminance"] * 1e5,
+            "rms_percent": figures["rms_percent"],
+        }
+        for strategy, figures in paper_figures(result).items()
+    }
 
 
-class Client:
-    """A minimal optimis client: JSON in, JSON out, problem+json errors raised as ApiError."""
-
-    def __init__(self, base_url: str, token: Optional[str], request_timeout: float) -> None:
-        self.base_url = base_url.rstrip("/")
-        self.request_timeout = request_timeout
-        self.session = requests.Session()
-        self.session.headers["Accept"] = "application/json"
-        if token:
-            self.session.headers["Authorization"] = f"Bearer {token}"
-
-    def request(self, method: str, path: str, deadline: float, **kwargs: Any) -> requests.Response:
-        """Send one request; wait and retry while the server answers 429/503 with Retry-After."""
-        url = self.base_url + path
-        while True:
-            try:
-                response = self.session.request(method, url, timeout=self.request_timeout, **kwargs)
-            except requests.RequestException as err:
-                raise ApiError(f"{method} {url}: {err}") from err
-            retry_after = response.headers.get("Retry-After")
-            if response.status_code in (429, 503) and retry_after is not None:
-                try:
-                    pause = float(retry_after)
-                except ValueError:
-                    pause = 1.0
-                if time.monotonic() + pause < deadline:
-                    time.sleep(pause)
-                    continue
-            if response.status_code >= 400:
-                raise ApiError(describe_problem(method, url, response))
-            return response
-
-    def submit(self, job: Dict[str, Any], deadline: float) -> Dict[str, Any]:
-        return self.request("POST", "/v1/jobs", deadline, json=job).json()
-
-    def job(self, job_id: int, deadline: float) -> Dict[str, Any]:
-        return self.request("GET", f"/v1/jobs/{job_id}", deadline).json()
-
-    def result(self, job_id: int, deadline: float, weights_lambda: Optional[float] = None) -> Dict[str, Any]:
-        params = {} if weights_lambda is None else {"lambda": weights_lambda}
-        return self.request("GET", f"/v1/jobs/{job_id}/result", deadline, params=params).json()
-
-    def cancel(self, job_id: int) -> None:
-        """Best effort: stop a job we no longer wait for, so that it does not hold the server."""
-        try:
-            self.session.post(f"{self.base_url}/v1/jobs/{job_id}/cancel", timeout=self.request_timeout)
-        except requests.RequestException:
-            pass
-
-
-def describe_problem(method: str, url: str, response: requests.Response) -> str:
-    """One line out of an RFC 9457 problem document (or whatever the body is)."""
+def cancel_quietly(client: Client, job_id: int) -> None:
+    """Best effort: stop a job we no longer wait for, so that it does not hold the server."""
     try:
-        problem = response.json()
-    except ValueError:
-        problem = None
-    if isinstance(problem, dict) and "detail" in problem:
-        text = f"{problem.get('title', 'error')} ({response.status_code}): {problem['detail']}"
-        if problem.get("field"):
-            text += f" [field: {problem['field']}]"
-        return text
-    body = response.text.strip()[:200]
-    return f"{method} {url}: HTTP {response.status_code} {body}"
+        client.cancel(job_id)
+    except OptimisError:
+        pass
 
 
 def wait_for(client: Client, job: Dict[str, Any], deadline: float, poll: float) -> Dict[str, Any]:
-    """Poll the job until it reaches a final state, reporting progress on stderr.
+    """Wait until the job has succeeded (``Client.wait``: a long-poll that answers as soon as the
+    job ends), reporting progress on stderr; the job is cancelled when the deadline passes or on
+    Ctrl-C. Raises ``JobFailed`` when it failed or was cancelled.
 
-    On a terminal the progress line is rewritten in place; in a log (CI) one line is written
-    per change of state.
+    On a terminal the progress line is rewritten in place (every `poll` seconds at most); in a log
+    (CI) one line is written per change of state.
     """
     job_id = job["id"]
     live = sys.stderr.isatty()
-    last_state = None
+    last_state: List[Optional[str]] = [None]
+
+    def report(current: Dict[str, Any]) -> None:
+        progress = current.get("progress") or {}
+        line = (f"job {job_id}: {current['state']:<9} {progress.get('iterations_done', 0)}"
+                f"/{progress.get('iterations_total', 0)} iterations")
+        if live:
+            print(f"\r{line}", end="", file=sys.stderr, flush=True)
+        elif current["state"] != last_state[0]:
+            print(line, file=sys.stderr, flush=True)
+        last_state[0] = current["state"]
+
     try:
-        while job["state"] not in FINAL_STATES:
-            if time.monotonic() >= deadline:
-                client.cancel(job_id)
-                raise ApiError(f"job {job_id} still {job['state']} when the timeout ran out (cancelled it)")
-            time.sleep(poll)
-            job = client.job(job_id, deadline)
-            progress = job.get("progress") or {}
-            line = (f"job {job_id}: {job['state']:<9} {progress.get('iterations_done', 0)}"
-                    f"/{progress.get('iterations_total', 0)} iterations")
-            if live:
-                print(f"\r{line}", end="", file=sys.stderr, flush=True)
-            elif job["state"] != last_state:
-                print(line, file=sys.stderr, flush=True)
-            last_state = job["state"]
+        return client.wait(job_id, timeout=max(0.0, deadline - time.monotonic()), progress=report, poll=poll)
+    except WaitTimeout as err:
+        cancel_quietly(client, job_id)
+        raise OptimisError(f"job {job_id} still {err.state} when the timeout ran out (cancelled it)") from err
     except KeyboardInterrupt:
-        client.cancel(job_id)
+        cancel_quietly(client, job_id)
         raise
     finally:
         if live:
             print(file=sys.stderr)
-    return job
 
 
 def fmt(value: Optional[float], digits: int, width: int) -> str:
@@ -200,9 +143,10 @@ def is_per_path(recommended: Optional[Dict[str, Any]]) -> bool:
 def table_rows(result: Dict[str, Any]) -> List[Dict[str, Any]]:
     """The noise table as printed: our figures, the flags and the paper's figures."""
     recommended = (result.get("recommended") or {}).get("strategy")
+    published = published_rows(result)
     rows = []
     for row in result["noise_table"]:
-        paper = PAPER_TABLE1.get(row["strategy"], {})
+        paper = published.get(row["strategy"], {})
         rows.append({
             "strategy": row["strategy"],
             "luminance_1e5": scaled(row.get("luminance")),
@@ -296,8 +240,8 @@ def print_table(rows: List[Dict[str, Any]], result: Dict[str, Any], job: Dict[st
         print(f"warning [{warning.get('code')}]: {warning.get('message')}")
 
 
-def figure_table(client: Client, job: Dict[str, Any], result: Dict[str, Any], weights_lambda: Optional[float],
-                 deadline: float) -> Dict[str, Any]:
+def figure_table(client: Client, job: Dict[str, Any], result: Dict[str, Any],
+                 weights_lambda: Optional[float]) -> Dict[str, Any]:
     """Which weights table Fig. 2 draws, fetching it when it is not the result's own.
 
     The in-sample table optimum at --weights-lambda when asked for; else the recommended row's
@@ -314,7 +258,7 @@ def figure_table(client: Client, job: Dict[str, Any], result: Dict[str, Any], we
         said = f"{recommended['strategy']} (λ = {recommended['lambda']:g})"
     figure: Dict[str, Any] = {"recommended": (recommended or {}).get("strategy"), "heuristics": []}
     if weights_lambda is not None:
-        document = client.result(job["id"], deadline, weights_lambda)
+        document = client.result(job["id"], lam=weights_lambda)
         figure["source"], figure["strategy"], figure["lambda"] = "lambda", "optimal", weights_lambda
         figure["title"] = f"in-sample table optimum (optimal, λ = {weights_lambda:g}); recommended: {said}"
     elif result.get("weights"):
@@ -331,7 +275,7 @@ def figure_table(client: Client, job: Dict[str, Any], result: Dict[str, Any], we
                           title=f"no table; recommended: {said}",
                           message=f"no weights table to draw: optimal_cv has no λ ({cv.get('error') or 'no row'})")
             return figure
-        document = client.result(job["id"], deadline, cv["lambda"])
+        document = client.result(job["id"], lam=cv["lambda"])
         figure["title"] = f"table optimum (optimal_cv, λ = {cv['lambda']:g}); recommended: {said}"
     cells = document.get("weights") or []
     figure["cells"] = len(cells)
@@ -452,27 +396,28 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--out", default="fig2.png", help="where to save Fig. 2 (PNG)")
     parser.add_argument("--json", dest="json_path", help="also write the printed table rows to this JSON file")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds to wait for the job in all")
-    parser.add_argument("--poll", type=float, default=0.5, help="seconds between polls")
+    parser.add_argument("--poll", type=float, default=0.5,
+                        help="seconds between progress reports (the wait ends as soon as the job does)")
     parser.add_argument("--weights-lambda", type=float, default=None,
                         help="draw the in-sample table optimum at this λ in Fig. 2 (0: the paper's) "
                              "instead of the recommended weights")
     args = parser.parse_args(argv)
 
-    client = Client(args.url, os.environ.get("OPTIMIS_TOKEN"), request_timeout=30.0)
+    # The bearer token, when the server requires one, comes from $OPTIMIS_TOKEN.
+    client = Client(args.url, timeout=30.0)
     deadline = time.monotonic() + args.timeout
     job_document = {"preset": "paper-table1", "iterations": args.iterations, "seed": args.seed}
 
     try:
-        job = client.submit(job_document, deadline)
+        job = client.submit(job_document)
         print(f"submitted job {job['id']} to {args.url}", file=sys.stderr)
+        # Raises JobFailed ("job N failed: why") unless it succeeded.
         job = wait_for(client, job, deadline, args.poll)
-        if job["state"] != "succeeded":
-            raise ApiError(f"job {job['id']} {job['state']}: {job.get('error') or 'no reason given'}")
-        result = client.result(job["id"], deadline)
+        result = client.result(job["id"])
         # Fig. 2's table: the recommended one, the table optimum at optimal_cv's λ when a per-path
         # strategy is recommended, or the in-sample fit at the λ asked for.
-        figure = figure_table(client, job, result, args.weights_lambda, deadline)
-    except ApiError as err:
+        figure = figure_table(client, job, result, args.weights_lambda)
+    except OptimisError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -62,6 +62,17 @@ pub struct JobSubmission {
     /// that runs its jobs on its own pool refuses it (422). Not part of the computation.
     #[schema(nullable = false)]
     execution: Option<crate::sim::spec::Execution>,
+    /// A name for people (1 to 200 printable characters), shown in the job list. Not part of the
+    /// computation nor of the fingerprint.
+    #[schema(nullable = false, min_length = 1, max_length = 200)]
+    name: Option<String>,
+    /// Labels to find the job by (`GET /v1/jobs?label=KEY=VALUE`): at most 32; keys of 1–64
+    /// letters, digits, `_`, `-`, `.`; values of at most 200 printable characters.
+    #[schema(nullable = false)]
+    labels: Option<std::collections::BTreeMap<String, String>>,
+    /// Free-form notes, at most 4,000 characters.
+    #[schema(nullable = false, max_length = 4000)]
+    notes: Option<String>,
 }
 
 /// Scene fields to override.

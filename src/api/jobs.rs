@@ -13,9 +13,12 @@ use super::AppState;
 use super::bodies::JobSubmission;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, page, query_problem, typed};
-use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
+use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
+use super::wait::{self, WaitQuery};
 use crate::jobs::documents::JobList;
 use crate::jobs::resource::{JobResource, JobState};
+use crate::store::JobFilter;
+
 /// Longest accepted `Idempotency-Key`.
 const MAX_KEY_LEN: usize = 255;
 
@@ -45,6 +48,12 @@ pub struct ExtendRequest {
 pub struct ListQuery {
     /// Only jobs in this state.
     state: Option<JobState>,
+    /// Only the runs of this sweep.
+    #[param(minimum = 1)]
+    sweep: Option<i64>,
+    /// Only jobs with this label: `KEY=VALUE` (the job document's `labels`).
+    #[param(pattern = "^[A-Za-z0-9_.-]{1,64}=.{0,200}$")]
+    label: Option<String>,
     /// Page size, 1 to 500 (default 50).
     #[param(minimum = 1, maximum = 500)]
     limit: Option<u32>,
@@ -123,19 +132,61 @@ pub async fn list(
 ) -> Result<Json<JobList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let (limit, cursor) = page(q.limit, q.cursor, 50, 500)?;
-    Ok(Json(state.jobs.list(q.state, cursor, limit).await?))
+    let label = match q.label {
+        None => None,
+        Some(text) => Some(parse_label(&text)?),
+    };
+    if q.sweep.is_some_and(|s| s < 1) {
+        return Err(ApiError::Invalid { field: "sweep".into(), message: "must be a sweep id (≥ 1)".into() });
+    }
+    let filter = JobFilter { state: q.state, sweep: q.sweep, label };
+    Ok(Json(state.jobs.list(&filter, cursor, limit).await?))
+}
+
+/// `KEY=VALUE` of the list's `label` filter.
+fn parse_label(text: &str) -> Result<(String, String), ApiError> {
+    let invalid = |message: &str| ApiError::Invalid { field: "label".into(), message: message.into() };
+    let (key, value) = text.split_once('=').ok_or_else(|| invalid("must be KEY=VALUE"))?;
+    if !(1..=64).contains(&key.len())
+        || !key.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
+    {
+        return Err(invalid("a label's key is 1 to 64 letters, digits, '_', '-' or '.'"));
+    }
+    if value.chars().count() > 200 {
+        return Err(invalid("a label's value is at most 200 characters"));
+    }
+    Ok((key.to_string(), value.to_string()))
 }
 
 /// A job: state, spec and progress.
 #[utoipa::path(
-    get, operation_id = "get_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id")),
+    get, operation_id = "get_job", path = "/v1/jobs/{id}", tag = "jobs", params(("id" = i64, Path, description = "Job id"), WaitQuery),
     responses(
-        (status = 200, description = "The job", body = JobResource),
+        (status = 200, description = "The job (with `wait`: once it has ended, or when the seconds have passed)", body = JobResource),
         NoSuchJob,
+        BadQuery,
+        (status = 429, description = "`wait`: too many requests are waiting (they share --max-event-streams); retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         ServerFailure,
     )
 )]
-pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<JobResource>, ApiError> {
+pub async fn get(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    query: Result<Query<WaitQuery>, QueryRejection>,
+) -> Result<Json<JobResource>, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    // A job that is not in memory has ended (or waits in the database for a restart's queue):
+    // nothing to wait for.
+    if let Some(wait) = q.duration()?
+        && let Some(mut rx) = state.jobs.subscribe(id)
+    {
+        let _slot = wait::slot(&state)?;
+        let mut shutdown = state.jobs.shutdown_signal();
+        tokio::select! {
+            _ = tokio::time::timeout(wait, rx.wait_for(|job| job.state.is_terminal())) => {}
+            _ = shutdown.wait_for(|stopping| *stopping) => {}
+        }
+    }
     Ok(Json(state.jobs.get(id).await?))
 }
 

@@ -10,6 +10,7 @@
 
 mod auth;
 mod bodies;
+mod compare;
 mod csv;
 mod dashboard;
 pub mod error;
@@ -21,11 +22,13 @@ mod jobs;
 pub mod limits;
 mod openapi;
 mod predictions;
+mod references;
 mod responses;
 mod solves;
 mod statistics;
 mod studies;
 mod sweeps;
+mod wait;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -117,6 +120,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(statistics::result))
         .routes(routes!(statistics::solve))
         .routes(routes!(predictions::predict))
+        .routes(routes!(predictions::budget))
         .routes(routes!(statistics::evaluate))
         .routes(routes!(solves::list))
         .routes(routes!(solves::save, solves::get, solves::delete))
@@ -130,6 +134,8 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(sweeps::get, sweeps::delete))
         .routes(routes!(sweeps::table))
         .routes(routes!(sweeps::cancel))
+        .routes(routes!(references::list))
+        .routes(routes!(compare::compare))
         .routes(routes!(events::events))
         .routes(routes!(health::healthz))
         .routes(routes!(health::readyz))

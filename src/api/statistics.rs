@@ -18,9 +18,12 @@ use super::extract::{JobId, JsonBody, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use crate::jobs::documents::{JobHistory, JobResult};
 use crate::jobs::evaluation::JobEvaluation;
+use crate::sim::checks::published::figures;
 use crate::sim::document::MomentsDocument;
 use crate::sim::solve::evaluate::GivenWeights;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
+use crate::sim::solve::strategy::Strategy;
+use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
 
 /// Query of a job's result.
 #[derive(Debug, Deserialize, IntoParams)]
@@ -31,8 +34,9 @@ pub struct ResultQuery {
     /// procedure) instead of the recommended weights; the noise table is the same.
     #[param(minimum = 0.0, maximum = 1e12)]
     lambda: Option<f64>,
-    /// `csv` or `json`; without it, `Accept: text/csv` asks for CSV.
-    #[param(pattern = "^(csv|json)$")]
+    /// `csv`, `json`, or the noise table as `markdown` or `latex` (a plain `tabular`, for a paper);
+    /// without it, `Accept: text/csv` asks for CSV.
+    #[param(pattern = "^(csv|json|markdown|latex)$")]
     format: Option<String>,
     /// With CSV: `noise` (default; one row per strategy) or `weights` (one row per cell).
     #[param(pattern = "^(noise|weights)$")]
@@ -55,7 +59,9 @@ pub struct HistoryQuery {
     responses(
         (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy, luminance in model units, rms_percent of one iteration; weights: one row per cell)", content(
             (JobResult = "application/json"),
-            (String = "text/csv"))),
+            (String = "text/csv"),
+            (String = "text/markdown"),
+            (String = "application/x-latex"))),
         NoSuchJob,
         (status = 409, description = "No checkpoint yet", body = Problem, content_type = "application/problem+json"),
         BadQuery,
@@ -69,18 +75,38 @@ pub async fn result(
     query: Result<Query<ResultQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    let csv = wants_csv(&headers, q.format.as_deref())?;
+    let text = match q.format.as_deref() {
+        Some(f @ ("markdown" | "latex")) => Some(f.to_string()),
+        _ => None,
+    };
+    let csv = text.is_none() && wants_csv(&headers, q.format.as_deref())?;
     let result = match q.lambda {
         None => state.statistics.result(id).await?,
         Some(lambda) => state.statistics.solve(id, &serde_json::json!({}), Some(lambda)).await?,
     };
+    if let Some(format) = text {
+        if q.table.as_deref().is_some_and(|t| t != "noise") {
+            return Err(ApiError::Invalid {
+                field: "table".into(),
+                message: format!("{format} has the noise table only"),
+            });
+        }
+        let paper = |s: &Strategy| figures(&result.references, s.name());
+        let (body, media) = if format == "latex" {
+            (noise_table_latex(&result.report.noise_table, paper), "application/x-latex; charset=utf-8")
+        } else {
+            (noise_table_markdown(&result.report.noise_table, paper), "text/markdown; charset=utf-8")
+        };
+        return Ok(([(header::CONTENT_TYPE, HeaderValue::from_static(media))], body).into_response());
+    }
     match (csv, q.table.as_deref()) {
         (false, None) => Ok(Json(result).into_response()),
         (false, Some(_)) => {
             Err(ApiError::Invalid { field: "table".into(), message: "applies to CSV only (format=csv)".into() })
         }
         (true, None | Some("noise")) => {
-            Ok(csv_response(noise_table_csv(&result.report.noise_table), &format!("optimis-job-{id}-noise.csv")))
+            let csv = noise_table_csv(&result.report.noise_table, |s| figures(&result.references, s.name()));
+            Ok(csv_response(csv, &format!("optimis-job-{id}-noise.csv")))
         }
         (true, Some("weights")) => {
             Ok(csv_response(weights_csv(&result.report.weights), &format!("optimis-job-{id}-weights.csv")))

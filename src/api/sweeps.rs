@@ -15,6 +15,7 @@ use super::error::{ApiError, Problem};
 use super::extract::query_problem;
 use super::extract::{JsonBody, SweepId, page};
 use super::responses::{BadQuery, NoSuchSweep, NotJson, ServerFailure, TooLarge};
+use super::wait::{self, WaitQuery};
 use crate::jobs::sweeps::{SweepList, SweepResource};
 use crate::sim::sweep::{SweepSpec, SweepTable};
 
@@ -85,14 +86,25 @@ pub async fn list(
 /// A sweep: progress, and per point the swept values, its job, its honest noise table and
 /// recommended weights (measured, or predicted from its run).
 #[utoipa::path(
-    get, operation_id = "get_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id")),
+    get, operation_id = "get_sweep", path = "/v1/sweeps/{id}", tag = "sweeps", params(("id" = i64, Path, description = "Sweep id"), WaitQuery),
     responses(
-        (status = 200, description = "The sweep", body = SweepResource),
+        (status = 200, description = "The sweep (with `wait`: once every run has ended, or when the seconds have passed)", body = SweepResource),
         NoSuchSweep,
+        BadQuery,
+        (status = 429, description = "`wait`: too many requests are waiting (they share --max-event-streams); retry after Retry-After seconds", body = Problem, content_type = "application/problem+json"),
         ServerFailure,
     )
 )]
-pub async fn get(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
+pub async fn get(
+    State(state): State<AppState>,
+    SweepId(id): SweepId,
+    query: Result<Query<WaitQuery>, QueryRejection>,
+) -> Result<Json<SweepResource>, ApiError> {
+    let Query(q) = query.map_err(query_problem)?;
+    if let Some(wait) = q.duration()? {
+        let _slot = wait::slot(&state)?;
+        state.sweeps.wait_for_end(id, wait).await?;
+    }
     Ok(Json(state.sweeps.get_sweep(id).await?))
 }
 

@@ -8,32 +8,32 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::bench::time_iterations;
-use super::documents::{read_document, solver_options};
+use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, thread_pool};
 use crate::sim::model::config::Engine;
 use crate::sim::model::params::check;
 use crate::sim::solve::budget::{Costs, plan};
 use crate::sim::solve::predict::Budget;
-use crate::sim::spec::{JobSpec, SpecError};
+use crate::sim::spec::JobSpec;
 
 #[derive(Debug, Args)]
 pub struct BudgetArgs {
     /// A moments document of a job run with `"noise_components": true`.
     pub document: PathBuf,
     /// The RMS to reach, in percent.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
     pub target_rms: f64,
     /// Pixels P of the image the light paths serve.
-    #[arg(long, default_value_t = 1e6)]
+    #[arg(long, default_value_t = 1e6, allow_hyphen_values = true)]
     pub pixels: f64,
     /// Seconds per light path (default: measured on the brute force here).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub light_cost: Option<f64>,
     /// Seconds per camera path and pixel (default: measured on the brute force here).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub camera_cost: Option<f64>,
     /// Seconds per iteration besides the paths (default: measured on the brute force here).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub iteration_cost: Option<f64>,
     /// Print the plan (every point evaluated) as JSON.
     #[arg(long)]
@@ -63,7 +63,7 @@ fn measure_costs(spec: &JobSpec) -> Result<[f64; 3], CliError> {
 
 pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
-    let job = doc.spec.validate()?;
+    let job = document_job(&doc, &args.document)?;
     check(args.target_rms.is_finite() && args.target_rms > 0.0, "--target-rms", || {
         format!("must be a positive percentage, got {}", args.target_rms)
     })?;
@@ -84,7 +84,7 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     let costs = Costs { light_path: t_f, camera_path: t_b, iteration: t_0, pixels: args.pixels };
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
     let p = plan(&doc.moments, &job.config().cells, &solver, measured, costs, args.target_rms)
-        .map_err(|e| SpecError::new("document", e.to_string()))?;
+        .map_err(|e| CliError::Unusable { path: args.document.clone(), detail: e.to_string() })?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &p).map_err(std::io::Error::from)?;

@@ -8,6 +8,7 @@ use serde_json::Value;
 
 use super::run::{write_atomically, write_csv};
 use super::{CliError, table};
+use crate::sim::checks::published::{applicable, figures};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::{MomentsDocument, merge_documents_at};
@@ -18,7 +19,8 @@ use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
-use crate::sim::spec::SpecError;
+use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
+use crate::sim::spec::{SpecError, ValidJob};
 
 #[derive(Debug, Args)]
 pub struct MergeArgs {
@@ -47,6 +49,14 @@ pub struct ReportArgs {
     /// Print the result document as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Show the paper's published figures (Table 1) beside the noise table when the run's
+    /// configuration is the paper's; otherwise say in which fields it differs.
+    #[arg(long, conflicts_with = "json")]
+    pub paper: bool,
+    /// Print the noise table only, as `markdown` or `latex` (a plain `tabular`, the paper's
+    /// columns where its Table 1 applies), instead of the tables.
+    #[arg(long, value_parser = ["markdown", "latex"], conflicts_with_all = ["json", "paper"])]
+    pub format: Option<String>,
     /// Solver options to change, as JSON (e.g. '{"lambda": 0.1}' or '{"fixed": {"w0": null}}').
     #[arg(long, value_name = "JSON")]
     pub solver: Option<String>,
@@ -79,6 +89,15 @@ fn parse_strategy(name: &str) -> Result<Strategy, String> {
 pub(super) fn read_document(path: &PathBuf) -> Result<MomentsDocument, CliError> {
     let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
     MomentsDocument::from_json(&bytes).map_err(|source| CliError::Document { path: path.clone(), source })
+}
+
+/// The job of a moments document read from `path`, validated again (a document written by an
+/// older version may carry a specification this one refuses): an error names the file.
+pub(super) fn document_job(doc: &MomentsDocument, path: &std::path::Path) -> Result<ValidJob, CliError> {
+    doc.spec.validate().map_err(|e| CliError::Unusable {
+        path: path.to_path_buf(),
+        detail: format!("the document's job specification is not valid: {e}"),
+    })
 }
 
 pub fn merge(args: MergeArgs) -> Result<(), CliError> {
@@ -117,7 +136,7 @@ pub(super) fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Resul
 
 pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
-    let job = doc.spec.validate()?;
+    let job = document_job(&doc, &args.document)?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
     let reference = reference_luminance(&job.config().scene).ok();
     if let Some(l) = args.weights_lambda {
@@ -130,7 +149,9 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
     let report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
-    write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
+    let mut spec = doc.spec.clone();
+    spec.solver = solver.clone();
+    write_csv(&spec, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.nested_cv {
         let cf = CrossFitting::new(&doc.moments, &doc.moments.pooled());
@@ -146,13 +167,20 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
             selected.and_then(|r| r.rms_percent).unwrap_or(f64::NAN)
         );
     }
-    if args.json {
+    if let Some(format) = &args.format {
+        let published = applicable(&spec);
+        let paper = |s: &Strategy| figures(&published, s.name());
+        let text = if format == "latex" {
+            noise_table_latex(&report.noise_table, paper)
+        } else {
+            noise_table_markdown(&report.noise_table, paper)
+        };
+        out.write_all(text.as_bytes())?;
+    } else if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
         writeln!(out)?;
     } else {
-        let mut spec = doc.spec.clone();
-        spec.solver = solver;
-        table::write_report(&mut out, &spec, &report, None)?;
+        table::write_report(&mut out, &spec, &report, None, args.paper)?;
     }
     Ok(())
 }

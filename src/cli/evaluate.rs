@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::documents::read_document;
+use super::documents::{document_job, read_document};
 use super::{CliError, table};
 use crate::sim::model::params::SpecError;
 use crate::sim::solve::evaluate::{Evaluation, GivenWeights, evaluate as score};
@@ -27,7 +27,7 @@ pub struct EvaluateArgs {
 
 pub fn evaluate(args: EvaluateArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
-    let job = doc.spec.validate()?;
+    let job = document_job(&doc, &args.document)?;
     let path = &args.weights;
     let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
     let given: GivenWeights =

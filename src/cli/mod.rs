@@ -1,20 +1,26 @@
 //! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `evaluate`, `budget`,
-//! `sweep`, `serve` and `openapi`, thin shells around the library.
+//! `compare`, `figure`, `sweep`, `serve`, `wait` and `openapi`, thin shells around the library.
 //!
 //! Imports: crate::api, crate::jobs, crate::server, crate::sim
 
 mod bench;
 mod budget;
+mod compare;
 mod documents;
 mod evaluate;
+mod figure;
 mod predict;
 mod progress;
+#[cfg(feature = "server")]
+mod remote;
 mod run;
 #[cfg(feature = "server")]
 mod serve;
 mod shard;
 mod sweep;
 mod table;
+#[cfg(feature = "server")]
+mod wait;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -60,12 +66,22 @@ pub enum Command {
     /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, from a moments
     /// document with noise components.
     Budget(budget::BudgetArgs),
+    /// Draw a figure from a moments document without a browser: `fig2` (w₁ against r₃ of the
+    /// weights table, ± 1 SE, the paper's Fig. 2) as SVG.
+    Figure(figure::FigureArgs),
+    /// Compare runs strategy by strategy: moments documents, or jobs of a server with --server;
+    /// ratios and differences against the first, with standard errors.
+    Compare(compare::CompareArgs),
     /// Run a sweep (a job varied along axes) locally or one run per cluster task, and collect its
     /// table (`optimis sweep collect DIR`).
     Sweep(sweep::SweepArgs),
     /// Run the HTTP job server.
     #[cfg(feature = "server")]
     Serve(Box<serve::ServeArgs>),
+    /// Wait for a job or a sweep on a server to end: exit status 0 if it succeeded, 1 if it
+    /// failed or was cancelled, 5 if the server does not answer.
+    #[cfg(feature = "server")]
+    Wait(wait::WaitArgs),
     /// Print the server's OpenAPI description (YAML).
     #[cfg(feature = "server")]
     Openapi,
@@ -90,9 +106,19 @@ pub enum CliError {
         /// The parse error, with its line and column.
         source: serde_json::Error,
     },
-    /// The job specification is invalid (exit status 3).
-    #[error("invalid job specification: {0}")]
+    /// A job specification, a flag or an environment variable is invalid (exit status 3); the
+    /// message says which of them by the field it names.
+    #[error("{}", labelled(.0))]
     Spec(#[from] SpecError),
+    /// A moments document was read but cannot serve the command: its job specification is no
+    /// longer valid, or it lacks what the command needs (e.g. noise components; exit status 3).
+    #[error("{path}: {detail}")]
+    Unusable {
+        /// The document's file.
+        path: PathBuf,
+        /// Why.
+        detail: String,
+    },
     /// An input other than a job specification names a bad field.
     #[error("invalid {what}: {source}")]
     Invalid {
@@ -127,10 +153,48 @@ pub enum CliError {
     /// Standard output could not be written (exit status 5; a closed pipe is not an error).
     #[error("cannot write the output: {0}")]
     Output(#[from] std::io::Error),
+    /// `optimis wait`: the server did not answer (exit status 5).
+    #[cfg(feature = "server")]
+    #[error("{url}: the server does not answer: {detail}")]
+    Unreachable {
+        /// The resource's URL.
+        url: String,
+        /// The connection's error.
+        detail: String,
+    },
+    /// `optimis wait`: the server refused the request (exit status 3 for 4xx, else 1).
+    #[cfg(feature = "server")]
+    #[error("{url}: {status}: {detail}")]
+    Refused {
+        /// The resource's URL.
+        url: String,
+        /// The HTTP status.
+        status: u16,
+        /// The problem document's detail.
+        detail: String,
+    },
+    /// `optimis wait`: the job or sweep ended without succeeding, or the timeout passed (exit
+    /// status 1).
+    #[cfg(feature = "server")]
+    #[error("{0}")]
+    Ended(String),
     /// The server failed to start or to run.
     #[cfg(feature = "server")]
     #[error(transparent)]
     Server(#[from] crate::server::ServerError),
+}
+
+/// A spec error labelled by what it is about: a flag (`--target-rms`), an environment variable
+/// (`SLURM_ARRAY_TASK_ID`) or a field of the job specification.
+fn labelled(e: &SpecError) -> String {
+    let field = e.field.as_str();
+    if field.starts_with("--") {
+        format!("invalid argument {e}")
+    } else if !field.is_empty() && field.bytes().all(|b| b.is_ascii_uppercase() || b == b'_') {
+        format!("invalid environment variable {e}")
+    } else {
+        format!("invalid job specification: {e}")
+    }
 }
 
 /// A rayon pool of `threads` workers (default: one per available core).
@@ -160,8 +224,12 @@ pub fn main() -> ExitCode {
         Command::Evaluate(args) => evaluate::evaluate(args),
         Command::Budget(args) => budget::budget(args),
         Command::Sweep(args) => sweep::sweep(args),
+        Command::Compare(args) => compare::compare(args),
+        Command::Figure(args) => figure::figure(args),
         #[cfg(feature = "server")]
         Command::Serve(args) => serve::serve_command(*args),
+        #[cfg(feature = "server")]
+        Command::Wait(args) => wait::wait(args),
         #[cfg(feature = "server")]
         Command::Openapi => {
             use std::io::Write;
@@ -197,8 +265,13 @@ impl CliError {
             | CliError::Invalid { .. }
             | CliError::Json { .. }
             | CliError::Document { .. }
+            | CliError::Unusable { .. }
             | CliError::Config(_) => 3,
             CliError::Read { .. } | CliError::Write { .. } | CliError::Output(_) => 5,
+            #[cfg(feature = "server")]
+            CliError::Unreachable { .. } => 5,
+            #[cfg(feature = "server")]
+            CliError::Refused { status: 400..=499, .. } => 3,
             _ => 1,
         }
     }

@@ -8,11 +8,10 @@ use clap::Args;
 
 use crate::sim::model::params::parse_count;
 
-use super::documents::{read_document, solver_options};
+use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, table};
 use crate::sim::model::params::check_path_counts;
 use crate::sim::solve::predict::{Budget, predict as predict_budget};
-use crate::sim::spec::SpecError;
 
 #[derive(Debug, Args)]
 pub struct PredictArgs {
@@ -34,7 +33,7 @@ pub struct PredictArgs {
 
 pub fn predict(args: PredictArgs) -> Result<(), CliError> {
     let doc = read_document(&args.document)?;
-    let job = doc.spec.validate()?;
+    let job = document_job(&doc, &args.document)?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
     let to = Budget {
@@ -43,7 +42,7 @@ pub fn predict(args: PredictArgs) -> Result<(), CliError> {
     };
     check_path_counts(to.light_paths, to.camera_paths, ["--light-paths", "--camera-paths"])?;
     let prediction = predict_budget(&doc.moments, &job.config().cells, &solver, measured, to)
-        .map_err(|e| SpecError::new("document", e.to_string()))?;
+        .map_err(|e| CliError::Unusable { path: args.document.clone(), detail: e.to_string() })?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &prediction).map_err(std::io::Error::from)?;

@@ -14,6 +14,7 @@ use serde_json::{Value, json};
 use super::progress::{Progress, ProgressArgs};
 use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
+use crate::sim::checks::published::{applicable, figures};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
@@ -21,7 +22,7 @@ use crate::sim::model::params::{merge_patch, path_patch};
 use crate::sim::runner::run_iterations;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
 use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
-use crate::sim::spec::{Shard, SpecError, ValidJob, parse_job_spec};
+use crate::sim::spec::{JobSpec, Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
 
 #[derive(Debug, Args)]
@@ -60,6 +61,10 @@ pub struct RunArgs {
     /// Print the result as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Show the paper's published figures (Table 1) beside the noise table when the run's
+    /// configuration is the paper's; otherwise say in which fields it differs.
+    #[arg(long, conflicts_with = "json")]
+    pub paper: bool,
     /// Write the run's statistics as a moments document (for `optimis merge`, `optimis report`
     /// or `POST /v1/jobs/{id}/merge`). `{shard}` in the name is replaced by the shard index (one
     /// file per task of a job array).
@@ -90,9 +95,16 @@ pub struct RunArgs {
 }
 
 /// Writes the report's tables as CSV where asked.
-pub(super) fn write_csv(report: &RunReport, noise: Option<&Path>, weights: Option<&Path>) -> Result<(), CliError> {
+pub(super) fn write_csv(
+    spec: &JobSpec,
+    report: &RunReport,
+    noise: Option<&Path>,
+    weights: Option<&Path>,
+) -> Result<(), CliError> {
     if let Some(path) = noise {
-        write_atomically(path, noise_table_csv(&report.noise_table).as_bytes())?;
+        let published = applicable(spec);
+        let csv = noise_table_csv(&report.noise_table, |s| figures(&published, s.name()));
+        write_atomically(path, csv.as_bytes())?;
     }
     if let Some(path) = weights {
         write_atomically(path, weights_csv(&report.weights).as_bytes())?;
@@ -278,13 +290,13 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
     let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
-    write_csv(&report, args.csv.as_deref(), args.weights_csv.as_deref())?;
+    write_csv(job.spec(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;
         writeln!(out)?;
     } else {
-        table::write_report(&mut out, job.spec(), &report, Some((seconds, pool.current_num_threads())))?;
+        table::write_report(&mut out, job.spec(), &report, Some((seconds, pool.current_num_threads())), args.paper)?;
     }
     Ok(())
 }

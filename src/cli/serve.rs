@@ -259,7 +259,7 @@ fn token(args: &ServeArgs) -> Result<Option<BearerToken>, CliError> {
     }
 }
 
-fn positive_seconds(s: &str) -> Result<f64, String> {
+pub(super) fn positive_seconds(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 && x <= 86_400.0 => Ok(x),
         _ => Err(format!("expected seconds in (0, 86400], got {s:?}")),

@@ -2,6 +2,8 @@
 
 use std::io::{self, Write};
 
+use crate::sim::checks::published::{ReferenceTable, applicable, differences, figures, tables};
+use crate::sim::solve::compare::Comparison;
 use crate::sim::solve::noise::{HeuristicWeight, NoiseRow};
 use crate::sim::solve::report::{RecommendedWeights, RunReport, WeightRow};
 use crate::sim::spec::JobSpec;
@@ -24,6 +26,7 @@ pub fn write_report(
     spec: &JobSpec,
     report: &RunReport,
     timing: Option<(f64, usize)>,
+    paper: bool,
 ) -> io::Result<()> {
     let when = timing.map_or_else(String::new, |(seconds, threads)| format!(" ({seconds:.1} s on {threads} threads)"));
     writeln!(
@@ -49,8 +52,22 @@ pub fn write_report(
         )?,
         None => writeln!(out, "reference (quadrature): did not converge for this geometry")?,
     }
+    let published = paper.then(|| applicable(spec));
+    match published.as_deref() {
+        Some([]) => writeln!(
+            out,
+            "the paper's Table 1 does not apply: this configuration differs in {}",
+            tables().first().map(|t| differences(t, spec).join(", ")).unwrap_or_default()
+        )?,
+        Some([t, ..]) => writeln!(
+            out,
+            "paper: {} ({} iterations); its optimum was fitted and scored in-sample, to compare with `optimal`",
+            t.source, t.iterations
+        )?,
+        None => {}
+    }
     writeln!(out)?;
-    write_noise_rows(out, &report.noise_table, report.folds, report.recommended.as_ref())?;
+    write_noise_rows_with(out, &report.noise_table, report.folds, report.recommended.as_ref(), published.as_deref())?;
     let m = &report.merges_per_iteration;
     writeln!(
         out,
@@ -131,9 +148,24 @@ pub fn write_noise_rows(
     folds: usize,
     recommended: Option<&RecommendedWeights>,
 ) -> io::Result<()> {
+    write_noise_rows_with(out, rows, folds, recommended, None)
+}
+
+/// [`write_noise_rows`] with the published figures of `paper` beside each row that has them
+/// (columns only when a table applies).
+pub fn write_noise_rows_with(
+    out: &mut impl Write,
+    rows: &[NoiseRow],
+    folds: usize,
+    recommended: Option<&RecommendedWeights>,
+    paper: Option<&[ReferenceTable]>,
+) -> io::Result<()> {
+    let paper = paper.filter(|p| !p.is_empty());
+    let paper_header =
+        if paper.is_some() { format!(" {:>12} {:>9}", "paper L·10⁵", "paper RMS") } else { String::new() };
     writeln!(
         out,
-        "{:<36} {:>10} {:>9} {:>9} {:>8} {:>10} {:>6}  note",
+        "{:<36} {:>10} {:>9} {:>9} {:>8} {:>10} {:>6}{paper_header}  note",
         "strategy", "L·10⁵", "± SE", "RMS %", "± SE", "E[L]·10⁵", "z"
     )?;
     for row in rows {
@@ -162,9 +194,16 @@ pub fn write_noise_rows(
             notes.push(e.clone());
         }
         let note = notes.join(", ");
+        let published = match paper {
+            Some(tables) => {
+                let p = figures(tables, row.strategy.name());
+                format!(" {} {}", num(p.map(|p| p.0), 1e5, 12, 3), num(p.map(|p| p.1), 1.0, 9, 0))
+            }
+            None => String::new(),
+        };
         writeln!(
             out,
-            "{:<36} {} {} {} {} {} {}  {}",
+            "{:<36} {} {} {} {} {} {}{published}  {}",
             row.strategy,
             num(row.luminance, 1e5, 10, 4),
             num(row.luminance_stderr, 1e5, 9, 4),
@@ -204,6 +243,53 @@ pub fn write_weights(out: &mut impl Write, weights: &[WeightRow]) -> io::Result<
             with_se(w.w2, w.w2_stderr),
             w.samples,
         )?;
+    }
+    Ok(())
+}
+
+/// A comparison of runs: per strategy, each run's L and RMS, and against the first run the ratio
+/// and difference of L and the ratio of RMS, each ± its standard error, and z.
+pub fn write_comparison(out: &mut impl Write, c: &Comparison) -> io::Result<()> {
+    let runs: Vec<String> = c.runs.iter().map(|r| format!("{} ({} iterations)", r.label, r.iterations)).collect();
+    writeln!(out, "baseline {}; compared {}", runs[0], runs[1..].join(", "))?;
+    let width = c.runs.iter().map(|r| r.label.chars().count()).max().unwrap_or(4).max(4);
+    writeln!(
+        out,
+        "\n{:<36} {:<width$} {:>10} {:>8} {:>8} {:>7} {:>15} {:>17} {:>6} {:>15}",
+        "strategy", "run", "L·10⁵", "± SE", "RMS %", "± SE", "L / base ± SE", "ΔL·10⁵ ± SE", "z", "RMS / base ± SE"
+    )?;
+    let pair = |v: Option<f64>, se: Option<f64>, scale: f64, width: usize, precision: usize| match (v, se) {
+        (Some(v), Some(se)) => format!("{:>width$}", format!("{:.precision$} ± {:.precision$}", v * scale, se * scale)),
+        _ => format!("{:>width$}", "—"),
+    };
+    for s in &c.strategies {
+        let name = if s.in_sample { format!("{} (in-sample)", s.strategy) } else { s.strategy.to_string() };
+        for (i, (f, run)) in s.runs.iter().zip(&c.runs).enumerate() {
+            let against = if i == 0 {
+                String::new()
+            } else {
+                format!(
+                    " {} {} {} {}",
+                    pair(f.luminance_ratio, f.luminance_ratio_stderr, 1.0, 15, 3),
+                    pair(f.luminance_difference, f.luminance_difference_stderr, 1e5, 17, 3),
+                    num(f.z, 1.0, 6, 1),
+                    pair(f.rms_ratio, f.rms_ratio_stderr, 1.0, 15, 3)
+                )
+            };
+            writeln!(
+                out,
+                "{:<36} {:<width$} {} {} {} {}{against}",
+                if i == 0 { name.as_str() } else { "" },
+                run.label,
+                num(f.luminance, 1e5, 10, 4),
+                num(f.luminance_stderr, 1e5, 8, 4),
+                num(f.rms_percent, 1.0, 8, 1),
+                num(f.rms_percent_stderr, 1.0, 7, 1),
+            )?;
+        }
+    }
+    for note in &c.notes {
+        writeln!(out, "\nnote: {note}")?;
     }
     Ok(())
 }

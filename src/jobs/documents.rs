@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::resource::{JobResource, JobState};
+use crate::sim::checks::published::ReferenceTable;
 use crate::sim::math::csv::{Csv, json_cell, number};
 use crate::sim::solve::report::RunReport;
 use crate::sim::solve::strategy::Strategy;
@@ -20,6 +21,10 @@ pub struct JobResult {
     /// The job's state when the results were read (a queued job may hold a checkpoint: an
     /// extended one).
     pub state: JobState,
+    /// The published tables whose configuration this job has (the paper's Table 1 for the
+    /// paper's scene, R, N_F and N_B; its optimum's row only with w0 fixed to 0), to read beside
+    /// the noise table; empty otherwise. Also `GET /v1/references`.
+    pub references: Vec<ReferenceTable>,
     /// The report of the latest checkpoint (noise table, recommendation, weights, gain,
     /// warnings), its fields inlined into this object.
     #[serde(flatten)]
@@ -70,12 +75,24 @@ pub struct JobHistory {
 
 impl JobHistory {
     /// The history as CSV: one row per checkpoint and strategy (`iterations`, `strategy`,
-    /// `luminance` in the model's units, `rms_percent` of one iteration).
+    /// `luminance` in the model's units, `luminance_stderr` = |L|·RMS/√M — the band the
+    /// dashboard draws —, `rms_percent` of one iteration).
     pub fn to_csv(&self) -> String {
-        let mut csv = Csv::new(["iterations", "strategy", "luminance", "rms_percent"]);
+        let mut csv = Csv::new(["iterations", "strategy", "luminance", "luminance_stderr", "rms_percent"]);
         for p in &self.points {
             for s in &p.strategies {
-                csv.row([p.iterations.to_string(), json_cell(&s.strategy), number(s.luminance), number(s.rms_percent)]);
+                let stderr = s
+                    .luminance
+                    .zip(s.rms_percent)
+                    .filter(|_| p.iterations > 0)
+                    .map(|(l, rms)| l.abs() * rms / 100.0 / (p.iterations as f64).sqrt());
+                csv.row([
+                    p.iterations.to_string(),
+                    json_cell(&s.strategy),
+                    number(s.luminance),
+                    number(stderr),
+                    number(s.rms_percent),
+                ]);
             }
         }
         csv.finish()

@@ -48,7 +48,7 @@ use super::toolbox::JobManager;
 use crate::metrics::{JobSample, Metrics};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::{SpecError, parse_job_spec};
-use crate::store::{Inserted, NewJob, Store, StoreError};
+use crate::store::{Inserted, JobFilter, NewJob, Store, StoreError};
 
 impl JobManager {
     /// Starts the manager on `store`: re-queues the jobs a previous server left running or queued
@@ -223,11 +223,11 @@ impl JobManager {
     /// A page of jobs, newest first, optionally in one state, after `cursor` (the last id seen).
     pub async fn list(
         &self,
-        state: Option<JobState>,
+        filter: &JobFilter,
         cursor: Option<i64>,
         limit: u32,
     ) -> Result<super::documents::JobList, JobError> {
-        let mut rows = self.inner.store.list_jobs(state, cursor, limit + 1).await?;
+        let mut rows = self.inner.store.list_jobs(filter, cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
         let next_cursor = if more { rows.last().map(|r| r.id.to_string()) } else { None };

@@ -16,11 +16,13 @@ use serde_json::Value;
 use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
 use super::documents::JobResult;
 use super::error::JobError;
+use super::lineage::{MergeProvenance, SourceRecord};
 use super::peers::CONCURRENT_PULLS;
 use super::policy::check_budget;
 use super::references::scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
 use super::statistics::Statistics;
+use crate::sim::configuration::explained;
 use crate::sim::document::{DocumentError, DocumentSignature, MomentsDocument, merged_spec, parse_json};
 use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::coverage::Coverage;
@@ -63,6 +65,18 @@ pub enum Source {
         /// JSON path of the `from` that named it (`sources[2].from`, or `from` for a merge).
         field: String,
     },
+}
+
+impl Source {
+    /// How the source is recorded in the merged job's provenance: the peer job's URL, or
+    /// `document` (or `document sources[2]` in a study).
+    pub fn label(&self) -> String {
+        match self {
+            Source::Peer { url, .. } => url.clone(),
+            Source::Document { field, .. } if field.is_empty() => "document".to_string(),
+            Source::Document { field, .. } => format!("document {field}"),
+        }
+    }
 }
 
 impl SourceFields {
@@ -197,6 +211,7 @@ impl Statistics {
     pub async fn merge_into(&self, id: i64, body: bytes::Bytes) -> Result<JobResult, JobError> {
         let source = self.jobs.compute(move || parse_merge_body(&body)).await??;
         self.check_peers(std::slice::from_ref(&source))?;
+        let from = source.label();
         let doc = self.fetch(source).await?;
         // Reserve the job: a short critical section (state checks only).
         let (row, _reservation) = {
@@ -221,26 +236,35 @@ impl Statistics {
         // statistics.
         let checkpoint = self.jobs.store().load_checkpoint(id).await?;
         let policy = self.jobs.policy().clone();
-        let (checkpoint, spec) = self
+        let (checkpoint, spec, provenance) = self
             .jobs
-            .compute_heavy(move |_| -> Result<(Checkpoint, String), JobError> {
+            .compute_heavy(move |_| -> Result<(Checkpoint, String, String), JobError> {
                 let spec = parse_stored_spec(&row)?;
                 let job = spec.validate()?;
                 let mut moments = match checkpoint {
                     Some(checkpoint) => decode_checkpoint(id, &checkpoint, &job, !row.merged)?,
                     None => Moments::new(job.config()),
                 };
-                moments.merge(&doc.moments).map_err(DocumentError::from)?;
+                // The sources so far (the job's own iterations, before its first merge), then this one.
+                let earlier: Option<MergeProvenance> =
+                    row.provenance.as_deref().and_then(|p| serde_json::from_str(p).ok());
+                let mut sources = match earlier {
+                    Some(p) => p.sources,
+                    None if moments.iterations() > 0 => vec![SourceRecord::new(format!("job {id}"), &moments.coverage)],
+                    None => Vec::new(),
+                };
+                sources.push(SourceRecord::new(from, &doc.moments.coverage));
+                moments.merge(&doc.moments).map_err(|e| DocumentError::from(explained(e, &doc.spec, &spec)))?;
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let spec = merged_spec(&spec, &moments);
                 check_budget(&policy, &spec, moments.iterations())?;
                 let checkpoint = checkpoint_of(&moments, &job, row.reference_luminance)?;
-                Ok((checkpoint, spec_json(&spec)?))
+                Ok((checkpoint, spec_json(&spec)?, MergeProvenance::of(sources).to_json()))
             })
             .await??;
         {
             let _guard = self.jobs.transition().await;
-            self.jobs.store().write_merged(id, &checkpoint, &spec, now_ms()).await?;
+            self.jobs.store().write_merged(id, &checkpoint, &spec, &provenance, now_ms()).await?;
         }
         self.result(id).await
     }
@@ -256,35 +280,47 @@ impl Statistics {
         }
         let StudyBody { sources, solver } = self.jobs.compute(move || parse_study_body(&body)).await??;
         self.check_peers(&sources)?;
+        let labels: Vec<String> = sources.iter().map(Source::label).collect();
         let arrivals = stream::iter(sources.into_iter().enumerate())
             .map(|(i, source)| async move { self.fetch(source).await.map(|doc| (i, doc)) })
             .buffer_unordered(CONCURRENT_PULLS);
         let gather = async {
             let mut first: Option<(usize, JobSpec)> = None;
+            // The spec of the first document to arrive: what a refused merge names differences
+            // against (the sum so far is of its configuration).
+            let mut arrived: Option<JobSpec> = None;
             let mut total: Option<Moments> = None;
+            let mut records: Vec<(usize, SourceRecord)> = Vec::new();
             let mut arrivals = std::pin::pin!(arrivals);
             while let Some((i, doc)) = arrivals.try_next().await? {
+                records.push((i, SourceRecord::new(labels[i].clone(), &doc.moments.coverage)));
                 if first.as_ref().is_none_or(|(j, _)| i < *j) {
                     first = Some((i, doc.spec.clone()));
                 }
                 total = Some(match total {
-                    None => doc.moments,
-                    Some(mut acc) => self
-                        .jobs
-                        .compute(move || {
-                            acc.merge(&doc.moments)?;
-                            Ok::<_, crate::sim::stats::moments::MergeError>(acc)
-                        })
-                        .await?
-                        .map_err(DocumentError::from)?,
+                    None => {
+                        arrived = Some(doc.spec.clone());
+                        doc.moments
+                    }
+                    Some(mut acc) => {
+                        let into = arrived.clone().unwrap_or_else(|| doc.spec.clone());
+                        self.jobs
+                            .compute(move || {
+                                acc.merge(&doc.moments).map_err(|e| explained(e, &doc.spec, &into))?;
+                                Ok::<_, crate::sim::stats::moments::MergeError>(acc)
+                            })
+                            .await?
+                            .map_err(DocumentError::from)?
+                    }
                 });
             }
-            Ok::<_, JobError>((first, total))
+            records.sort_by_key(|(i, _)| *i);
+            Ok::<_, JobError>((first, total, records))
         };
         // The whole gathering is bounded (each pull is too, but a study of many slow sources
         // would otherwise hold its request for the sum of their deadlines).
         let deadline = self.jobs.policy().study_deadline;
-        let (first, total) = tokio::time::timeout(deadline, gather).await.map_err(|_| JobError::Peer {
+        let (first, total, records) = tokio::time::timeout(deadline, gather).await.map_err(|_| JobError::Peer {
             field: "sources".into(),
             message: format!(
                 "the sources did not all arrive and merge within the study deadline of {} s (--study-deadline); \
@@ -320,7 +356,8 @@ impl Statistics {
                 Ok((new, checkpoint))
             })
             .await??;
-        let row = self.jobs.store().insert_study(&new, &checkpoint).await?;
+        let provenance = MergeProvenance::of(records.into_iter().map(|(_, r)| r).collect()).to_json();
+        let row = self.jobs.store().insert_study(&new, &checkpoint, &provenance).await?;
         resource_from_row(&row)
     }
 }

@@ -27,7 +27,8 @@
 //! * [`peers`] — moments documents pulled from allowed peer servers, for merges; [`peer_tls`] —
 //!   how https peers' certificates are verified (roots, and `--peer-ca` pins);
 //! * [`signing`] — provenance: this server's signature on exports, the keys merges require;
-//! * [`resource`], [`documents`] — what the API shows of a job; [`error`] — what job operations
+//! * [`resource`], [`documents`] — what the API shows of a job; [`lineage`] — where a merged
+//!   job's statistics come from; [`error`] — what job operations
 //!   fail with.
 
 pub mod checkpoint;
@@ -38,6 +39,7 @@ pub mod driver;
 pub mod error;
 pub mod evaluation;
 pub mod executor;
+pub mod lineage;
 pub mod manager;
 pub mod merges;
 pub mod peer_tls;

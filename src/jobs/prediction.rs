@@ -1,5 +1,7 @@
 //! `POST /v1/jobs/{id}/predict`: the noise table and re-fitted weights of a job's latest
-//! checkpoint at another ray budget (`sim::solve::predict`), computed on the request pool.
+//! checkpoint at another ray budget (`sim::solve::predict`), computed on the request pool; and
+//! `POST /v1/jobs/{id}/budget`: the budget that reaches a target noise soonest
+//! (`sim::solve::budget`), on the heavy pool (it predicts at every point of its grid).
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -8,7 +10,8 @@ use utoipa::ToSchema;
 use super::error::JobError;
 use super::resource::JobState;
 use super::statistics::{Latest, Statistics};
-use crate::sim::model::params::check_path_counts;
+use crate::sim::model::params::{check, check_path_counts};
+use crate::sim::solve::budget::{BudgetPlan, Costs, plan};
 use crate::sim::solve::predict::{Budget, Prediction, predict};
 
 /// What to predict.
@@ -72,5 +75,88 @@ impl Predictions {
             })
             .await??;
         Ok(JobPrediction { job_id: id, partial, state, prediction })
+    }
+}
+
+/// The ray budget to plan for: the target noise and the renderer's costs (the client's renderer:
+/// the server does not time one).
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BudgetRequest {
+    /// The RMS to reach, in percent (e.g. 1).
+    pub target_rms: f64,
+    /// t_F: the renderer's seconds per light path (≥ 0).
+    pub light_cost: f64,
+    /// t_B: seconds per camera path and pixel (≥ 0).
+    pub camera_cost: f64,
+    /// t_0: seconds per iteration besides the paths (≥ 0).
+    pub iteration_cost: f64,
+    /// P: pixels of the image the light paths serve (≥ 1; default 10^6).
+    #[serde(default)]
+    pub pixels: Option<f64>,
+    /// Solver options to change (a merge patch, as for `POST /v1/jobs/{id}/solve`).
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub solver: Option<Value>,
+}
+
+/// A job's budget plan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct JobBudget {
+    /// Id of the job whose latest checkpoint the plan is made from.
+    pub job_id: i64,
+    /// True until the job has succeeded with all its iterations.
+    pub partial: bool,
+    /// The job's state when the plan was computed.
+    pub state: JobState,
+    /// Per strategy the (N_F, N_B) that reaches the target soonest, with the time and its
+    /// speed-up over the paper's configuration (each with a standard error), the search range
+    /// and whether the best lies on its edge — as `optimis budget --json` prints it.
+    #[serde(flatten)]
+    pub plan: BudgetPlan,
+}
+
+impl Predictions {
+    /// Plans the ray budget that reaches `request.target_rms` soonest, per strategy, from the
+    /// job's latest checkpoint (needs noise components); on the heavy pool, nothing stored.
+    pub async fn budget(&self, id: i64, request: &BudgetRequest) -> Result<JobBudget, JobError> {
+        let pixels = request.pixels.unwrap_or(1e6);
+        check(request.target_rms.is_finite() && request.target_rms > 0.0, "target_rms", || {
+            format!("must be a positive percentage, got {}", request.target_rms)
+        })?;
+        check(pixels.is_finite() && (1.0..=1e10).contains(&pixels), "pixels", || {
+            format!("must be in [1, 10^10], got {pixels}")
+        })?;
+        for (field, v) in [
+            ("light_cost", request.light_cost),
+            ("camera_cost", request.camera_cost),
+            ("iteration_cost", request.iteration_cost),
+        ] {
+            check(v.is_finite() && (0.0..=1e6).contains(&v), field, || {
+                format!("must be in [0, 10^6] seconds, got {v}")
+            })?;
+        }
+        let Latest { state, partial, job, moments, .. } = self.statistics.latest(id).await?;
+        let solver = match &request.solver {
+            Some(patch) => job.spec().solver.patched(patch)?,
+            None => job.spec().solver.clone(),
+        };
+        let measured = Budget { light_paths: job.spec().light_paths, camera_paths: job.spec().camera_paths };
+        let costs = Costs {
+            light_path: request.light_cost,
+            camera_path: request.camera_cost,
+            iteration: request.iteration_cost,
+            pixels,
+        };
+        let target = request.target_rms;
+        let plan = self
+            .statistics
+            .jobs
+            .compute_heavy(move |_| -> Result<BudgetPlan, JobError> {
+                plan(&moments, &job.config().cells, &solver, measured, costs, target)
+                    .map_err(|e| JobError::Conflict(e.to_string()))
+            })
+            .await??;
+        Ok(JobBudget { job_id: id, partial, state, plan })
     }
 }

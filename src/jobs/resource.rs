@@ -84,6 +84,11 @@ pub struct JobResource {
     /// tasks, each with its Slurm job id, state, iterations and log. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub execution: Option<ExecutionView>,
+    /// For a job holding merged statistics (a study, or a job that took merges): each source —
+    /// a peer URL, a document, the job's own iterations — with the seeds and iterations it
+    /// brought, and every seed held. Absent for a job that merged nothing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<super::lineage::MergeProvenance>,
 }
 
 /// Unix milliseconds now.
@@ -129,6 +134,7 @@ pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
         sweep_id: row.sweep_id,
         warnings: row.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default(),
         execution: None,
+        provenance: row.provenance.as_deref().and_then(|p| serde_json::from_str(p).ok()),
     })
 }
 

@@ -15,6 +15,7 @@ use super::references::expected_luminances;
 use super::resource::JobState;
 use super::signing::Provenance;
 use super::toolbox::JobManager;
+use crate::sim::checks::published::applicable;
 use crate::sim::document::{MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
 use crate::sim::solve::options::MAX_LAMBDA;
@@ -82,7 +83,14 @@ impl Statistics {
             .compute(move || serde_json::from_str(&json))
             .await?
             .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
-        Ok(JobResult { job_id: id, partial: !(state == JobState::Succeeded && done >= total), state, report })
+        let references = applicable(&resource.spec);
+        Ok(JobResult {
+            job_id: id,
+            partial: !(state == JobState::Succeeded && done >= total),
+            state,
+            references,
+            report,
+        })
     }
 
     /// Each strategy's figures at every checkpoint (thinned to at most 1,000 points; the store
@@ -135,7 +143,12 @@ impl Statistics {
                 format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
             })?;
         }
-        let solver = self.jobs.get(id).await?.spec.solver.patched(patch)?;
+        let resource = self.jobs.get(id).await?;
+        let solver = resource.spec.solver.patched(patch)?;
+        // The published rows that apply to the options solved with (the optimum's needs w0 = 0).
+        let mut spec = resource.spec;
+        spec.solver = solver.clone();
+        let references = applicable(&spec);
         let Latest { state, partial, reference, job, moments, .. } = self.latest(id).await?;
         let report = self
             .jobs
@@ -146,7 +159,7 @@ impl Statistics {
                 build_report(&moments, &job.config().cells, &solver, &inputs)
             })
             .await?;
-        Ok(JobResult { job_id: id, partial, state, report })
+        Ok(JobResult { job_id: id, partial, state, references, report })
     }
 
     /// The latest checkpoint's moments as a portable, checksummed document (its canonical JSON

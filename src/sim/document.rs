@@ -23,6 +23,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::configuration::explained;
 use super::spec::JobSpec;
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::stats::coverage::Coverage;
@@ -261,7 +262,7 @@ pub fn merge_documents_at(documents: &[MomentsDocument]) -> Result<MomentsDocume
         documents.split_first().ok_or_else(|| (0, DocumentError::Inconsistent("nothing to merge".into())))?;
     let mut moments = first.moments.clone();
     for (i, doc) in rest.iter().enumerate() {
-        moments.merge(&doc.moments).map_err(|e| (i + 1, e.into()))?;
+        moments.merge(&doc.moments).map_err(|e| (i + 1, explained(e, &doc.spec, &first.spec).into()))?;
     }
     moments.check_bounded().map_err(|e| (documents.len() - 1, e.into()))?;
     Ok(MomentsDocument::new(merged_spec(&first.spec, &moments), moments))
@@ -431,5 +432,23 @@ mod tests {
             merge_documents(&[shard(0, 2), shard(0, 2)]),
             Err(DocumentError::Merge(MergeError::Overlap(_)))
         ));
+    }
+
+    /// Issue 25, item 8: a refused merge named two fingerprints; it names the fields that differ.
+    #[test]
+    fn a_merge_of_two_configurations_names_the_fields_that_differ() {
+        let doc = |l3: f64, radius: f64, seed: u64| {
+            let spec = parse_job_spec(&json!({ "light_paths": 20_000, "camera_paths": 100, "merge_radius": radius,
+                "iterations": 2, "seed": seed, "scene": { "l3": l3 } }))
+            .unwrap();
+            let moments = run(spec.validate().unwrap().config(), seed, 0..2);
+            MomentsDocument::new(spec, moments)
+        };
+        let e = merge_documents(&[doc(3.0, 0.02, 1), doc(9.0, 0.01, 2)]).unwrap_err().to_string();
+        assert!(e.contains("merge_radius: 0.01 vs 0.02"), "{e}");
+        assert!(e.contains("scene.l3: 9.0 vs 3.0"), "{e}");
+        assert!(!e.contains("seed"), "the seed may differ: {e}");
+        // Same configuration, other seed: merges.
+        merge_documents(&[doc(3.0, 0.02, 1), doc(3.0, 0.02, 2)]).unwrap();
     }
 }

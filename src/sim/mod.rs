@@ -14,8 +14,9 @@
 //!   the restricted engine, and the expected work of an iteration;
 //! * [`stats`] — exact, mergeable moments and the iterations they cover;
 //! * [`solve`] — solver options, the optimal weights, the noise table, the result document;
-//! * [`spec`], [`document`], [`runner`], [`sweep`] — the job document users submit (presets,
-//!   validation), the portable moments document, the runner that puts iterations into moments, and
+//! * [`spec`], [`configuration`], [`document`], [`runner`], [`sweep`] — the job document users
+//!   submit (presets, validation), which of its fields make the configuration (and how two
+//!   differ), the portable moments document, the runner that puts iterations into moments, and
 //!   sweeps (a job document varied along axes, and their table);
 //! * [`checks`] — independent references: the quadrature, exact merge expectations, engine
 //!   equivalence.
@@ -26,6 +27,7 @@
 //! Imports: nothing from the crate
 
 pub mod checks;
+pub mod configuration;
 pub mod document;
 pub mod engines;
 pub mod math;

@@ -10,6 +10,7 @@
 //! Unknown fields are errors, never ignored. Parsing gives a [`JobSpec`]; [`JobSpec::validate`] is
 //! the one place where values are checked, and yields the [`ValidJob`] everything else consumes.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -20,8 +21,8 @@ use crate::sim::model::config::{DEFAULT_FOLDS, Engine, MAX_FOLDS, MIN_FOLDS, Pro
 use crate::sim::model::illumination::validate_flux;
 pub use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{
-    CellSpec, MIN_LENGTH, SceneSpec, check, check_path_counts, count, merge_patch, optional_count, validate_cells,
-    validate_scene,
+    CellSpec, MIN_LENGTH, SceneSpec, check, check_path_counts, count, merge_patch, optional_count,
+    validate_annotations, validate_cells, validate_scene,
 };
 use crate::sim::model::scene::Scene;
 use crate::sim::solve::options::{SolverOptions, validate_solver};
@@ -83,6 +84,18 @@ pub struct JobSpec {
     /// carry it, and a local run ignores it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub execution: Option<Execution>,
+    /// A name for people (the job list shows it; a sweep names each run after its swept values).
+    /// Not part of the computation nor of the fingerprint: runs of other names merge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Labels, key → value, to find jobs by (`GET /v1/jobs?label=study=radius`): at most 32, keys
+    /// of 1–64 letters, digits, `_`, `-`, `.`, values of at most 200 characters. Not part of the
+    /// computation nor of the fingerprint.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub labels: BTreeMap<String, String>,
+    /// Free-form notes (at most 4,000 characters). Not part of the computation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub notes: Option<String>,
 }
 
 /// Most tasks one job may be cut into (a server's `--max-tasks` may lower it).
@@ -268,6 +281,7 @@ impl JobSpec {
         validate_range(self)?;
         let cells = validate_cells(&self.cells)?;
         validate_solver(&self.solver)?;
+        validate_annotations(self.name.as_deref(), &self.labels, self.notes.as_deref())?;
         if let Some(Execution { tasks }) = self.execution {
             check((1..=self.iterations.min(MAX_TASKS)).contains(&tasks), "execution.tasks", || {
                 format!("must be in [1, min(iterations, {MAX_TASKS})] so that every task has iterations, got {tasks}")

@@ -94,12 +94,19 @@ impl Store {
     /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
     /// with `iterations_total = iterations_done` = the iterations now covered, and its spec
     /// (`spec`: iterations set to that total) says so. One transaction.
-    pub async fn write_merged(&self, id: i64, checkpoint: &Checkpoint, spec: &str, now: i64) -> Result<(), StoreError> {
+    pub async fn write_merged(
+        &self,
+        id: i64,
+        checkpoint: &Checkpoint,
+        spec: &str,
+        provenance: &str,
+        now: i64,
+    ) -> Result<(), StoreError> {
         self.transaction(async |tx| {
             upsert_checkpoint(tx, id, checkpoint, now).await?;
             sqlx::query(
                 "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
-                 updated_at = ?4, warnings = ?6 WHERE id = ?5",
+                 updated_at = ?4, warnings = ?6, provenance = ?7 WHERE id = ?5",
             )
             .bind(checkpoint.iterations_done as i64)
             .bind(&checkpoint.best)
@@ -107,6 +114,7 @@ impl Store {
             .bind(now)
             .bind(id)
             .bind(&checkpoint.warnings)
+            .bind(provenance)
             .execute(&mut *tx)
             .await?;
             Ok(())
@@ -116,15 +124,16 @@ impl Store {
 
     /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
     /// transaction.
-    pub async fn insert_study(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
-        self.insert_study_tx(job, checkpoint).await
-    }
-
-    async fn insert_study_tx(&self, job: &NewJob, checkpoint: &Checkpoint) -> Result<JobRow, StoreError> {
+    pub async fn insert_study(
+        &self,
+        job: &NewJob,
+        checkpoint: &Checkpoint,
+        provenance: &str,
+    ) -> Result<JobRow, StoreError> {
         self.transaction(async |tx| {
             let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
-             warnings, merged, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?) RETURNING ",
+             warnings, merged, created_at, updated_at, provenance) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?, ?) RETURNING ",
             job_columns!()
         ))
         .bind(JobState::Succeeded.as_str())
@@ -137,6 +146,7 @@ impl Store {
         .bind(&checkpoint.warnings)
         .bind(job.now)
         .bind(job.now)
+        .bind(provenance)
         .fetch_one(&mut *tx)
         .await?;
             let id: i64 = row.try_get("id")?;

@@ -50,6 +50,9 @@ pub struct JobRow {
     pub created_at: i64,
     /// When the row last changed (Unix milliseconds).
     pub updated_at: i64,
+    /// Where a merged job's statistics come from (JSON, `jobs::provenance`); None for a job that
+    /// merged nothing.
+    pub provenance: Option<String>,
 }
 
 /// A job to insert (queued, or a study with its checkpoint).
@@ -73,6 +76,17 @@ pub struct NewJob {
     pub now: i64,
 }
 
+/// Which jobs a list holds: every condition given must hold.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JobFilter {
+    /// Only jobs in this state.
+    pub state: Option<JobState>,
+    /// Only the runs of this sweep.
+    pub sweep: Option<i64>,
+    /// Only jobs with this label (key, value).
+    pub label: Option<(String, String)>,
+}
+
 /// The outcome of an insert with an idempotency key.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Inserted {
@@ -88,7 +102,7 @@ pub enum Inserted {
 macro_rules! job_columns {
     () => {
         "id, state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, warnings, \
-         error, merged, cancel_requested, sweep_id, created_at, updated_at"
+         error, merged, cancel_requested, sweep_id, created_at, updated_at, provenance"
     };
 }
 pub(super) use job_columns;
@@ -119,6 +133,7 @@ pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRow, sqlx::Error> {
         sweep_id: row.try_get("sweep_id")?,
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
+        provenance: row.try_get("provenance")?,
     })
 }
 
@@ -206,18 +221,26 @@ impl Store {
     /// Jobs newest first, optionally in one state, with ids below `before` (keyset pagination).
     pub async fn list_jobs(
         &self,
-        state: Option<JobState>,
+        filter: &JobFilter,
         before: Option<i64>,
         limit: u32,
     ) -> Result<Vec<JobRow>, StoreError> {
+        // The label's JSON path is bound, never spliced: `$.labels."KEY"` (keys are validated to
+        // letters, digits, `_`, `-`, `.`, so the quoted member name needs no escaping).
+        let label_path = filter.label.as_ref().map(|(key, _)| format!("$.labels.\"{key}\""));
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
-            " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR id < ?2) ORDER BY id DESC LIMIT ?3"
+            " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR id < ?2) \
+             AND (?4 IS NULL OR sweep_id = ?4) AND (?5 IS NULL OR json_extract(spec, ?5) = ?6) \
+             ORDER BY id DESC LIMIT ?3"
         ))
-        .bind(state.map(JobState::as_str))
+        .bind(filter.state.map(JobState::as_str))
         .bind(before)
         .bind(i64::from(limit))
+        .bind(filter.sweep)
+        .bind(label_path)
+        .bind(filter.label.as_ref().map(|(_, value)| value.clone()))
         .fetch_all(self.pool())
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)

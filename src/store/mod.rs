@@ -33,7 +33,7 @@ use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, S
 
 pub use checkpoints::Checkpoint;
 pub use history::{MAX_HISTORY_ROWS, evenly_kept};
-pub use jobs::{Inserted, JobRow, NewJob};
+pub use jobs::{Inserted, JobFilter, JobRow, NewJob};
 pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;
@@ -152,7 +152,7 @@ impl Store {
     }
 
     /// Whether the database answers, every embedded migration is applied, a write commits, and
-    /// there is room for more: [`HEADROOM_BYTES`] must fit under the database's page limit (an
+    /// there is room for more: 1 MiB (`HEADROOM_BYTES`) must fit under the database's page limit (an
     /// allocation inside a transaction that is rolled back) and be free on the filesystem.
     ///
     /// Why not remember failed writes instead: a write that fits in pages a previous write freed

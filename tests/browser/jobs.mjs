@@ -227,7 +227,10 @@ export async function checkPagination(page) {
     const shard = i === SMALL_JOBS - 1 ? { iterations: 2, shard: { index: 1, count: 2 } } : {};
     const response = await callApi('/v1/jobs', {
       method: 'POST',
-      body: { light_paths: 20000, camera_paths: 200, merge_radius: 0.02, iterations: 1, seed: i + 1, ...shard },
+      body: {
+        light_paths: 20000, camera_paths: 200, merge_radius: 0.02, iterations: 1, seed: i + 1, ...shard,
+        name: `small job ${i + 1}`, labels: { batch: (i + 1) % 2 === 0 ? 'even' : 'odd' },
+      },
     });
     if (response.status !== 202) throw new Error(`submitting small job ${i + 1} answered ${response.status}`);
   }
@@ -255,5 +258,30 @@ export async function checkPagination(page) {
   });
   check(empty === 'No failed jobs.', `filtering by state "failed" shows "${empty}"`);
   await page.locator('select[data-ref="filter"]').selectOption('');
+  await waitFor('the unfiltered list', async () => (await rowCount()) === 25);
+  const name = await newest.locator('[data-col="name"]').textContent();
+  check(name === `small job ${SMALL_JOBS}`, `a job's name heads its row ("${name}")`);
+
+  // Labels: the label filter lists only the jobs with that label, as the API does; a label chip
+  // filters by itself.
+  const evens = Math.floor(SMALL_JOBS / 2);
+  const fromApi = (await callApi('/v1/jobs?label=batch%3Deven&limit=100')).json.jobs;
+  check(fromApi.length === evens && fromApi.every((j) => j.spec.labels.batch === 'even'),
+    `GET /v1/jobs?label=batch=even lists the ${fromApi.length} jobs with an even seed`);
+  const filter = page.locator('input[data-ref="label-filter"]');
+  await filter.fill('batch=even');
+  await filter.press('Enter');
+  await waitFor('the list filtered by label', async () => (await rowCount()) === evens);
+  const seeds = (await page.locator('table.jobs-table tbody td[data-col="seed"]').allTextContents()).map(Number);
+  check(seeds.every((seed) => seed % 2 === 0), `the label filter "batch=even" lists the ${seeds.length} jobs with an even seed`);
+  await filter.fill('');
+  await filter.press('Enter');
+  await waitFor('the unfiltered list', async () => (await rowCount()) === 25);
+  await newest.locator('button.label-chip').click();
+  await waitFor('the list filtered by a label chip', async () => (await rowCount()) === evens
+    && (await filter.inputValue()) === 'batch=even');
+  check(true, 'clicking the chip "batch=even" filters the list by it');
+  await filter.fill('');
+  await filter.press('Enter');
   await waitFor('the unfiltered list', async () => (await rowCount()) === 25);
 }

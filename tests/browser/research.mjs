@@ -197,7 +197,8 @@ export async function checkPaperJob(page, id) {
   }
   checkZ(await readNoiseRows(page), result);
   const note = await page.locator('[data-ref="paper-note"]').textContent();
-  check(note.includes('Ershov et al. 2020, Table 1'), `the paper's column cites its source ("${note.slice(0, 50)}…")`);
+  check(note.includes('Ershov') && note.includes('Table 1') && note.includes(result.references[0].source),
+    `the paper's column cites its source, as the server serves it ("${note.slice(0, 50)}…")`);
   const figure = await checkFigure2(page, id, result);
 
   const lum = await readPlot(page.locator('[data-ref="luminance-plot"]'));
@@ -316,6 +317,16 @@ export async function checkCompare(page, { spot, uniform }, results) {
     return row.error ? text === 'no fit' : Math.abs(parseWithError(text)[0] - row.rms_percent) < 0.06;
   }));
   check(agree, 'each cell is its job\'s RMS %, or "no fit" where its fit failed');
+
+  // Against the first job: the server's comparison (GET /v1/compare), ratios with their SEs.
+  const comparison = (await callApi(`/v1/compare?ids=${spot},${uniform}`)).json;
+  await waitFor('the ratios table', async () => (await page.locator('.ratios-table tbody tr').count()) === comparison.strategies.length);
+  const switchRow = page.locator('.ratios-table tbody tr[data-strategy="switch"]');
+  const ratioText = await switchRow.locator('td[data-col="rms-ratio"]').textContent();
+  const expected = comparison.strategies.find((x) => x.strategy === 'switch').runs[1];
+  const [ratio, ratioSe] = parseWithError(ratioText);
+  check(Math.abs(ratio - expected.rms_ratio) < 6e-4 && Math.abs(ratioSe - expected.rms_ratio_stderr) < 6e-4,
+    `the ratios table gives switch's RMS ratio against the first job as the API does (${ratioText})`);
 
   // Each job's table: its recommended one, or its table optimum (a per-path strategy recommended).
   const figures = await Promise.all([spot, uniform].map((id, k) => expectedFigure(id, results[k])));

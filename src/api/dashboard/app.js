@@ -9,7 +9,7 @@
 //   format.js     DOM and formatting helpers                          (imports nothing of ours)
 //   form.js       the submit form                                     (api, format)
 //   csv.js        CSV text (RFC 4180) and its download buttons        (api, format)
-//   paper.js      the paper's Table 1, its configuration, SE(L)      (imports nothing of ours)
+//   paper.js      the paper's configuration, SE(L)                  (imports nothing of ours)
 //   chartkit.js   uPlot plugins: error bars, SE bands, guide lines    (imports nothing of ours)
 //   chartfiles.js a chart's SVG (a serialiser) and PNG downloads      (api, chartkit, format)
 //   plots.js      the job's history charts: luminance, RMS; shared    (chartkit, format, paper)

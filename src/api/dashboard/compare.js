@@ -1,6 +1,7 @@
 // The compare page, #/compare?ids=1,2,… (2 to 8 jobs): their noise tables side by side (RMS % ± SE
 // per strategy, one column per job, under each job's key parameters, the recommended and unstable
-// rows marked) and their weights tables' w₁ against r₃ overlaid (one series per job, ± 1 SE bars,
+// rows marked), the server's comparison against the first job (ratios and differences ± SE, z),
+// and their weights tables' w₁ against r₃ overlaid (one series per job, ± 1 SE bars,
 // open markers for cells without a data SE, an r₂ bin selector, the spots' r₃ = a): each job's
 // recommended table, or — when it recommends a per-path strategy — its table optimum at
 // optimal_cv's λ, labelled as not recommended (fig2.js). CSV, SVG and PNG downloads. Polled while a
@@ -32,6 +33,10 @@ export function parseIds(query) {
   }
   return { ids: unique };
 }
+
+/** `v ± se` (scaled, three decimals), or — when the figure is missing. */
+const plusMinus = (v, se, scale = 1) => (v === null || v === undefined ? '—'
+  : withError(v * scale, se === null || se === undefined ? null : se * scale, (x) => fixed(x, 3)));
 
 /** The illumination in a few words: `spot a = 0.02`, `uniform`. */
 const describeLight = (ill) => (ill.kind === 'spot' ? `spot a = ${formatParameter(ill.a)}` : ill.kind);
@@ -82,6 +87,8 @@ export function showCompare(app, query) {
     const problems = entries.filter((e) => e.error).map((e) => e.error);
     showMessage(refs['load-error'], problems.join(' '));
     renderTable();
+    await renderRatios();
+    if (!alive) return;
     renderSelector();
     drawOverlay();
     if (entries.some((e) => e.job && !TERMINAL.has(e.job.state))) timer = setTimeout(load, POLL_MS);
@@ -120,6 +127,41 @@ export function showCompare(app, query) {
           row.unstable ? h('span', { class: 'unstable-mark', title: 'Its fitted weights change from fold to fold by more than 0.25: never recommended' }, 'unstable') : null,
           recommended ? h('span', { class: 'recommended-mark', title: e.result.recommended.reason ?? 'The recommended row' }, 'recommended') : null);
       }))));
+  }
+
+  /**
+   * The server's comparison (`GET /v1/compare`): per strategy and later job, L and RMS against
+   * the first job's — ratios and the difference of L, each ± its standard error, and z.
+   */
+  async function renderRatios() {
+    const ready = entries.filter((e) => e.result);
+    if (ready.length < 2 || ready[0].id !== ids[0]) {
+      refs['ratios-head'].replaceChildren();
+      refs['ratios-rows'].replaceChildren();
+      showMessage(refs['ratios-note'], `The first job (#${ids[0]}) and at least one other need results to compare against it.`);
+      return;
+    }
+    let comparison;
+    try {
+      comparison = await api(`/v1/compare?ids=${ready.map((e) => e.id).join(',')}`);
+    } catch (error) {
+      showMessage(refs['ratios-note'], error.message);
+      return;
+    }
+    const others = comparison.runs.slice(1);
+    refs['ratios-head'].replaceChildren(h('tr', {}, h('th', { scope: 'col' }, 'Strategy'), h('th', { scope: 'col' }, 'Job'),
+      h('th', { scope: 'col', class: 'num' }, 'L / L₁ ± SE'), h('th', { scope: 'col', class: 'num' }, 'ΔL·10⁵ ± SE'),
+      h('th', { scope: 'col', class: 'num' }, 'z'), h('th', { scope: 'col', class: 'num' }, 'RMS / RMS₁ ± SE')));
+    refs['ratios-rows'].replaceChildren(...comparison.strategies.flatMap((s) => s.runs.slice(1).map((f, k) => h('tr',
+      { 'data-strategy': s.strategy, 'data-job': ready[k + 1].id },
+      k === 0 ? h('th', { scope: 'row', rowspan: others.length }, h('code', {}, s.strategy), s.in_sample ? ' (in-sample)' : '') : null,
+      h('td', {}, `#${ready[k + 1].id}`),
+      h('td', { class: 'num', 'data-col': 'luminance-ratio' }, plusMinus(f.luminance_ratio, f.luminance_ratio_stderr)),
+      h('td', { class: 'num', 'data-col': 'luminance-difference' },
+        plusMinus(f.luminance_difference, f.luminance_difference_stderr, 1e5)),
+      h('td', { class: 'num', 'data-col': 'z' }, f.z === null ? '—' : fixed(f.z, 2)),
+      h('td', { class: 'num', 'data-col': 'rms-ratio' }, plusMinus(f.rms_ratio, f.rms_ratio_stderr))))));
+    showMessage(refs['ratios-note'], comparison.notes.join(' '));
   }
 
   /** The r₂ bins of the first job with weights; keeps the chosen one while it exists. */

@@ -1,6 +1,7 @@
-// The job list page: one page of jobs (with each one's engine, N_F, N_B, seed, and whether it is a
-// shard, a merge or a run of a sweep), polled, with the first running ones streamed live, the state
-// filter and paging, the selection of jobs to compare (#/compare?ids=…), and the submit form (form.js).
+// The job list page: one page of jobs (with each one's name and labels, engine, N_F, N_B, seed, and
+// whether it is a shard, a merge or a run of a sweep — a sweep's runs are named after their swept
+// values), polled, with the first running ones streamed live, the state and label filters (a
+// label chip filters by itself) and paging, the selection of jobs to compare (#/compare?ids=…), and the submit form (form.js).
 
 import { TERMINAL, api, streamJob } from './api.js';
 import {
@@ -18,7 +19,7 @@ const MAX_LIST_STREAMS = 2;
 export const MAX_COMPARED = 8;
 
 // Kept across page changes so that coming back from a job shows the same page of the list.
-const listView = { filter: '', cursors: [null], selected: new Set() };
+const listView = { filter: '', label: '', cursors: [null], selected: new Set() };
 
 /** Shows the list in `app` (the page's #app element); returns what leaving the page does. */
 export function showList(app) {
@@ -38,6 +39,7 @@ export function showList(app) {
     const seq = ++requestSeq;
     const params = new URLSearchParams({ limit: PAGE_SIZE });
     if (listView.filter) params.set('state', listView.filter);
+    if (listView.label) params.set('label', listView.label);
     const cursor = listView.cursors.at(-1);
     if (cursor) params.set('cursor', cursor);
     try {
@@ -73,7 +75,8 @@ export function showList(app) {
 
   function emptyText(firstPage) {
     if (!firstPage) return 'No more jobs on this page.';
-    return listView.filter ? `No ${listView.filter} jobs.` : 'No jobs yet. Submit one with the form.';
+    const which = [listView.filter, listView.label ? `labelled ${listView.label}` : ''].filter(Boolean).join(' ');
+    return which ? `No ${which} jobs.` : 'No jobs yet. Submit one with the form.';
   }
 
   // Rows are updated in place, and moved only when the order changes: a row taken out of the
@@ -91,7 +94,10 @@ export function showList(app) {
     pick.checked = listView.selected.has(job.id);
     return h('tr', { 'data-job': job.id },
       h('td', { class: 'col-pick' }, pick),
-      h('td', {}, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`), h('span', { class: 'sub' }, describeKind(job))),
+      h('td', { class: 'col-job' }, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`),
+        spec.name ? h('span', { class: 'job-name', 'data-col': 'name', title: spec.notes ?? spec.name }, spec.name) : null,
+        h('span', { class: 'sub' }, describeKind(job)),
+        labelChips(spec.labels)),
       h('td'),
       h('td', { class: 'col-progress' }, progressBar()),
       h('td', { 'data-col': 'engine' }, spec.engine || 'brute'),
@@ -151,6 +157,19 @@ export function showList(app) {
     listView.cursors = [null];
     load();
   });
+  // The label filter: KEY=VALUE as typed (the server says if it is not one), or a chip clicked.
+  const filterByLabel = (label) => {
+    listView.label = label.trim();
+    refs['label-filter'].value = listView.label;
+    listView.cursors = [null];
+    load();
+  };
+  refs['label-filter'].value = listView.label;
+  refs['label-filter'].addEventListener('change', () => filterByLabel(refs['label-filter'].value));
+  refs.rows.addEventListener('click', (event) => {
+    const chip = event.target.closest('button.label-chip');
+    if (chip) filterByLabel(chip.dataset.label);
+  });
   refs.next.addEventListener('click', () => {
     listView.cursors.push(nextCursor);
     load();
@@ -159,10 +178,10 @@ export function showList(app) {
     listView.cursors.pop();
     load();
   });
-  // The whole row leads to the job, not only its id (but not its checkbox).
+  // The whole row leads to the job, not only its id (but not its checkbox or a label chip).
   refs.rows.addEventListener('click', (event) => {
     const row = event.target.closest('tr[data-job]');
-    if (row && !event.target.closest('a, input, .col-pick')) location.hash = `#/jobs/${row.dataset.job}`;
+    if (row && !event.target.closest('a, input, button, .col-pick')) location.hash = `#/jobs/${row.dataset.job}`;
   });
   refs.rows.addEventListener('change', (event) => {
     if (event.target.name !== 'compare') return;
@@ -205,11 +224,26 @@ function formatSize(n) {
   return Number.isInteger(Math.log10(n)) && n >= 1000 ? formatParameter(n) : formatCount(n);
 }
 
+/** A job's labels as chips; clicking one lists the jobs with that label. */
+function labelChips(labels) {
+  const entries = Object.entries(labels ?? {});
+  if (entries.length === 0) return null;
+  return h('span', { class: 'labels' }, ...entries.map(([key, value]) => h('button',
+    { type: 'button', class: 'label-chip', 'data-label': `${key}=${value}`, title: `Only jobs labelled ${key}=${value}` },
+    `${key}=${value}`)));
+}
+
 /** The preset, and whether the job is a shard of a study, a merge, or a run of a sweep (linked). */
 function describeKind(job) {
   const parts = [job.spec.preset];
   if (job.spec.shard) parts.push(h('span', { class: 'kind', 'data-kind': 'shard' }, `shard ${job.spec.shard.index + 1}/${job.spec.shard.count}`));
-  if (job.merged) parts.push(h('span', { class: 'kind', 'data-kind': 'merged' }, 'merged'));
+  if (job.merged) {
+    // A merge holds every seed of its sources (its spec keeps the first source's).
+    const seeds = job.provenance?.seeds ?? [];
+    const sources = (job.provenance?.sources ?? []).map((s) => s.from).join(', ');
+    parts.push(h('span', { class: 'kind', 'data-kind': 'merged', title: sources ? `Merged from ${sources}` : null },
+      seeds.length > 1 ? `merged · seeds ${seeds.join(', ')}` : 'merged'));
+  }
   if (job.sweep_id !== null && job.sweep_id !== undefined) {
     parts.push(h('a', { class: 'sweep-link', 'data-kind': 'sweep', href: `#/sweeps/${job.sweep_id}` }, `sweep ${job.sweep_id}`));
   }

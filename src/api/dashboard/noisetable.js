@@ -6,7 +6,11 @@
 // in-sample, unstable and outside-the-fixed-weights rows marked; and the same table as CSV rows.
 
 import { fixed, formatBetas, formatLuminance, formatParameter, formatRms, h, signed, withError } from './format.js';
-import { PAPER_TABLE1, paperMismatches } from './paper.js';
+import { paperMismatches } from './paper.js';
+
+// The paper's case numbers of the strategies that have one: which row is which case, whatever the
+// configuration (the published figures themselves come with the result, where they apply).
+const CASES = { plane1: '1', plane2: '2', plane3: '3', switch: '4', optimal: '5' };
 
 const MARKS = {
   'in-sample': 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)',
@@ -19,8 +23,8 @@ const MARKS = {
  * are shown only then).
  */
 export function noiseRows(result, job) {
-  const paper = paperMismatches(job.spec).length === 0;
-  const context = { spec: job.spec, recommended: result.recommended, folds: result.folds, paper };
+  const paper = (result.references ?? []).length > 0;
+  const context = { spec: job.spec, recommended: result.recommended, folds: result.folds, paper, result };
   return { rows: result.noise_table.map((row) => noiseRow(row, context)), paper };
 }
 
@@ -43,11 +47,27 @@ export function referenceNote(result, spec) {
   return parts.join(' ');
 }
 
+/**
+ * A strategy's published row (case, L, RMS %) in the tables the server attached to the result
+ * (`references`: the repository's references/*.json, for a job with the paper's configuration).
+ */
+function published(result, strategy) {
+  for (const table of result.references ?? []) {
+    const row = table.rows.find((r) => r.strategy === strategy);
+    if (row) return row;
+  }
+  return undefined;
+}
+
 /** The paper's column: where its values come from, or why they are not shown. */
-export function paperNote(spec) {
+export function paperNote(spec, result) {
+  const table = (result?.references ?? [])[0];
+  if (table) {
+    return `Paper: ${table.source} (${table.iterations} iterations; its case 5 is fitted and scored in-sample, like our optimal row). Its L and RMS do not depend on the number of iterations; ours carry ± 1 SE.`;
+  }
   const differs = paperMismatches(spec);
   if (differs.length === 0) {
-    return "Paper: Ershov et al. 2020, Table 1 (10⁴ iterations; its case 5 is fitted and scored in-sample, like our optimal row). Its L and RMS do not depend on the number of iterations; ours carry ± 1 SE.";
+    return 'The paper\'s values are not in this result (it was read from an older checkpoint or a solve that changes the fixed weights).';
   }
   return `Paper values apply to the paper-table1 configuration only (this job differs in ${differs.join(', ')}).`;
 }
@@ -59,7 +79,7 @@ const formatZ = (z) => `${z > 0 ? '+' : ''}${signed(z, 2)}`;
 const mark = (cls, text, title) => h('span', { class: cls, title }, text);
 
 function noiseRow(row, context) {
-  const { recommended, paper } = context;
+  const { recommended, paper, result } = context;
   const isRecommended = row.strategy === recommended?.strategy;
   const numbers = row.error
     ? [h('td', { class: 'row-error', colspan: 3, 'data-col': 'error' }, row.error)]
@@ -68,7 +88,7 @@ function noiseRow(row, context) {
       zCell(row),
       h('td', { class: 'num', 'data-col': 'rms' }, withError(row.rms_percent, row.rms_percent_stderr, formatRms)),
     ];
-  const ours = PAPER_TABLE1[row.strategy];
+  const ours = published(result, row.strategy);
   const paperCells = paper ? [
     h('td', { class: 'num paper-col', 'data-col': 'paper-luminance' }, ours ? fixed(ours.luminance * 1e5, 3) : ''),
     h('td', { class: 'num paper-col', 'data-col': 'paper-rms' }, ours ? `${ours.rms_percent}` : ''),
@@ -79,7 +99,7 @@ function noiseRow(row, context) {
       row.in_sample ? mark('in-sample-mark', 'in-sample', MARKS['in-sample']) : null,
       row.unstable ? mark('unstable-mark', 'unstable', MARKS.unstable) : null,
       row.respects_fixed === false ? mark('outside-mark', 'outside fixed weights', MARKS.outside) : null),
-    h('td', { class: 'num', 'data-col': 'case' }, ours ? String(ours.case) : ''),
+    h('td', { class: 'num', 'data-col': 'case' }, CASES[row.strategy] ?? ''),
     weightsCell(row, context),
     ...numbers,
     ...paperCells);
@@ -168,16 +188,16 @@ function describeCrossValidation(row, folds) {
 }
 
 /** The noise table as CSV rows (luminance in model units, RMS in percent; the paper's columns empty unless they apply). */
-export function noiseCsv(result, spec) {
-  const paper = paperMismatches(spec).length === 0;
+export function noiseCsv(result) {
+  const paper = (result.references ?? []).length > 0;
   const columns = ['strategy', 'paper_case', 'luminance_model_units', 'luminance_stderr_model_units', 'expected_luminance_at_r_model_units',
     'z_vs_expected', 'expected_error', 'reference_luminance_r0_model_units', 'rms_percent', 'rms_percent_stderr', 'in_sample', 'respects_fixed',
     'unstable', 'recommended', 'lambda', 'heuristics', 'paper_luminance_model_units', 'paper_rms_percent', 'error'];
   const rows = result.noise_table.map((row) => {
-    const ours = PAPER_TABLE1[row.strategy];
+    const ours = published(result, row.strategy);
     return {
       strategy: row.strategy,
-      paper_case: ours?.case,
+      paper_case: CASES[row.strategy],
       luminance_model_units: row.luminance,
       luminance_stderr_model_units: row.luminance_stderr,
       expected_luminance_at_r_model_units: row.expected_luminance,

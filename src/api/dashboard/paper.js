@@ -1,20 +1,8 @@
-// The paper: its Table 1, when a job runs the paper's configuration (so that its values apply),
-// and the standard error of a luminance from its RMS. No DOM here. (A row's z is the server's,
-// against the row's own expectation at R: noisetable.js.)
-//
-// Source: Ershov, Frolov, Voloboy, Galaktionov (2020), "Direct optimal MIS weights for
-// bidirectional photon mapping", section 5, Table 1 (10⁴ iterations, weights fitted and scored on
-// the same iterations, optimisation constrained to w₀ = 0); transcribed in /work/shared/model.md,
-// "Expected figures", and in examples/python/paper_table1.py.
-
-/** The paper's case number, L (model units) and RMS % of the strategies that have a counterpart here. */
-export const PAPER_TABLE1 = {
-  plane1: { case: 1, luminance: 26.484e-5, rms_percent: 208 },
-  plane2: { case: 2, luminance: 26.352e-5, rms_percent: 254 },
-  plane3: { case: 3, luminance: 25.997e-5, rms_percent: 146 },
-  switch: { case: 4, luminance: 26.352e-5, rms_percent: 61 },
-  optimal: { case: 5, luminance: 25.961e-5, rms_percent: 54 },
-};
+// The paper's configuration — to say in which fields a job differs when the server attached no
+// published table to its result (the figures themselves come from the server: the result's
+// `references`, from the repository's references/*.json) — and the standard error of a luminance
+// from its RMS. No DOM here. (A row's z is the server's, against the row's own expectation at R:
+// noisetable.js.)
 
 // The paper's configuration (the preset paper-table1): what the paper's values depend on.
 // Iterations, seed, engine, cells and λ are left free: the luminance and the per-iteration RMS do

@@ -182,10 +182,44 @@ export function drawHistory(slot, note, points) {
       value: (u, v) => (v === null ? '—' : `${formatRms(v)} %`),
     });
   }
+  // One object for the slot's life: a redraw with the same series keeps the first options (and
+  // their range function), which updates this object.
+  slot.historyClip ??= { early: false };
+  const clipped = slot.historyClip;
   slot.draw({
     series,
-    scales: { x: { time: false }, y: { distr: 3 } },
-    axes: [{ label: 'iterations' }, { label: 'RMS error (%, log scale)', size: 60 }],
+    scales: { x: { time: false }, y: { distr: 3, range: (u) => settledRange(u, clipped) } },
+    axes: [{ label: 'iterations' }, { label: 'RMS error (%, log scale)', size: 70 }],
   }, data);
-  showMessage(note, points.length === 1 ? 'One checkpoint so far: lines appear from the second on.' : '');
+  const notes = [];
+  if (points.length === 1) notes.push('One checkpoint so far: lines appear from the second on.');
+  if (clipped.early) notes.push('The axis follows the checkpoints after the first tenth of the iterations: earlier, noisier figures above it are cut off (hover the line for them).');
+  showMessage(note, notes.join(' '));
+}
+
+/**
+ * The log axis of the RMS history: spanned by the visible values from the first tenth of the
+ * iterations on, padded — one early checkpoint of a fitted row (a few hundred iterations, 1,300 %)
+ * would otherwise squeeze every later line into the bottom of the chart. Sets `clipped.early`
+ * when an earlier value lies above the axis.
+ */
+function settledRange(u, clipped) {
+  const x = u.data[0];
+  const settledFrom = 0.1 * (x[x.length - 1] ?? 0);
+  let lo = Infinity;
+  let hi = -Infinity;
+  let earlyHi = -Infinity;
+  u.data.slice(1).forEach((ys, s) => {
+    if (u.series[s + 1] && !u.series[s + 1].show) return;
+    ys.forEach((y, i) => {
+      if (!(y > 0)) return;
+      lo = Math.min(lo, y);
+      if (x[i] >= settledFrom || x.length <= 2) hi = Math.max(hi, y);
+      else earlyHi = Math.max(earlyHi, y);
+    });
+  });
+  if (!Number.isFinite(hi)) hi = earlyHi;
+  if (!Number.isFinite(lo) || !Number.isFinite(hi)) return [1, 100];
+  clipped.early = earlyHi > hi * 1.25;
+  return [lo / 1.25, hi * 1.25];
 }

@@ -35,7 +35,7 @@ export class ResultsLoader {
   addDownloads() {
     const { refs, plots, id } = this;
     refs['noise-downloads'].append(
-      csvButton('Noise table (CSV)', `optimis-job-${id}-noise.csv`, () => noiseCsv(this.result, this.job.spec)),
+      csvButton('Noise table (CSV)', `optimis-job-${id}-noise.csv`, () => noiseCsv(this.result)),
       csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.figure)),
       csvButton('History (CSV)', `optimis-job-${id}-history.csv`, () => historyCsv(this.history)));
     refs['weights-downloads'].append(chartDownloads(plots.weights, `optimis-job-${id}-fig2-w1`));
@@ -143,7 +143,7 @@ export class ResultsLoader {
     refs['noise-rows'].replaceChildren(...rows);
     refs['recommended-note'].replaceChildren(...recommendedNote(result));
     refs['recommended-note'].hidden = !result.recommended;
-    showMessage(refs['paper-note'], paperNote(this.job.spec));
+    showMessage(refs['paper-note'], paperNote(this.job.spec, result));
     showMessage(refs['solve-error'], result.solve_error ? `The weight fit failed: ${result.solve_error}` : '');
     refs.gain.textContent = describeGain(result.gain);
     refs.warnings.replaceChildren(...result.warnings.map((w) => h('li', { 'data-code': w.code },

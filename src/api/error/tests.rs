@@ -153,6 +153,7 @@ async fn unusable_documents_are_422_and_conflicting_ones_409() {
         JobError::Document(DocumentError::Merge(MergeError::Fingerprint {
             found: "abc".into(),
             expected: "def".into(),
+            differences: Vec::new(),
         }))
     };
     let a = answer(foreign, 409, "conflict").await;

@@ -6,12 +6,14 @@
 //!   radius (the reference is its R → 0 limit);
 //! * [`expectation`] — exact expected merge counts given the camera paths;
 //! * [`equivalence`] — block-wise comparison of two engines' figures;
-//! * [`references`] — each strategy's expected luminance at the job's R, as reports take it.
+//! * [`references`] — each strategy's expected luminance at the job's R, as reports take it;
+//! * [`published`] — the paper's Table 1 as data, and whether a job's configuration is the paper's.
 //!
-//! Imports: crate::sim::engines, crate::sim::model, crate::sim::runner, crate::sim::solve, crate::sim::stats
+//! Imports: crate::sim::engines, crate::sim::model, crate::sim::runner, crate::sim::solve, crate::sim::spec, crate::sim::stats
 
 pub mod equivalence;
 pub mod expectation;
 pub mod expected;
+pub mod published;
 pub mod quadrature;
 pub mod references;

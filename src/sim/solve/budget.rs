@@ -26,6 +26,7 @@ use crate::sim::stats::moments::Moments;
 
 /// Seconds per light path, per camera path and pixel, and per iteration, and the pixel count P.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct Costs {
     /// t_F: seconds per light path (one set serves every pixel).
     pub light_path: f64,
@@ -46,6 +47,7 @@ impl Costs {
 
 /// One strategy at one budget.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct BudgetPoint {
     /// The strategy whose noise was predicted.
     pub strategy: Strategy,
@@ -65,6 +67,7 @@ pub struct BudgetPoint {
 
 /// A strategy's fastest budget in the searched range.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct BestBudget {
     /// The point itself (its fields appear at the top level of the JSON).
     #[serde(flatten)]
@@ -83,6 +86,7 @@ pub struct BestBudget {
 /// The budgets searched: a grid in half-decade steps, widened from a decade around the measured
 /// budget while the headline's best lies on its edge, up to [`MAX_DECADES`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct SearchRange {
     /// The smallest and largest N_F of the grid.
     pub light_paths: [u64; 2],
@@ -94,6 +98,7 @@ pub struct SearchRange {
 
 /// The best budget of every strategy, the paper's configuration, and every point evaluated.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct BudgetPlan {
     /// The target RMS% the times are measured to.
     pub target_rms_percent: f64,
@@ -124,6 +129,7 @@ pub struct BudgetPlan {
 /// The RMS every budget reaches in a fixed wall time T, as a curve against N_F/N_B
 /// (docs/model.md §12).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct FixedTime {
     /// T: the paper configuration's `seconds_to_target`, so that the paper's own point reads the
     /// target RMS and every other point reads what it would reach in the same time.
@@ -137,6 +143,7 @@ pub struct FixedTime {
 
 /// One strategy's best budget at one ratio N_F/N_B, after the fixed time.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct FixedTimePoint {
     /// The strategy of the curve this point is on.
     pub strategy: Strategy,

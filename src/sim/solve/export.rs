@@ -1,5 +1,6 @@
 //! The result document's tables as CSV (`GET /v1/jobs/{id}/result?format=csv`, `optimis report
-//! --csv`): the noise table, one row per strategy, and the weights table, one row per cell.
+//! --csv`): the noise table, one row per strategy (with the paper's figures where its Table 1
+//! applies), and the weights table, one row per cell.
 //!
 //! Units: `luminance` (and its standard error) in the model's units (docs/model.md: the light's
 //! radiance scale, as in the JSON); `rms_percent` in percent of L for one iteration; cell bounds in
@@ -7,10 +8,11 @@
 
 use super::noise::NoiseRow;
 use super::report::WeightRow;
+use super::strategy::Strategy;
 use crate::sim::math::csv::{Csv, json_cell, number, quoted};
 
 /// The noise table's columns.
-const NOISE_COLUMNS: [&str; 12] = [
+const NOISE_COLUMNS: [&str; 14] = [
     "strategy",
     "luminance",
     "luminance_stderr",
@@ -23,12 +25,16 @@ const NOISE_COLUMNS: [&str; 12] = [
     "in_sample_luminance_stderr",
     "in_sample_rms_percent",
     "error",
+    "paper_luminance",
+    "paper_rms_percent",
 ];
 
-/// The noise table as CSV.
-pub fn noise_table_csv(rows: &[NoiseRow]) -> String {
+/// The noise table as CSV; `paper` gives a row's published (L, RMS %) where a published table
+/// applies to the job (`sim::checks::published`; empty cells otherwise).
+pub fn noise_table_csv(rows: &[NoiseRow], paper: impl Fn(&Strategy) -> Option<(f64, f64)>) -> String {
     let mut csv = Csv::new(NOISE_COLUMNS);
     for r in rows {
+        let published = paper(&r.strategy);
         csv.row([
             json_cell(&r.strategy),
             number(r.luminance),
@@ -42,6 +48,8 @@ pub fn noise_table_csv(rows: &[NoiseRow]) -> String {
             number(r.in_sample_luminance_stderr),
             number(r.in_sample_rms_percent),
             r.error.as_deref().map(quoted).unwrap_or_default(),
+            number(published.map(|p| p.0)),
+            number(published.map(|p| p.1)),
         ]);
     }
     csv.finish()

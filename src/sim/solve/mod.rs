@@ -12,15 +12,18 @@
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
-//! * [`report`] — the result document of a run; [`export`] — its tables as CSV;
+//! * [`report`] — the result document of a run; [`export`] — its tables as CSV; [`tables`] — the
+//!   noise table as Markdown and LaTeX;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
 //!   noise components;
 //! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy;
-//! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run.
+//! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run;
+//! * [`compare`] — runs compared strategy by strategy, ratios and differences with their SEs.
 //!
 //! Imports: crate::sim::engines, crate::sim::math, crate::sim::model, crate::sim::stats
 
 pub mod budget;
+pub mod compare;
 pub mod crossfit;
 pub mod evaluate;
 pub mod export;
@@ -34,5 +37,6 @@ pub mod rms_error;
 pub mod row;
 pub mod solver;
 pub mod strategy;
+pub mod tables;
 pub mod warnings;
 pub mod ystats;

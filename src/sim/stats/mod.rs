@@ -2,7 +2,8 @@
 //!
 //! * [`bounded`] — list deserialisation bounded by the largest valid value;
 //! * [`coverage`] — the (seed, iteration range) pairs a moments value holds;
-//! * [`moments`] — the additive sufficient statistics, their checks and merges.
+//! * [`moments`] — the additive sufficient statistics, their checks and merges; [`merge_error`] —
+//!   why two of them cannot be merged.
 //!
 //! Imports: crate::sim::engines, crate::sim::math, crate::sim::model
 
@@ -10,4 +11,5 @@ pub mod bounded;
 pub mod components;
 pub mod coverage;
 mod fold_checks;
+pub mod merge_error;
 pub mod moments;

@@ -236,54 +236,7 @@ pub struct Moments {
     pub folds: Vec<FoldMoments>,
 }
 
-/// Why two moments values cannot be merged (or a document cannot be used).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum MergeError {
-    /// A moments format this build does not read (`expected`: the one it writes).
-    #[error(
-        "moments format {found} is not supported (this build reads formats 2 and {expected}; format 1, written before K-fold cross-fitting, holds two folds of even and odd iterations that cannot be split into K folds: run the iterations again with this build)"
-    )]
-    Format {
-        /// The format of the moments refused.
-        found: u32,
-        /// The format this build writes.
-        expected: u32,
-    },
-    /// Moments of two formats: the older lacks sums the newer keeps, so they cannot be added.
-    #[error(
-        "moments of format {found} cannot be merged with moments of format {expected}: format 2 (written before optimis kept the w0 = 0 heuristics and the stacked optimum's columns) lacks sums that format 3 keeps; merge format-2 documents with each other, or run the iterations again with this build"
-    )]
-    FormatMix {
-        /// The format of the moments merged in.
-        found: u32,
-        /// The format of the moments merged into.
-        expected: u32,
-    },
-    /// Moments of another configuration: their fingerprints (or cell or fold counts) differ.
-    #[error(
-        "configuration fingerprints differ ({found} vs {expected}): the statistics were drawn under another scene, R, N_F, N_B, cell grid or generator"
-    )]
-    Fingerprint {
-        /// The fingerprint of the moments merged in.
-        found: String,
-        /// The fingerprint of the moments merged into.
-        expected: String,
-    },
-    /// Iterations of the same seed on both sides (listed): adding them would count them twice.
-    #[error("these iterations are already counted: {}", list(.0))]
-    Overlap(Vec<Overlap>),
-    /// The moments contradict themselves or their layout (e.g. array lengths that do not match
-    /// the grid, a negative sum of squares, a fold's count that disagrees with its coverage).
-    #[error("malformed moments: {0}")]
-    Malformed(String),
-    /// A counter would wrap or an exact sum would leave the representable range; nothing changed.
-    #[error("the merged statistics would overflow: {0}")]
-    Overflow(String),
-}
-
-fn list(overlaps: &[Overlap]) -> String {
-    overlaps.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
-}
+pub use super::merge_error::MergeError;
 
 impl Moments {
     /// No iterations yet, for `config`.
@@ -407,6 +360,7 @@ impl Moments {
             return Err(MergeError::Fingerprint {
                 found: other.fingerprint.clone(),
                 expected: self.fingerprint.clone(),
+                differences: Vec::new(),
             });
         }
         let overlaps = self.coverage.overlaps(&other.coverage);

@@ -233,7 +233,26 @@ pub fn plan(document: &Value, max_points: usize) -> Result<SweepPlan, SpecError>
             ),
         ));
     }
-    Ok(SweepPlan { spec, runs, points })
+    let mut plan = SweepPlan { spec, runs, points };
+    name_runs(&mut plan);
+    Ok(plan)
+}
+
+/// Names each run after its swept values (`NAME: merge_radius=0.003, scene.l3=1`, NAME the base
+/// job's name or `sweep`), so that a job list tells a sweep's runs apart; at most 200 characters,
+/// as a job's name.
+fn name_runs(plan: &mut SweepPlan) {
+    for r in 0..plan.runs.len() {
+        let values = plan.describe_run(r);
+        let spec = &mut plan.runs[r].spec;
+        let base = spec.name.clone().unwrap_or_else(|| "sweep".to_string());
+        let name = if values.is_empty() { base } else { format!("{base}: {values}") };
+        spec.name = Some(if name.chars().count() <= 200 {
+            name
+        } else {
+            format!("{}…", name.chars().take(199).collect::<String>())
+        });
+    }
 }
 
 /// The axes' paths and values within bounds, no axis twice or inside another, predictions only

@@ -8,11 +8,15 @@
 //! on the request pool; predicted points are computed there too, once per checkpoint of their run
 //! (a small cache keyed by the checkpoint's checksum) and one re-fit at a time (concurrent readers
 //! wait for it, up to a timeout, then read the cache), so neither a dashboard polling a sweep nor
-//! several readers at once re-fit every point each.
+//! several readers at once re-fit every point each. `wait`: the long-poll of a sweep.
+//!
+//! Imports: crate::jobs, crate::sim, crate::store
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+mod wait;
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};

@@ -1,0 +1,49 @@
+"""A Python client of the optimis job server (``optimis serve``).
+
+Submit simulation jobs, wait for them, and read their noise and weights tables as pandas
+DataFrames::
+
+    from optimis_client import Client
+
+    client = Client("http://127.0.0.1:8080")          # token: $OPTIMIS_TOKEN
+    job = client.submit({"preset": "paper-table1", "iterations": 10000, "seed": 1})
+    client.wait(job["id"])
+    print(client.noise_table(job["id"]))
+
+Errors: every exception is an :class:`OptimisError` — :class:`ApiError` (the server's problem
+document), :class:`ServerUnreachable`, :class:`JobFailed` (:class:`SweepFailed`) and
+:class:`WaitTimeout` (a :class:`TimeoutError`).
+"""
+
+from ._client import DEFAULT_URL, FINAL_STATES, MAX_WAIT_SECONDS, Client
+from ._errors import ApiError, JobFailed, OptimisError, ServerUnreachable, SweepFailed, WaitTimeout
+from ._frames import (
+    compare_frame,
+    history_frame,
+    noise_table_frame,
+    paper_figures,
+    sweep_table_frame,
+    weights_frame,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DEFAULT_URL",
+    "FINAL_STATES",
+    "MAX_WAIT_SECONDS",
+    "ApiError",
+    "Client",
+    "JobFailed",
+    "OptimisError",
+    "ServerUnreachable",
+    "SweepFailed",
+    "WaitTimeout",
+    "compare_frame",
+    "history_frame",
+    "noise_table_frame",
+    "paper_figures",
+    "sweep_table_frame",
+    "weights_frame",
+    "__version__",
+]

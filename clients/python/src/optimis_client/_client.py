@@ -1,0 +1,567 @@
+"""The HTTP client of an optimis server (``optimis serve``)."""
+
+from __future__ import annotations
+
+import email.utils
+import math
+import os
+import time
+from datetime import datetime, timezone
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
+
+import pandas as pd
+import requests
+
+from ._errors import ApiError, JobFailed, OptimisError, ServerUnreachable, SweepFailed, WaitTimeout
+from ._frames import compare_frame, history_frame, noise_table_frame, sweep_table_frame, weights_frame
+
+#: A JSON object as the server sends it.
+Json = Dict[str, Any]
+
+#: Where ``optimis serve`` listens by default.
+DEFAULT_URL = "http://127.0.0.1:8080"
+
+#: States after which a job (or a sweep) no longer changes.
+FINAL_STATES = ("succeeded", "failed", "cancelled")
+
+#: The longest long-poll the server grants one request (``?wait=``, seconds).
+MAX_WAIT_SECONDS = 60
+
+#: Seconds one long-poll of :meth:`Client.wait` lasts by default.
+DEFAULT_POLL_SECONDS = 30
+
+# Merges and studies may pull documents from peers and merge megabytes: the server gives a study
+# 180 s by default (--study-deadline).
+_DOCUMENT_TIMEOUT = 200.0
+
+
+def _normalise_url(base_url: str) -> str:
+    """`base_url` without a trailing slash, ``http://`` added when it names no scheme."""
+    url = base_url.strip().rstrip("/")
+    if not url:
+        raise ValueError("base_url is empty")
+    if "://" not in url:
+        url = "http://" + url
+    return url
+
+
+def _reason(err: requests.RequestException, timeout: float) -> str:
+    """A short account of a transport failure (requests' own messages run to several lines)."""
+    if isinstance(err, requests.ConnectTimeout):
+        return f"the connection timed out after {timeout:g} s"
+    if isinstance(err, requests.ReadTimeout):
+        return f"no answer within {timeout:g} s"
+    text = str(err)
+    for needle, reason in (
+        ("Connection refused", "connection refused"),
+        ("Connection reset", "connection reset"),
+        ("Name or service not known", "unknown host name"),
+        ("nodename nor servname", "unknown host name"),
+        ("RemoteDisconnected", "the server closed the connection without answering"),
+        ("No route to host", "no route to host"),
+        ("Network is unreachable", "network unreachable"),
+    ):
+        if needle in text:
+            return reason
+    return text.splitlines()[0][:300] if text else type(err).__name__
+
+
+def _retry_after(header: Optional[str], attempt: int) -> float:
+    """Seconds to wait before retrying: the ``Retry-After`` header (seconds or an HTTP date), or
+    an exponential back-off from half a second when there is none."""
+    if header:
+        try:
+            return max(0.0, float(header))
+        except ValueError:
+            pass
+        try:
+            when = email.utils.parsedate_to_datetime(header)
+        except (TypeError, ValueError):
+            when = None
+        if when is not None:
+            if when.tzinfo is None:
+                when = when.replace(tzinfo=timezone.utc)
+            return max(0.0, (when - datetime.now(timezone.utc)).total_seconds())
+    return min(0.5 * 2.0**attempt, 8.0)
+
+
+def _api_error(method: str, url: str, response: requests.Response) -> ApiError:
+    """The :class:`ApiError` of a 4xx/5xx answer: its problem document, or whatever the body is."""
+    try:
+        problem = response.json()
+    except ValueError:
+        problem = None
+    status = response.status_code
+    if isinstance(problem, dict) and "detail" in problem:
+        return ApiError(
+            int(problem.get("status") or status),
+            str(problem.get("title") or response.reason or "Error"),
+            str(problem["detail"]),
+            problem.get("field"),
+            type=problem.get("type"),
+            method=method,
+            url=url,
+            problem=problem,
+        )
+    body = " ".join(response.text.split())[:200]
+    detail = f"{method} {url}: HTTP {status}" + (f" {body}" if body else "")
+    return ApiError(status, response.reason or "Error", detail, None, method=method, url=url)
+
+
+def _source(source: Union[str, Mapping[str, Any]]) -> Json:
+    """A merge source: a moments document as is, or a URL as ``{"from": URL}``."""
+    if isinstance(source, str):
+        return {"from": source}
+    if isinstance(source, Mapping):
+        return dict(source)
+    raise TypeError(f"a source is a moments document (a dict) or a job's URL (a str), not {type(source).__name__}")
+
+
+def _mark(resource: Mapping[str, Any]) -> Tuple[Any, ...]:
+    """What a progress callback is told about: the state and the counts of a job or a sweep."""
+    progress = resource.get("progress") or {}
+    by_state = progress.get("runs_by_state") or {}
+    return (
+        resource.get("state"),
+        progress.get("iterations_done"),
+        progress.get("iterations_total"),
+        tuple(sorted(by_state.items())),
+    )
+
+
+class Client:
+    """A client of one optimis server.
+
+    ``base_url`` is the server's address (``http://`` is assumed when it names no scheme);
+    ``token`` the bearer token the server requires (default: the ``OPTIMIS_TOKEN`` environment
+    variable; ``""`` sends none); ``timeout`` the seconds one request may take (a long-poll gets
+    its waiting time on top). Answers 429 and 503 are retried after their ``Retry-After``, at most
+    ``max_retries`` times and while ``retry_deadline`` seconds have not passed; any other 4xx/5xx
+    raises :class:`ApiError`, and no answer at all :class:`ServerUnreachable`.
+
+    Usable as a context manager (the connection pool is closed on exit)::
+
+        with Client("http://127.0.0.1:8080") as client:
+            job = client.wait(client.submit({"preset": "paper-table1", "iterations": 10000})["id"])
+            print(client.noise_table(job["id"]))
+    """
+
+    def __init__(
+        self,
+        base_url: str = DEFAULT_URL,
+        token: Optional[str] = None,
+        timeout: float = 30.0,
+        *,
+        max_retries: int = 5,
+        retry_deadline: float = 120.0,
+        session: Optional[requests.Session] = None,
+    ) -> None:
+        """Connect to the server at `base_url` (nothing is sent until the first call)."""
+        self.base_url = _normalise_url(base_url)
+        self.timeout = float(timeout)
+        self.max_retries = int(max_retries)
+        self.retry_deadline = float(retry_deadline)
+        #: Jobs asked for per page by :meth:`jobs` (the server allows at most 500).
+        self.page_size = 500
+        if token is None:
+            token = os.environ.get("OPTIMIS_TOKEN")
+        self._session = session if session is not None else requests.Session()
+        self._session.headers["Accept"] = "application/json"
+        if token:
+            self._session.headers["Authorization"] = f"Bearer {token}"
+
+    def __repr__(self) -> str:
+        """``Client('http://…')`` (never the token)."""
+        return f"Client({self.base_url!r})"
+
+    def __enter__(self) -> "Client":
+        """The client itself."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close the connection pool."""
+        self.close()
+
+    def close(self) -> None:
+        """Close the connection pool (the client opens a new one if used again)."""
+        self._session.close()
+
+    # -- transport ------------------------------------------------------------------------------
+
+    def request(
+        self,
+        method: str,
+        path: str,
+        *,
+        params: Optional[Mapping[str, Any]] = None,
+        json: Any = None,
+        headers: Optional[Mapping[str, str]] = None,
+        timeout: Optional[float] = None,
+    ) -> requests.Response:
+        """Send one request to `path` (``/v1/…``) and return the answer (any status below 400).
+
+        Retries 429 and 503 after their ``Retry-After`` (bounded by ``max_retries`` and
+        ``retry_deadline``); raises :class:`ApiError` for any other 4xx/5xx and
+        :class:`ServerUnreachable` when the server does not answer. The routes without a method of
+        their own (``/solve``, ``/evaluate``, the named solves, CSV with ``format=csv``) are
+        reachable through this.
+        """
+        url = self.base_url + path
+        seconds = self.timeout if timeout is None else timeout
+        started = time.monotonic()
+        attempt = 0
+        while True:
+            try:
+                response = self._session.request(
+                    method, url, params=params, json=json, headers=dict(headers or {}), timeout=seconds
+                )
+            except requests.exceptions.SSLError as err:
+                raise OptimisError(f"{method} {url}: TLS failed: {err}") from err
+            except (requests.ConnectionError, requests.Timeout) as err:
+                raise ServerUnreachable(self.base_url, _reason(err, seconds)) from err
+            except requests.RequestException as err:
+                raise OptimisError(f"{method} {url}: {err}") from err
+            if response.status_code in (429, 503) and attempt < self.max_retries:
+                pause = _retry_after(response.headers.get("Retry-After"), attempt)
+                if time.monotonic() - started + pause <= self.retry_deadline:
+                    response.close()
+                    attempt += 1
+                    time.sleep(pause)
+                    continue
+            if response.status_code >= 400:
+                raise _api_error(method, url, response)
+            return response
+
+    def _json(self, method: str, path: str, **kwargs: Any) -> Json:
+        """The JSON object a request answered with."""
+        response = self.request(method, path, **kwargs)
+        try:
+            document = response.json()
+        except ValueError as err:
+            raise OptimisError(f"{method} {self.base_url + path}: the answer is not JSON ({err})") from err
+        if not isinstance(document, dict):
+            raise OptimisError(f"{method} {self.base_url + path}: the answer is not a JSON object")
+        return document
+
+    # -- jobs -----------------------------------------------------------------------------------
+
+    def submit(
+        self,
+        job: Mapping[str, Any],
+        *,
+        name: Optional[str] = None,
+        labels: Optional[Mapping[str, str]] = None,
+        notes: Optional[str] = None,
+        idempotency_key: Optional[str] = None,
+    ) -> Json:
+        """Submit a job (``POST /v1/jobs``) and return its resource (``id``, ``state``, ``spec``, …).
+
+        `job` is a job document: a preset and any fields to override, e.g. ``{"preset":
+        "paper-table1", "iterations": 10000, "seed": 1}``. `name`, `labels` (merged over the
+        document's own) and `notes` describe it without changing the computation. With
+        `idempotency_key`, a repeated submission of the same document returns the original job.
+        Raises :class:`ApiError` (422, ``field`` naming the bad field) for an invalid document.
+        """
+        document = dict(job)
+        if name is not None:
+            document["name"] = name
+        if labels is not None:
+            document["labels"] = {**(document.get("labels") or {}), **dict(labels)}
+        if notes is not None:
+            document["notes"] = notes
+        headers = {"Idempotency-Key": idempotency_key} if idempotency_key is not None else None
+        return self._json("POST", "/v1/jobs", json=document, headers=headers)
+
+    def job(self, id: int) -> Json:
+        """A job's resource as it is now (``GET /v1/jobs/{id}``): state, spec, progress, error."""
+        return self._json("GET", f"/v1/jobs/{int(id)}")
+
+    def jobs(
+        self,
+        *,
+        state: Optional[str] = None,
+        label: Union[str, Tuple[str, str], None] = None,
+        sweep: Optional[int] = None,
+        limit: Optional[int] = 50,
+    ) -> List[Json]:
+        """Jobs, newest first (``GET /v1/jobs``), following the pages up to `limit` jobs (``None``: all).
+
+        Filters: `state` (``queued``, ``running``, ``succeeded``, ``failed``, ``cancelled``),
+        `label` (``"KEY=VALUE"`` or a ``(key, value)`` pair: jobs whose document has that label),
+        `sweep` (the runs of that sweep).
+        """
+        if isinstance(label, tuple):
+            label = f"{label[0]}={label[1]}"
+        found: List[Json] = []
+        cursor: Optional[str] = None
+        while limit is None or len(found) < limit:
+            size = max(1, min(500, self.page_size))
+            params: Dict[str, Any] = {"limit": size if limit is None else min(size, limit - len(found))}
+            if state is not None:
+                params["state"] = state
+            if label is not None:
+                params["label"] = label
+            if sweep is not None:
+                params["sweep"] = int(sweep)
+            if cursor is not None:
+                params["cursor"] = cursor
+            page = self._json("GET", "/v1/jobs", params=params)
+            found.extend(page.get("jobs") or [])
+            cursor = page.get("next_cursor")
+            if not cursor or not page.get("jobs"):
+                break
+        return found if limit is None else found[:limit]
+
+    def wait(
+        self,
+        id: int,
+        *,
+        timeout: Optional[float] = None,
+        progress: Optional[Callable[[Json], None]] = None,
+        poll: float = DEFAULT_POLL_SECONDS,
+    ) -> Json:
+        """Wait until a job has ended and return its resource once it ``succeeded``.
+
+        Long-polls ``GET /v1/jobs/{id}?wait=`` (`poll` seconds per request, 1 to 60: the server
+        answers at once when the job ends, so `poll` only sets how often `progress` can hear of
+        the job's progress). `progress`, if given, is called with the job resource first and then
+        whenever its state or iteration counts changed. Raises :class:`JobFailed` (with the job
+        and its ``error``) when it ended ``failed`` or ``cancelled``, and :class:`WaitTimeout` (a
+        :class:`TimeoutError`) when `timeout` seconds passed first — the job keeps running then.
+        """
+        return self._wait(f"/v1/jobs/{int(id)}", "job", timeout, progress, poll, JobFailed)
+
+    def _wait(
+        self,
+        path: str,
+        kind: str,
+        timeout: Optional[float],
+        progress: Optional[Callable[[Json], None]],
+        poll: float,
+        failed: Union[Type[JobFailed], Type[SweepFailed]],
+    ) -> Json:
+        """The long-poll loop of :meth:`wait` and :meth:`wait_sweep`."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        per_request = max(1, min(MAX_WAIT_SECONDS, math.ceil(poll)))
+        resource = self._json("GET", path)
+        told: Optional[Tuple[Any, ...]] = None
+        while True:
+            if progress is not None and _mark(resource) != told:
+                told = _mark(resource)
+                progress(resource)
+            if resource.get("state") in FINAL_STATES:
+                break
+            seconds = per_request
+            if deadline is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise WaitTimeout(resource, kind)
+                seconds = max(1, min(per_request, math.ceil(remaining)))
+            asked = time.monotonic()
+            resource = self._json("GET", path, params={"wait": seconds}, timeout=self.timeout + seconds)
+            # The server answers a long-poll early only when the resource ended, or when it cannot
+            # wait for it (a job waiting in the database for a restart's queue, a shutdown): then
+            # pause, so that the loop does not spin.
+            quick = time.monotonic() - asked
+            if resource.get("state") not in FINAL_STATES and quick < min(1.0, seconds / 2):
+                time.sleep(min(1.0, seconds) - quick)
+        if resource.get("state") != "succeeded":
+            raise failed(resource)
+        return resource
+
+    def result(self, id: int, *, lam: Optional[float] = None) -> Json:
+        """A job's result document (``GET /v1/jobs/{id}/result``), from its latest checkpoint.
+
+        ``partial`` is true until the job succeeded. Holds ``noise_table`` (one row per strategy),
+        ``recommended`` (the row to use, and why), ``weights`` (the recommended table; empty for a
+        per-path strategy), ``weights_fit``, ``gain``, ``warnings`` and ``references`` (the
+        published tables that apply). With `lam`, ``weights`` is the table fitted in-sample on all
+        iterations at λ = `lam` (``0``: the paper's procedure) instead; the noise table is the same.
+        Raises :class:`ApiError` 409 while the job has no checkpoint yet.
+        """
+        params = None if lam is None else {"lambda": lam}
+        return self._json("GET", f"/v1/jobs/{int(id)}/result", params=params)
+
+    def noise_table(self, id: int) -> pd.DataFrame:
+        """A job's noise table as a DataFrame: one row per strategy, in the server's order.
+
+        The columns are the JSON row's fields plus ``paper_luminance``, ``paper_rms_percent`` and
+        ``paper_case`` where a published table applies (the paper's Table 1 for the paper's
+        configuration); see :func:`optimis_client.noise_table_frame` for a result already fetched.
+        """
+        return noise_table_frame(self.result(id))
+
+    def weights(self, id: int, *, lam: Optional[float] = None) -> pd.DataFrame:
+        """A job's weights table as a DataFrame, one row per cell (empty for a per-path
+        recommendation): ``cell``, ``r2_lo``, ``r2_hi``, ``r3_lo``, ``r3_hi``, ``phi_lo``,
+        ``phi_hi``, ``w0``, ``w1``, ``w2``, their ``_stderr``, ``samples``, ``status``. With `lam`,
+        the in-sample table at that λ (as :meth:`result`)."""
+        return weights_frame(self.result(id, lam=lam).get("weights") or [])
+
+    def history(self, id: int) -> pd.DataFrame:
+        """Each strategy's figures at every checkpoint (``GET /v1/jobs/{id}/history``, at most
+        1,000 points) in long format: ``iterations``, ``strategy``, ``luminance``, ``rms_percent``."""
+        return history_frame(self._json("GET", f"/v1/jobs/{int(id)}/history"))
+
+    def moments(self, id: int) -> Json:
+        """A job's statistics as a checksummed moments document (``GET /v1/jobs/{id}/moments``):
+        what :meth:`merge` and :meth:`study` take, and ``optimis report`` reads."""
+        return self._json("GET", f"/v1/jobs/{int(id)}/moments", timeout=max(self.timeout, _DOCUMENT_TIMEOUT))
+
+    def merge(self, id: int, source: Union[str, Mapping[str, Any]]) -> Json:
+        """Merge statistics into a finished job and return its recomputed result document.
+
+        `source` is a moments document (a dict, e.g. from :meth:`moments`) or the URL of a job on
+        a peer server the server was told to trust (``--peer``), sent as ``{"from": URL}``. Runs of
+        another configuration, or iterations already counted, are refused (:class:`ApiError` 409).
+        """
+        return self._json(
+            "POST", f"/v1/jobs/{int(id)}/merge", json=_source(source), timeout=max(self.timeout, _DOCUMENT_TIMEOUT)
+        )
+
+    def study(
+        self, sources: Sequence[Union[str, Mapping[str, Any]]], *, solver: Optional[Mapping[str, Any]] = None
+    ) -> Json:
+        """Create a finished job from several sources' merged statistics (``POST /v1/studies``).
+
+        Each source is a moments document or a peer job's URL (as in :meth:`merge`); they must
+        share one configuration and hold disjoint iterations. `solver` changes solver options from
+        the first source's. Returns the study's job resource (its results are computed).
+        """
+        body: Json = {"sources": [_source(s) for s in sources]}
+        if solver is not None:
+            body["solver"] = dict(solver)
+        return self._json("POST", "/v1/studies", json=body, timeout=max(self.timeout, _DOCUMENT_TIMEOUT))
+
+    def cancel(self, id: int) -> Json:
+        """Cancel a queued job, or stop a running one within one chunk of paths; returns the job.
+
+        It keeps the iterations it finished. Raises :class:`ApiError` 409 if it already ended.
+        """
+        return self._json("POST", f"/v1/jobs/{int(id)}/cancel")
+
+    def delete(self, id: int) -> None:
+        """Delete a job that is not running, with its checkpoint (``DELETE /v1/jobs/{id}``)."""
+        self.request("DELETE", f"/v1/jobs/{int(id)}")
+
+    def extend(self, id: int, iterations: Optional[int] = None, *, total: Optional[int] = None) -> Json:
+        """Add iterations to a job — the same deterministic sequence continues — and return it.
+
+        `iterations` more than it would otherwise reach, or (instead) run until it holds `total`
+        (e.g. to resume a cancelled job to its original target). A finished job is queued again.
+        """
+        if (iterations is None) == (total is None):
+            raise ValueError("give exactly one of iterations and total")
+        body = {"iterations": iterations} if iterations is not None else {"total": total}
+        return self._json("POST", f"/v1/jobs/{int(id)}/extend", json=body)
+
+    # -- predictions ----------------------------------------------------------------------------
+
+    def predict(
+        self, id: int, light_paths: int, camera_paths: int, *, solver: Optional[Mapping[str, Any]] = None
+    ) -> Json:
+        """The noise table at another ray budget (N_F = `light_paths`, N_B = `camera_paths`), with
+        the fitted rows re-fitted for it and the row recommended there (``POST
+        /v1/jobs/{id}/predict``). Needs a job run with ``"noise_components": true`` (else
+        :class:`ApiError` 409). Nothing is run or stored."""
+        body: Json = {"light_paths": int(light_paths), "camera_paths": int(camera_paths)}
+        if solver is not None:
+            body["solver"] = dict(solver)
+        return self._json("POST", f"/v1/jobs/{int(id)}/predict", json=body)
+
+    def budget(
+        self,
+        id: int,
+        *,
+        target_rms: float,
+        light_cost: float,
+        camera_cost: float,
+        iteration_cost: float,
+        pixels: float = 1e6,
+        solver: Optional[Mapping[str, Any]] = None,
+    ) -> Json:
+        """The ray budget (N_F, N_B) that reaches `target_rms` (percent) soonest, per strategy
+        (``POST /v1/jobs/{id}/budget``), for a renderer costing `light_cost` s per light path,
+        `camera_cost` s per camera path and pixel and `iteration_cost` s per iteration, over
+        `pixels` pixels. Each speed-up over the paper's configuration has a standard error. Needs a
+        job run with ``"noise_components": true``."""
+        body: Json = {
+            "target_rms": target_rms,
+            "light_cost": light_cost,
+            "camera_cost": camera_cost,
+            "iteration_cost": iteration_cost,
+            "pixels": pixels,
+        }
+        if solver is not None:
+            body["solver"] = dict(solver)
+        return self._json("POST", f"/v1/jobs/{int(id)}/budget", json=body, timeout=max(self.timeout, 120.0))
+
+    def compare(self, ids: Sequence[int]) -> pd.DataFrame:
+        """Jobs compared strategy by strategy (``GET /v1/compare``, 2 to 8 ids; the first is the
+        baseline), in long format: one row per strategy and run with ``strategy``, ``in_sample``,
+        ``run`` (its label), ``run_index``, ``job_id``, ``iterations`` and every figure — L, RMS,
+        and against the baseline the L ratio and difference and the RMS ratio, each with its
+        ``_stderr``, and ``z``. ``frame.attrs["notes"]`` says how to read them."""
+        ids = [int(i) for i in ids]
+        document = self._json("GET", "/v1/compare", params={"ids": ",".join(map(str, ids))})
+        return compare_frame(document, ids)
+
+    # -- sweeps ---------------------------------------------------------------------------------
+
+    def sweep(self, doc: Mapping[str, Any]) -> Json:
+        """Create a sweep (``POST /v1/sweeps``): ``{"base": job document, "axes": [{"field":
+        "merge_radius", "values": [...]}, ...], "mode": "grid" | "zip"}``; every run is queued as a
+        job. Returns the sweep resource (``id``, ``state``, ``progress``, ``points``). A bad axis
+        is an :class:`ApiError` 422 whose ``field`` names it (``axes[1].values[2]``)."""
+        return self._json("POST", "/v1/sweeps", json=dict(doc))
+
+    def get_sweep(self, id: int) -> Json:
+        """A sweep's resource as it is now (``GET /v1/sweeps/{id}``): progress and, per point, the
+        swept values, its job, its noise table and recommended weights."""
+        return self._json("GET", f"/v1/sweeps/{int(id)}")
+
+    def wait_sweep(
+        self,
+        id: int,
+        *,
+        timeout: Optional[float] = None,
+        progress: Optional[Callable[[Json], None]] = None,
+        poll: float = DEFAULT_POLL_SECONDS,
+    ) -> Json:
+        """Wait until every run of a sweep has ended; return the sweep once all succeeded.
+
+        As :meth:`wait`: raises :class:`SweepFailed` (a :class:`JobFailed`) when a run failed or
+        was cancelled, :class:`WaitTimeout` when `timeout` seconds passed first.
+        """
+        return self._wait(f"/v1/sweeps/{int(id)}", "sweep", timeout, progress, poll, SweepFailed)
+
+    def sweep_table(self, id: int) -> pd.DataFrame:
+        """A sweep's table as a DataFrame (``GET /v1/sweeps/{id}/table``): one row per point and
+        strategy, a column per swept field, as the server's CSV."""
+        return sweep_table_frame(self._json("GET", f"/v1/sweeps/{int(id)}/table"))
+
+    def cancel_sweep(self, id: int) -> Json:
+        """Cancel every queued or running run of a sweep; returns the sweep."""
+        return self._json("POST", f"/v1/sweeps/{int(id)}/cancel")
+
+    def delete_sweep(self, id: int) -> None:
+        """Delete a sweep and its jobs (refused, 409, while a run runs: cancel it first)."""
+        self.request("DELETE", f"/v1/sweeps/{int(id)}")
+
+    # -- the server -----------------------------------------------------------------------------
+
+    def references(self) -> List[Json]:
+        """The published reference tables (``GET /v1/references``): the paper's Table 1, with the
+        configuration each applies to and its rows."""
+        return list(self._json("GET", "/v1/references").get("references") or [])
+
+    def ready(self) -> bool:
+        """Whether the server answers ``/readyz`` with 200 (it can store jobs); ``False`` on 503.
+
+        Raises :class:`ServerUnreachable` when it does not answer at all. Not retried.
+        """
+        try:
+            response = self._session.get(self.base_url + "/readyz", timeout=self.timeout)
+        except (requests.ConnectionError, requests.Timeout) as err:
+            raise ServerUnreachable(self.base_url, _reason(err, self.timeout)) from err
+        return response.status_code == 200

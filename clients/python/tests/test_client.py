@@ -1,0 +1,372 @@
+"""The client against a real optimis server (see conftest.py), plus its retries against a stub."""
+
+from __future__ import annotations
+
+import http.server
+import json
+import math
+import socket
+import threading
+import time
+import uuid
+from typing import Any, Dict, Iterator, List
+
+import pandas as pd
+import pytest
+
+from optimis_client import (
+    ApiError,
+    Client,
+    JobFailed,
+    OptimisError,
+    ServerUnreachable,
+    WaitTimeout,
+    noise_table_frame,
+)
+
+# A brute-force job that takes well under a second.
+FAST: Dict[str, Any] = {
+    "engine": "brute",
+    "light_paths": 20000,
+    "camera_paths": 200,
+    "merge_radius": 0.02,
+    "iterations": 30,
+    "seed": 1,
+}
+# The paper's configuration (its Table 1 applies) at 2,000 iterations: about a second.
+PAPER: Dict[str, Any] = {"preset": "paper-table1", "iterations": 2000, "seed": 1}
+# A brute-force job at the paper's N_F that runs for minutes: something to cancel.
+LONG: Dict[str, Any] = {"engine": "brute", "iterations": 100000, "seed": 9}
+
+
+def missing(value: Any) -> bool:
+    """None, NaN or pandas' NA: what a JSON null becomes in a DataFrame."""
+    if value is None or value is pd.NA:
+        return True
+    return isinstance(value, float) and math.isnan(value)
+
+
+def same(frame_value: Any, json_value: Any) -> bool:
+    """A DataFrame cell holds the JSON value: equal, or both missing."""
+    if json_value is None:
+        return missing(frame_value)
+    if isinstance(json_value, list):
+        return list(frame_value) == json_value
+    return bool(frame_value == json_value)
+
+
+@pytest.fixture(scope="module")
+def done(server: Any) -> Iterator[Dict[str, Dict[str, Any]]]:
+    """Jobs several tests read, each run once: the fast one, the paper's (seeds 1 and 2)."""
+    with Client(server.url, token=server.token) as c:
+        submitted = {
+            "fast": c.submit(FAST),
+            "paper": c.submit(PAPER),
+            "paper2": c.submit({**PAPER, "seed": 2}),
+        }
+        yield {name: c.wait(job["id"], timeout=120) for name, job in submitted.items()}
+
+
+def test_submit_and_wait(client: Client) -> None:
+    """A submitted job is queued with its name, labels and notes; wait() follows it to success."""
+    job = client.submit(FAST, name="fast", labels={"suite": "python-client"}, notes="a quick one")
+    assert job["state"] in ("queued", "running", "succeeded")
+    assert job["spec"]["name"] == "fast" and job["spec"]["labels"] == {"suite": "python-client"}
+    seen: List[Dict[str, Any]] = []
+    final = client.wait(job["id"], timeout=120, progress=seen.append)
+    assert final["id"] == job["id"] and final["state"] == "succeeded"
+    assert final["progress"]["iterations_done"] == FAST["iterations"]
+    assert seen and seen[-1]["state"] == "succeeded"
+    assert client.job(job["id"])["state"] == "succeeded"
+
+
+def test_idempotent_submission(client: Client) -> None:
+    """The same Idempotency-Key and document return the original job."""
+    key = f"python-client-{uuid.uuid4()}"
+    first = client.submit({**FAST, "seed": 11}, idempotency_key=key)
+    again = client.submit({**FAST, "seed": 11}, idempotency_key=key)
+    assert again["id"] == first["id"]
+    client.wait(first["id"], timeout=120)
+
+
+def test_noise_table_matches_result(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """The DataFrame is the result's noise table row for row, every field's value equal."""
+    for name in ("fast", "paper"):
+        job_id = done[name]["id"]
+        result = client.result(job_id)
+        table = client.noise_table(job_id)
+        rows = result["noise_table"]
+        assert len(table) == len(rows)
+        assert list(table["strategy"]) == [row["strategy"] for row in rows]
+        for (_, frame_row), row in zip(table.iterrows(), rows):
+            for key, value in row.items():
+                where = f"job {job_id} {row['strategy']}.{key}"
+                assert same(frame_row[key], value), f"{where}: {frame_row[key]!r} != {value!r}"
+        # The same document converted without the server gives the same table.
+        pd.testing.assert_frame_equal(noise_table_frame(result), table)
+
+
+def test_paper_figures_beside_paper_preset(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """The paper's Table 1 is beside the paper's configuration, and only there."""
+    table = client.noise_table(done["paper"]["id"]).set_index("strategy")
+    assert table.loc["switch", "paper_luminance"] == pytest.approx(26.352e-5, rel=1e-12)
+    assert table.loc["switch", "paper_rms_percent"] == pytest.approx(61.0)
+    assert table.loc["switch", "paper_case"] == 4
+    published = {"plane1": 1, "plane2": 2, "plane3": 3, "switch": 4, "optimal": 5}
+    assert {s: int(c) for s, c in table["paper_case"].dropna().items()} == published
+    assert table.drop(index=list(published))["paper_luminance"].isna().all()
+    # The fast job's configuration is not the paper's: no published figures.
+    fast = client.noise_table(done["fast"]["id"])
+    assert fast[["paper_luminance", "paper_rms_percent", "paper_case"]].isna().all().all()
+
+
+def test_weights_history_and_lambda(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """weights(lam=0) flattens the in-sample table's cells; history is one row per checkpoint and strategy."""
+    job_id = done["paper"]["id"]
+    cells = client.result(job_id, lam=0)["weights"]
+    weights = client.weights(job_id, lam=0)
+    assert cells and len(weights) == len(cells)
+    for column in ("r2_lo", "r2_hi", "r3_lo", "r3_hi", "phi_lo", "phi_hi", "w0", "w1", "w2",
+                   "w0_stderr", "w1_stderr", "w2_stderr", "samples", "status"):
+        assert column in weights.columns
+    for (_, row), cell in zip(weights.iterrows(), cells):
+        assert same(row["r3_lo"], cell["r3"][0]) and same(row["r3_hi"], cell["r3"][1])
+        assert same(row["w1"], cell["w1"]) and same(row["w1_stderr"], cell["w1_stderr"])
+        assert row["status"] == cell["status"] and row["samples"] == cell["samples"]
+
+    history = client.history(job_id)
+    assert list(history.columns[:4]) == ["iterations", "strategy", "luminance", "rms_percent"]
+    assert history["iterations"].max() == PAPER["iterations"]
+    strategies = {row["strategy"] for row in client.result(job_id)["noise_table"]}
+    assert set(history["strategy"]) <= strategies and "switch" in set(history["strategy"])
+
+
+def test_labels_filter(client: Client) -> None:
+    """jobs(label="k=v") lists the jobs with that label, and only them."""
+    tag = uuid.uuid4().hex[:12]
+    a = client.submit({**FAST, "seed": 21}, labels={"suite": f"a-{tag}"})
+    b = client.submit({**FAST, "seed": 22}, labels={"suite": f"b-{tag}", "other": "x"})
+    for job in (a, b):
+        client.wait(job["id"], timeout=120)
+    assert [j["id"] for j in client.jobs(label=f"suite=a-{tag}")] == [a["id"]]
+    assert [j["id"] for j in client.jobs(label=("suite", f"b-{tag}"), state="succeeded")] == [b["id"]]
+    assert client.jobs(label=f"suite=c-{tag}") == []
+
+
+def test_jobs_follows_pages(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """jobs() follows next_cursor across pages up to its limit, newest first."""
+    everything = client.jobs(limit=None)
+    assert len(everything) >= 3
+    client.page_size = 2
+    paged = client.jobs(limit=len(everything))
+    assert [j["id"] for j in paged] == [j["id"] for j in everything]
+    assert [j["id"] for j in client.jobs(limit=3)] == [j["id"] for j in everything[:3]]
+    ids = [j["id"] for j in everything]
+    assert ids == sorted(ids, reverse=True)
+
+
+def test_compare(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """compare() is long: one row per strategy and run, with every ratio and its standard error."""
+    ids = [done["paper"]["id"], done["paper2"]["id"]]
+    frame = client.compare(ids)
+    strategies = [row["strategy"] for row in client.result(ids[0])["noise_table"]]
+    assert len(frame) == 2 * len(set(frame["strategy"]))
+    assert set(frame["strategy"]) <= set(strategies) and "switch" in set(frame["strategy"])
+    for column in ("luminance", "luminance_stderr", "rms_percent", "rms_percent_stderr", "luminance_ratio",
+                   "luminance_ratio_stderr", "luminance_difference", "luminance_difference_stderr", "z",
+                   "rms_ratio", "rms_ratio_stderr"):
+        assert column in frame.columns
+    assert list(frame["job_id"].unique()) == ids
+    assert list(frame["run"].unique()) == [f"job {i}" for i in ids]
+    switch = frame[frame["strategy"] == "switch"].set_index("run_index")
+    assert switch.loc[0, ["luminance_ratio", "rms_ratio"]].isna().all()
+    for column in ("luminance_ratio", "luminance_ratio_stderr", "rms_ratio", "rms_ratio_stderr"):
+        value = switch.loc[1, column]
+        assert math.isfinite(value) and value > 0, column
+    assert frame.attrs["notes"] and len(frame.attrs["runs"]) == 2
+
+
+def test_sweep(client: Client) -> None:
+    """A two-point sweep runs both points; its table has every row of the server's."""
+    sweep = client.sweep({
+        "base": {**FAST, "labels": {"suite": "sweep"}},
+        "axes": [{"field": "merge_radius", "values": [0.01, 0.02]}],
+        "mode": "grid",
+    })
+    assert len(sweep["points"]) == 2
+    seen: List[Dict[str, Any]] = []
+    final = client.wait_sweep(sweep["id"], timeout=120, progress=seen.append)
+    assert final["state"] == "succeeded" and seen[-1]["state"] == "succeeded"
+    table = client.sweep_table(sweep["id"])
+    rows = client.request("GET", f"/v1/sweeps/{sweep['id']}/table").json()["rows"]
+    assert len(table) == len(rows) > 0
+    assert list(table.columns[:2]) == ["point", "merge_radius"]
+    assert sorted(set(table["merge_radius"])) == [0.01, 0.02]
+    assert [(r["point"], r["strategy"]) for r in rows] == list(zip(table["point"], table["strategy"]))
+    assert all(same(v, r["rms_percent"]) for v, r in zip(table["rms_percent"], rows))
+    assert len(client.jobs(sweep=sweep["id"])) == 2
+
+
+def test_predict_and_budget(client: Client) -> None:
+    """A job with noise components predicts another budget and plans the fastest one."""
+    job = client.submit({"preset": "paper-table1", "light_paths": 1000000, "iterations": 2000,
+                         "noise_components": True, "seed": 3})
+    client.wait(job["id"], timeout=120)
+    prediction = client.predict(job["id"], light_paths=2000000, camera_paths=100)
+    assert prediction["job_id"] == job["id"]
+    assert prediction["budget"] == {"light_paths": 2000000, "camera_paths": 100}
+    assert any(row["strategy"] == "switch" and row["rms_percent"] for row in prediction["noise_table"])
+    plan = client.budget(job["id"], target_rms=1, light_cost=2e-8, camera_cost=1e-7, iteration_cost=0.001)
+    assert plan["job_id"] == job["id"] and plan["partial"] is False
+    # A job without noise components cannot predict: 409.
+    plain = client.submit({**FAST, "seed": 31})
+    client.wait(plain["id"], timeout=120)
+    with pytest.raises(ApiError) as caught:
+        client.predict(plain["id"], light_paths=20000, camera_paths=200)
+    assert caught.value.status == 409
+
+
+def test_moments_study_merge_extend(client: Client) -> None:
+    """Moments of two seeds make a study; one merges into a third job; a job extends."""
+    jobs = [client.submit({**FAST, "seed": seed}) for seed in (41, 42, 43)]
+    for job in jobs:
+        client.wait(job["id"], timeout=120)
+    documents = [client.moments(job["id"]) for job in jobs[:2]]
+    assert documents[0]["kind"] == "optimis-moments"
+    study = client.study(documents)
+    assert study["state"] == "succeeded" and study["progress"]["iterations_done"] == 2 * FAST["iterations"]
+    merged = client.merge(jobs[2]["id"], documents[0])
+    assert merged["iterations"] == 2 * FAST["iterations"]
+    with pytest.raises(ApiError) as caught:
+        client.merge(jobs[2]["id"], documents[0])  # those iterations are counted already
+    assert caught.value.status == 409
+    extended = client.extend(jobs[1]["id"], 10)
+    assert extended["progress"]["iterations_total"] == FAST["iterations"] + 10
+    assert client.wait(jobs[1]["id"], timeout=120)["progress"]["iterations_done"] == FAST["iterations"] + 10
+    with pytest.raises(ValueError):
+        client.extend(jobs[1]["id"])
+
+
+def test_references(client: Client) -> None:
+    """The published tables include the paper's Table 1 with its switch row."""
+    tables = {t["id"]: t for t in client.references()}
+    rows = {r["strategy"]: r for r in tables["ershov2020-table1"]["rows"]}
+    assert rows["switch"]["luminance"] == pytest.approx(26.352e-5)
+
+
+def test_invalid_job_names_field(client: Client) -> None:
+    """A 422 is an ApiError carrying the problem: status, title, detail and the field."""
+    with pytest.raises(ApiError) as caught:
+        client.submit({"preset": "paper-table1", "merge_radius": -1})
+    err = caught.value
+    assert isinstance(err, OptimisError)
+    assert err.status == 422 and err.field == "merge_radius"
+    assert err.title == "Unprocessable Entity"
+    assert "merge_radius" in err.detail and err.detail in str(err)
+    assert "(422)" in str(err) and "[field: merge_radius]" in str(err)
+
+
+def test_not_found(client: Client) -> None:
+    """An unknown job is a 404 ApiError."""
+    with pytest.raises(ApiError) as caught:
+        client.job(987654321)
+    assert caught.value.status == 404 and caught.value.field is None
+
+
+def test_cancelled_job_fails_wait(client: Client) -> None:
+    """wait() times out on a running job, then raises JobFailed once it is cancelled; it can be deleted."""
+    job = client.submit(LONG)
+    # Until it runs (a guard against a hang, not a measure of speed).
+    give_up = time.monotonic() + 120
+    while client.job(job["id"])["state"] == "queued":
+        if time.monotonic() > give_up:
+            pytest.fail(f"job {job['id']} was still queued after 120 s")
+        time.sleep(0.05)
+    try:
+        with pytest.raises(TimeoutError) as timed_out:
+            client.wait(job["id"], timeout=0.5)
+        assert isinstance(timed_out.value, WaitTimeout) and timed_out.value.state == "running"
+    finally:
+        client.cancel(job["id"])
+    with pytest.raises(JobFailed) as caught:
+        client.wait(job["id"], timeout=120)
+    assert caught.value.state == "cancelled" and caught.value.job["id"] == job["id"]
+    assert f"job {job['id']} cancelled" in str(caught.value)
+    with pytest.raises(ApiError) as conflict:
+        client.cancel(job["id"])
+    assert conflict.value.status == 409
+    client.delete(job["id"])
+    with pytest.raises(ApiError) as gone:
+        client.job(job["id"])
+    assert gone.value.status == 404
+
+
+def test_server_unreachable() -> None:
+    """Nothing listening: ServerUnreachable names the URL and says how to start a server."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))  # bound, never listening: connections are refused
+        url = f"http://127.0.0.1:{sock.getsockname()[1]}"
+        with pytest.raises(ServerUnreachable) as caught:
+            Client(url, token="", timeout=5).jobs()
+    message = str(caught.value)
+    assert url in message and "is the server running?" in message and "optimis serve" in message
+    assert isinstance(caught.value, OptimisError) and isinstance(caught.value, ConnectionError)
+
+
+def test_missing_token(server: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the token the server answers 401, an ApiError."""
+    monkeypatch.delenv("OPTIMIS_TOKEN", raising=False)
+    for client in (Client(server.url), Client(server.url, token="")):
+        with pytest.raises(ApiError) as caught:
+            client.jobs()
+        assert caught.value.status == 401 and "(401)" in str(caught.value)
+    monkeypatch.setenv("OPTIMIS_TOKEN", server.token)
+    assert isinstance(Client(server.url).jobs(limit=1), list)
+
+
+class _Busy(http.server.BaseHTTPRequestHandler):
+    """A stub that answers 429 (Retry-After: 0) `busy` times, then 200."""
+
+    busy = 2
+    calls = 0
+
+    def do_GET(self) -> None:  # noqa: N802 (the handler's API)
+        type(self).calls += 1
+        if type(self).calls <= type(self).busy:
+            body = json.dumps({"type": "urn:problem-type:optimis:too-many-requests", "title": "Too Many Requests",
+                               "status": 429, "detail": "the queue is full"}).encode()
+            self.send_response(429)
+            self.send_header("Retry-After", "0")
+            self.send_header("Content-Type", "application/problem+json")
+        else:
+            body = json.dumps({"references": []}).encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args: Any) -> None:
+        """Quiet."""
+
+
+@pytest.mark.parametrize("busy, retries, succeeds", [(2, 5, True), (3, 2, False)])
+def test_retries_429(busy: int, retries: int, succeeds: bool) -> None:
+    """429 with Retry-After is retried, at most max_retries times (a loopback stub, not the server)."""
+    handler = type("Handler", (_Busy,), {"busy": busy, "calls": 0})
+    stub = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=stub.serve_forever, daemon=True)
+    thread.start()
+    try:
+        client = Client(f"http://127.0.0.1:{stub.server_address[1]}", token="", max_retries=retries)
+        if succeeds:
+            assert client.references() == []
+            assert handler.calls == busy + 1
+        else:
+            with pytest.raises(ApiError) as caught:
+                client.references()
+            assert caught.value.status == 429 and caught.value.detail == "the queue is full"
+            assert handler.calls == retries + 1
+    finally:
+        stub.shutdown()
+        stub.server_close()
