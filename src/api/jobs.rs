@@ -14,9 +14,10 @@ use super::bodies::JobSubmission;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, page, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
-use super::wait::{self, WaitQuery};
+use super::wait::WaitQuery;
 use crate::jobs::documents::JobList;
 use crate::jobs::resource::{JobResource, JobState};
+use crate::sim::model::params::{MAX_LABEL_VALUE, is_label_key};
 use crate::store::JobFilter;
 
 /// Longest accepted `Idempotency-Key`.
@@ -147,12 +148,10 @@ pub async fn list(
 fn parse_label(text: &str) -> Result<(String, String), ApiError> {
     let invalid = |message: &str| ApiError::Invalid { field: "label".into(), message: message.into() };
     let (key, value) = text.split_once('=').ok_or_else(|| invalid("must be KEY=VALUE"))?;
-    if !(1..=64).contains(&key.len())
-        || !key.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
-    {
+    if !is_label_key(key) {
         return Err(invalid("a label's key is 1 to 64 letters, digits, '_', '-' or '.'"));
     }
-    if value.chars().count() > 200 {
+    if value.chars().count() > MAX_LABEL_VALUE {
         return Err(invalid("a label's value is at most 200 characters"));
     }
     Ok((key.to_string(), value.to_string()))
@@ -180,7 +179,7 @@ pub async fn get(
     if let Some(wait) = q.duration()?
         && let Some(mut rx) = state.jobs.subscribe(id)
     {
-        let _slot = wait::slot(&state)?;
+        let _slot = state.streams.acquire()?;
         let mut shutdown = state.jobs.shutdown_signal();
         tokio::select! {
             _ = tokio::time::timeout(wait, rx.wait_for(|job| job.state.is_terminal())) => {}

@@ -15,7 +15,7 @@ use super::error::{ApiError, Problem};
 use super::extract::query_problem;
 use super::extract::{JsonBody, SweepId, page};
 use super::responses::{BadQuery, NoSuchSweep, NotJson, ServerFailure, TooLarge};
-use super::wait::{self, WaitQuery};
+use super::wait::WaitQuery;
 use crate::jobs::sweeps::{SweepList, SweepResource};
 use crate::sim::sweep::{SweepSpec, SweepTable};
 
@@ -102,7 +102,7 @@ pub async fn get(
 ) -> Result<Json<SweepResource>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     if let Some(wait) = q.duration()? {
-        let _slot = wait::slot(&state)?;
+        let _slot = state.streams.acquire()?;
         state.sweeps.wait_for_end(id, wait).await?;
     }
     Ok(Json(state.sweeps.get_sweep(id).await?))

@@ -13,8 +13,6 @@ use std::time::Duration;
 use serde::Deserialize;
 use utoipa::IntoParams;
 
-use super::AppState;
-use super::auth::StreamSlot;
 use super::error::ApiError;
 
 /// The longest one request waits.
@@ -44,9 +42,4 @@ impl WaitQuery {
             Some(s) => Ok(Some(Duration::from_secs(u64::from(s)))),
         }
     }
-}
-
-/// The slot a waiting request holds (429 with Retry-After when all are taken).
-pub(super) fn slot(state: &AppState) -> Result<StreamSlot, ApiError> {
-    state.streams.acquire()
 }

@@ -14,7 +14,8 @@ use plotters::prelude::*;
 use super::CliError;
 use super::documents::{document_job, read_document, solver_options};
 use super::run::write_atomically;
-use crate::sim::model::params::IlluminationSpec;
+use crate::sim::model::params::{IlluminationSpec, check};
+use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::report::{ReportInputs, WeightRow, WeightsQuery, build_report};
 use crate::sim::solve::solver::CellStatus;
 use crate::sim::solve::strategy::Strategy;
@@ -31,13 +32,18 @@ pub struct FigureArgs {
     pub out: PathBuf,
     /// Draw the in-sample table optimum at this λ (0: the paper's procedure) instead of the
     /// recommended table.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub lambda: Option<f64>,
 }
 
 pub fn figure(args: FigureArgs) -> Result<(), CliError> {
     if args.out.extension().and_then(|e| e.to_str()) != Some("svg") {
         return Err(CliError::Config(format!("--out {}: figures are written as SVG (FILE.svg)", args.out.display())));
+    }
+    if let Some(l) = args.lambda {
+        check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--lambda", || {
+            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
+        })?;
     }
     let doc = read_document(&args.document)?;
     let job = document_job(&doc, &args.document)?;

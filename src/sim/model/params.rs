@@ -349,6 +349,15 @@ fn kind_differs(a: &Value, b: &Value) -> bool {
 /// Most labels on one job.
 pub const MAX_LABELS: usize = 32;
 
+/// Longest label value, in characters.
+pub const MAX_LABEL_VALUE: usize = 200;
+
+/// Whether `key` can be a label's key: 1 to 64 letters, digits, `_`, `-`, `.` (the job list's
+/// `label=` filter reads the same rule, and builds a JSON path from the key).
+pub fn is_label_key(key: &str) -> bool {
+    (1..=64).contains(&key.len()) && key.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
+}
+
 /// Checks a job's `name`, `labels` and `notes`: bounded, printable (they are shown in tables and
 /// pages), label keys of letters, digits, `_`, `-`, `.` (a list filters by them).
 pub fn validate_annotations(
@@ -364,13 +373,10 @@ pub fn validate_annotations(
     }
     check(labels.len() <= MAX_LABELS, "labels", || format!("at most {MAX_LABELS} labels, got {}", labels.len()))?;
     for (key, value) in labels {
-        check(
-            (1..=64).contains(&key.len())
-                && key.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.')),
-            &format!("labels.{key}"),
-            || "a label's key is 1 to 64 letters, digits, '_', '-' or '.'".to_string(),
-        )?;
-        check(value.chars().count() <= 200 && printable(value), &format!("labels.{key}"), || {
+        check(is_label_key(key), &format!("labels.{key}"), || {
+            "a label's key is 1 to 64 letters, digits, '_', '-' or '.'".to_string()
+        })?;
+        check(value.chars().count() <= MAX_LABEL_VALUE && printable(value), &format!("labels.{key}"), || {
             "a label's value is at most 200 printable characters".to_string()
         })?;
     }
