@@ -96,6 +96,45 @@ fn four_shards_merged_equal_a_single_run() {
     assert!(in_sample.contains("weights fitted on all iterations at λ = 0.5"), "{in_sample}");
 }
 
+/// `optimis bench` reports the restricted engine on one thread beside its rate on all of them (the
+/// figures themselves are timings: only their consistency is checked, never a wall-clock bound).
+#[test]
+fn bench_reports_the_parallel_speed_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["bench", "--engine", "restricted", "--iterations", "1", "--light-paths", "100000", "--threads", "2"];
+    let out: Value = serde_json::from_slice(&ok(optimis(dir.path(), &[&args[..], &["--json"]].concat(), &[]))).unwrap();
+    let scaling = &out["restricted_scaling"];
+    let (one, two) = (
+        scaling["iterations_per_second_1_thread"].as_f64().unwrap(),
+        scaling["iterations_per_second"].as_f64().unwrap(),
+    );
+    assert_eq!(scaling["threads"], 2);
+    assert_eq!(two, out["engines"][0]["iterations_per_second"].as_f64().unwrap());
+    assert!(one > 0.0 && (scaling["speed_up"].as_f64().unwrap() - two / one).abs() < 1e-9 * two / one);
+    assert!((scaling["efficiency"].as_f64().unwrap() - two / one / 2.0).abs() < 1e-9);
+    let text = String::from_utf8(ok(optimis(dir.path(), &args, &[]))).unwrap();
+    assert!(text.contains("restricted on 1 thread:") && text.contains("parallel efficiency"), "{text}");
+    // One thread: nothing to compare.
+    let one: Value = serde_json::from_slice(&ok(optimis(
+        dir.path(),
+        &[
+            "bench",
+            "--engine",
+            "restricted",
+            "--iterations",
+            "1",
+            "--light-paths",
+            "100000",
+            "--threads",
+            "1",
+            "--json",
+        ],
+        &[],
+    )))
+    .unwrap();
+    assert!(one["restricted_scaling"].is_null());
+}
+
 /// `optimis bench | head -1` and friends: the reader closing the pipe is not an error (exit 0, no
 /// panic message). The pipe's read end is closed before the child starts, so every write fails.
 #[test]
@@ -288,11 +327,23 @@ fn set_progress_csv_and_exit_codes() {
     // The CSV tables hold the JSON's figures.
     let noise = std::fs::read_to_string(dir.path().join("noise.csv")).unwrap();
     let lines: Vec<&str> = noise.lines().collect();
-    assert!(lines[0].starts_with("strategy,luminance,luminance_stderr,rms_percent,rms_percent_stderr,"));
+    // docs/csv.md's vocabulary, in its order.
+    assert!(
+        lines[0].starts_with("strategy,paper_case,luminance,luminance_stderr,expected_luminance,z,"),
+        "{}",
+        lines[0]
+    );
     assert_eq!(lines.len(), 1 + report["noise_table"].as_array().unwrap().len());
+    let column = |name: &str| lines[0].split(',').position(|c| c == name).unwrap();
     let switch = report["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == "switch").unwrap();
-    let row = lines.iter().find(|l| l.starts_with("switch,")).unwrap();
-    assert_eq!(row.split(',').nth(3).unwrap().parse::<f64>().unwrap(), switch["rms_percent"].as_f64().unwrap());
+    let row: Vec<&str> = lines.iter().find(|l| l.starts_with("switch,")).unwrap().split(',').collect();
+    assert_eq!(row[column("rms_percent")].parse::<f64>().unwrap(), switch["rms_percent"].as_f64().unwrap());
+    assert_eq!(row[column("z")].parse::<f64>().unwrap(), switch["z"].as_f64().unwrap());
+    assert_eq!(row[column("paper_case")], "4", "switch is the paper's case 4 (whether or not its figures apply)");
+    let recommended = report["recommended"]["strategy"].as_str().unwrap();
+    let chosen: Vec<&str> =
+        lines[1..].iter().copied().filter(|l| l.split(',').nth(column("recommended")) == Some("true")).collect();
+    assert!(chosen.len() == 1 && chosen[0].starts_with(&format!("{recommended},")), "{chosen:?}");
     let same_weights = |csv: &str, report: &Value| {
         let weights = std::fs::read_to_string(dir.path().join(csv)).unwrap();
         let rows = report["weights"].as_array().unwrap();

@@ -13,6 +13,7 @@ mod crash;
 mod dashboard;
 mod engines;
 mod faults;
+mod figures;
 mod formats;
 mod hardening;
 mod hostile_documents;

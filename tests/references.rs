@@ -116,8 +116,6 @@ fn the_cli_prints_the_paper_column_and_names_what_is_wrong() {
     assert_eq!(svg.matches(r#"r="4""#).count(), 52, "one marker per cell of the paper's grid");
     let bars = svg.matches(r#"r="3""#).count();
     assert!(bars > 0 && bars < 52, "bars on the cells with a data SE only ({bars})");
-    let out = optimis(dir.path(), &["figure", "fig2", "l3-paper.json", "--out", "fig2.png"]);
-    assert_eq!(out.status.code(), Some(3), "{out:?}");
 
     let out = optimis(dir.path(), &["merge", "l3-paper.json", "l3.json", "--out", "merged.json"]);
     assert_eq!(out.status.code(), Some(4), "{out:?}");

@@ -93,7 +93,7 @@ async fn a_sweep_runs_as_jobs_and_its_table_equals_the_clis() {
     let csv_text = csv.text();
     let lines: Vec<&str> = csv_text.lines().collect();
     assert_eq!(lines.len(), 1 + 4 * strategies);
-    assert!(lines[0].starts_with("point,merge_radius,scene.l3,source,light_paths,camera_paths,iterations_done,"));
+    assert!(lines[0].starts_with("point,merge_radius,scene.l3,source,light_paths,camera_paths,iterations,"));
 
     // The CLI, locally and as four tasks collected: the same bytes.
     let dir = tempfile::tempdir().unwrap();
@@ -218,13 +218,16 @@ async fn a_jobs_tables_download_as_csv() {
     );
     let text = noise.text();
     let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows[0][..5], ["strategy", "luminance", "luminance_stderr", "rms_percent", "rms_percent_stderr"]);
+    // The header is docs/csv.md's, in its order (the contract the dashboard's CSVs share).
+    assert_eq!(text.lines().next().unwrap(), documented_columns("noise table").join(","));
     let table = result["noise_table"].as_array().unwrap();
     assert_eq!(rows.len(), 1 + table.len());
     for (row, json) in rows[1..].iter().zip(table) {
         assert_eq!(row[0], json["strategy"].as_str().unwrap());
-        // A row that could not be computed (its `error` says why) has empty fields.
-        assert_eq!(row[1].parse::<f64>().ok(), json["luminance"].as_f64(), "{json}");
+        // A row that could not be computed (its `error` says why) has empty fields. (The columns
+        // before `heuristics`, a quoted JSON cell, split at commas safely.)
+        assert_eq!(row[2].parse::<f64>().ok(), json["luminance"].as_f64(), "{json}");
+        assert_eq!(row[5].parse::<f64>().ok(), json["z"].as_f64(), "{json}");
     }
     let by_accept = server
         .send(server.builder(reqwest::Method::GET, &format!("/v1/jobs/{id}/result")).header("accept", "text/csv"))
@@ -232,14 +235,14 @@ async fn a_jobs_tables_download_as_csv() {
     assert_eq!(by_accept.text(), text);
     let weights = server.get(&format!("/v1/jobs/{id}/result?format=csv&table=weights")).await.text();
     assert_eq!(weights.lines().count(), 1 + result["weights"].as_array().unwrap().len());
-    assert!(weights.starts_with("cell,r2_lo,r2_hi,r3_lo,r3_hi,phi_lo_rad,phi_hi_rad,w0,w0_stderr,w1,"));
+    assert_eq!(weights.lines().next().unwrap(), documented_columns("weights").join(","));
     let history = server.get(&format!("/v1/jobs/{id}/history?format=csv")).await.text();
     let json_history = server.history(id).await;
     let samples: usize =
         json_history["points"].as_array().unwrap().iter().map(|p| p["strategies"].as_array().unwrap().len()).sum();
     assert!(samples > 0);
     assert_eq!(history.lines().count(), 1 + samples, "one row per checkpoint and strategy");
-    assert!(history.starts_with("iterations,strategy,luminance,luminance_stderr,rms_percent\r\n"));
+    assert!(history.starts_with(&format!("{}\r\n", documented_columns("history").join(","))));
     // The SE column is the dashboard's band: |L|·RMS/√M.
     let first: Vec<f64> = history
         .lines()
@@ -314,4 +317,12 @@ async fn concurrent_reads_of_a_predicted_sweep_refit_it_once() {
     let refits = metrics.lines().find(|l| l.starts_with("optimis_sweep_refits_total ")).expect("the counter");
     assert_eq!(refits, "optimis_sweep_refits_total 1", "one re-fit for five reads of one checkpoint");
     server.stop().await;
+}
+
+/// The columns docs/csv.md lists for `table` (its "Tables" section), in order.
+fn documented_columns(table: &str) -> Vec<String> {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/csv.md")).unwrap();
+    let line = doc.lines().find(|l| l.starts_with(&format!("| {table} |"))).unwrap_or_else(|| panic!("{table}"));
+    let columns = line.trim_end_matches('|').rsplit('|').next().unwrap();
+    columns.split(", ").map(|c| c.trim().trim_matches('`').to_string()).collect()
 }

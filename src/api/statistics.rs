@@ -18,7 +18,7 @@ use super::extract::{JobId, JsonBody, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use crate::jobs::documents::{JobHistory, JobResult};
 use crate::jobs::evaluation::JobEvaluation;
-use crate::sim::checks::published::figures;
+use crate::sim::checks::published::{figures, paper_columns};
 use crate::sim::document::MomentsDocument;
 use crate::sim::solve::evaluate::GivenWeights;
 use crate::sim::solve::export::{noise_table_csv, weights_csv};
@@ -57,7 +57,7 @@ pub struct HistoryQuery {
 #[utoipa::path(
     get, operation_id = "get_result", path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
-        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy, luminance in model units, rms_percent of one iteration; weights: one row per cell)", content(
+        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy; weights: one row per cell; the columns and units of docs/csv.md)", content(
             (JobResult = "application/json"),
             (String = "text/csv"),
             (String = "text/markdown"),
@@ -105,7 +105,7 @@ pub async fn result(
             Err(ApiError::Invalid { field: "table".into(), message: "applies to CSV only (format=csv)".into() })
         }
         (true, None | Some("noise")) => {
-            let csv = noise_table_csv(&result.report.noise_table, |s| figures(&result.references, s.name()));
+            let csv = noise_table_csv(&result.report, |s| paper_columns(&result.references, s.name()));
             Ok(csv_response(csv, &format!("optimis-job-{id}-noise.csv")))
         }
         (true, Some("weights")) => {

@@ -109,7 +109,7 @@ pub async fn get(
 }
 
 /// The sweep's table: one row per point (with figures) and strategy, as JSON or CSV (columns:
-/// `point`, one per swept field, then `source`, `light_paths`, `camera_paths`, `iterations_done`,
+/// `point`, one per swept field, then `source`, `light_paths`, `camera_paths`, `iterations` (docs/csv.md),
 /// `partial`, `strategy`, `luminance` (model units), `luminance_stderr`, `rms_percent` (percent of
 /// L, one iteration), `rms_percent_stderr`, `respects_fixed`, `recommended`).
 #[utoipa::path(

@@ -1,5 +1,7 @@
 //! `optimis bench`: iterations and light paths per second of the simulation core at the paper's
-//! parameters, for each engine asked for, and the restricted engine's speed-up over the brute force.
+//! parameters, for each engine asked for, the restricted engine's speed-up over the brute force,
+//! and the restricted engine's rate on one thread beside its rate on all of them (the parallel
+//! speed-up and efficiency: the serial part of a run — merging the workers' moments — shows here).
 
 use std::io::Write;
 use std::sync::atomic::AtomicBool;
@@ -90,6 +92,22 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
     }
     let rate =
         |e: BenchEngine| results.iter().find(|(x, _)| *x == e).and_then(|(_, v)| v["iterations_per_second"].as_f64());
+    // The same restricted run on one thread, timed after the others (same warm caches).
+    let scaling = match rate(BenchEngine::Restricted) {
+        Some(many) if threads > 1 => {
+            let config = job.config().with_engine(Engine::Restricted(Proposals::Auto));
+            let one = thread_pool(Some(1))?.install(|| time_iterations(&config, base * 1000));
+            let single = (base * 1000) as f64 / one;
+            Some(json!({
+                "threads": threads,
+                "iterations_per_second_1_thread": single,
+                "iterations_per_second": many,
+                "speed_up": many / single,
+                "efficiency": many / single / threads as f64,
+            }))
+        }
+        _ => None,
+    };
     let speedup = rate(BenchEngine::Restricted).zip(rate(BenchEngine::Brute)).map(|(r, b)| r / b);
     let config = &job.config();
     // Written with `?`, not println!: a closed pipe (`optimis bench | head -1`) is the reader
@@ -99,6 +117,7 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
         let doc = json!({
             "engines": results.iter().map(|(_, v)| v.clone()).collect::<Vec<_>>(),
             "restricted_over_brute": speedup,
+            "restricted_scaling": scaling,
             "light_paths_per_iteration": config.light_paths,
             "camera_paths_per_iteration": config.camera_paths,
             "threads": threads,
@@ -119,6 +138,15 @@ pub fn bench(args: BenchArgs) -> Result<(), CliError> {
         }
         if let Some(s) = speedup {
             writeln!(out, "restricted / brute: {s:.0}× per iteration")?;
+        }
+        if let Some(s) = &scaling {
+            writeln!(
+                out,
+                "restricted on 1 thread: {:.4e} iterations/s; on {threads}: speed-up {:.2}× (parallel efficiency {:.0}%)",
+                s["iterations_per_second_1_thread"].as_f64().unwrap_or(0.0),
+                s["speed_up"].as_f64().unwrap_or(0.0),
+                100.0 * s["efficiency"].as_f64().unwrap_or(0.0),
+            )?;
         }
         writeln!(
             out,

@@ -66,8 +66,9 @@ pub enum Command {
     /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, from a moments
     /// document with noise components.
     Budget(budget::BudgetArgs),
-    /// Draw a figure from a moments document without a browser: `fig2` (w₁ against r₃ of the
-    /// weights table, ± 1 SE, the paper's Fig. 2) as SVG.
+    /// Draw a figure without a browser, as SVG, PNG or PDF: `fig2` (w₁ against r₃ of the weights
+    /// table, ± 1 SE, the paper's Fig. 2) and `table1` (RMS ± SE beside the paper's) from a moments
+    /// document, `convergence` (L ± SE and RMS against iterations) from a job's history.
     Figure(figure::FigureArgs),
     /// Compare runs strategy by strategy: moments documents, or jobs of a server with --server;
     /// ratios and differences against the first, with standard errors.

@@ -14,7 +14,7 @@ use serde_json::{Value, json};
 use super::progress::{Progress, ProgressArgs};
 use super::shard::{parse_shard, resolve_shard};
 use super::{CliError, table, thread_pool};
-use crate::sim::checks::published::{applicable, figures};
+use crate::sim::checks::published::{applicable, paper_columns};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
@@ -103,7 +103,7 @@ pub(super) fn write_csv(
 ) -> Result<(), CliError> {
     if let Some(path) = noise {
         let published = applicable(spec);
-        let csv = noise_table_csv(&report.noise_table, |s| figures(&published, s.name()));
+        let csv = noise_table_csv(report, |s| paper_columns(&published, s.name()));
         write_atomically(path, csv.as_bytes())?;
     }
     if let Some(path) = weights {

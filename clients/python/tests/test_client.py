@@ -126,7 +126,7 @@ def test_weights_history_and_lambda(client: Client, done: Dict[str, Dict[str, An
     cells = client.result(job_id, lam=0)["weights"]
     weights = client.weights(job_id, lam=0)
     assert cells and len(weights) == len(cells)
-    for column in ("r2_lo", "r2_hi", "r3_lo", "r3_hi", "phi_lo", "phi_hi", "w0", "w1", "w2",
+    for column in ("r2_lo", "r2_hi", "r3_lo", "r3_hi", "phi_lo_rad", "phi_hi_rad", "w0", "w1", "w2",
                    "w0_stderr", "w1_stderr", "w2_stderr", "samples", "status"):
         assert column in weights.columns
     for (_, row), cell in zip(weights.iterrows(), cells):
@@ -135,7 +135,11 @@ def test_weights_history_and_lambda(client: Client, done: Dict[str, Dict[str, An
         assert row["status"] == cell["status"] and row["samples"] == cell["samples"]
 
     history = client.history(job_id)
-    assert list(history.columns[:4]) == ["iterations", "strategy", "luminance", "rms_percent"]
+    # docs/csv.md's history columns, as the server's CSV has them.
+    assert list(history.columns[:5]) == ["iterations", "strategy", "luminance", "luminance_stderr", "rms_percent"]
+    last = history[history["iterations"] == history["iterations"].max()].iloc[0]
+    expected = abs(last["luminance"]) * last["rms_percent"] / 100 / math.sqrt(last["iterations"])
+    assert same(last["luminance_stderr"], expected)
     assert history["iterations"].max() == PAPER["iterations"]
     strategies = {row["strategy"] for row in client.result(job_id)["noise_table"]}
     assert set(history["strategy"]) <= strategies and "switch" in set(history["strategy"])

@@ -9,6 +9,7 @@ use std::sync::OnceLock;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::sim::solve::export::PaperColumns;
 use crate::sim::spec::JobSpec;
 
 /// The tables' JSON sources, in the order they are listed.
@@ -84,6 +85,13 @@ pub fn applicable(spec: &JobSpec) -> Vec<ReferenceTable> {
 /// A strategy's published (L, RMS %) in the first of `tables` that has a row for it.
 pub fn figures(tables: &[ReferenceTable], strategy: &str) -> Option<(f64, f64)> {
     tables.iter().flat_map(|t| &t.rows).find(|r| r.strategy == strategy).map(|r| (r.luminance, r.rms_percent))
+}
+
+/// A noise-table row's CSV columns from the published tables: its case number in any of them,
+/// and the figures of `applicable` (the tables that apply to the job) where it has them.
+pub fn paper_columns(applicable: &[ReferenceTable], strategy: &str) -> PaperColumns {
+    let case = tables().iter().flat_map(|t| &t.rows).find(|r| r.strategy == strategy).map(|r| r.case);
+    PaperColumns { case, figures: figures(applicable, strategy) }
 }
 
 /// The fields of `table`'s configuration in which `spec` differs, as `field: the job's vs the

@@ -2,54 +2,86 @@
 //! --csv`): the noise table, one row per strategy (with the paper's figures where its Table 1
 //! applies), and the weights table, one row per cell.
 //!
-//! Units: `luminance` (and its standard error) in the model's units (docs/model.md: the light's
-//! radiance scale, as in the JSON); `rms_percent` in percent of L for one iteration; cell bounds in
-//! the scene's lengths (r2, r3) and radians (φ); an open bound (the tail cell) is empty.
+//! Column names and units follow docs/csv.md, one vocabulary for every table: `luminance` (and its
+//! standard error) in the model's units (docs/model.md: the light's radiance scale, as in the
+//! JSON); `rms_percent` in percent of L for one iteration; cell bounds in the scene's lengths (r2,
+//! r3) and radians (φ); an open bound (the tail cell) is empty.
 
-use super::noise::NoiseRow;
-use super::report::WeightRow;
+use super::report::{RunReport, WeightRow};
 use super::strategy::Strategy;
 use crate::sim::math::csv::{Csv, json_cell, number, quoted};
 
-/// The noise table's columns.
-const NOISE_COLUMNS: [&str; 14] = [
+/// The noise table's columns, in the vocabulary of docs/csv.md (the dashboard writes the same).
+const NOISE_COLUMNS: [&str; 22] = [
     "strategy",
+    "paper_case",
     "luminance",
     "luminance_stderr",
+    "expected_luminance",
+    "z",
+    "expected_error",
+    "reference_luminance",
     "rms_percent",
     "rms_percent_stderr",
     "lambda",
     "in_sample",
     "respects_fixed",
+    "unstable",
+    "recommended",
+    "heuristics",
     "in_sample_luminance",
     "in_sample_luminance_stderr",
     "in_sample_rms_percent",
-    "error",
     "paper_luminance",
     "paper_rms_percent",
+    "error",
 ];
 
-/// The noise table as CSV; `paper` gives a row's published (L, RMS %) where a published table
-/// applies to the job (`sim::checks::published`; empty cells otherwise).
-pub fn noise_table_csv(rows: &[NoiseRow], paper: impl Fn(&Strategy) -> Option<(f64, f64)>) -> String {
+/// A row's columns from a published table (`sim::checks::published`): its case number in the
+/// paper, and the published (L, RMS %) where the table applies to the job.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PaperColumns {
+    /// The paper's case number of the row (whether or not its figures apply to this job).
+    pub case: Option<u32>,
+    /// The published L and RMS%, where the table applies.
+    pub figures: Option<(f64, f64)>,
+}
+
+/// The report's noise table as CSV, one row per strategy; `paper` gives a row's published columns.
+pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperColumns) -> String {
     let mut csv = Csv::new(NOISE_COLUMNS);
-    for r in rows {
+    let chosen = report.recommended.as_ref().map(|r| r.strategy);
+    for r in &report.noise_table {
         let published = paper(&r.strategy);
+        // β of a stacked row as JSON: one cell, so that the table keeps one row per strategy.
+        let heuristics = if r.heuristics.is_empty() {
+            String::new()
+        } else {
+            serde_json::to_string(&r.heuristics).map(|s| quoted(&s)).unwrap_or_default()
+        };
         csv.row([
             json_cell(&r.strategy),
+            published.case.map(|c| c.to_string()).unwrap_or_default(),
             number(r.luminance),
             number(r.luminance_stderr),
+            number(r.expected_luminance),
+            number(r.z),
+            r.expected_error.as_deref().map(quoted).unwrap_or_default(),
+            number(report.reference_luminance),
             number(r.rms_percent),
             number(r.rms_percent_stderr),
             number(r.lambda),
             r.in_sample.to_string(),
             r.respects_fixed.to_string(),
+            r.unstable.to_string(),
+            (Some(r.strategy) == chosen).to_string(),
+            heuristics,
             number(r.in_sample_luminance),
             number(r.in_sample_luminance_stderr),
             number(r.in_sample_rms_percent),
+            number(published.figures.map(|p| p.0)),
+            number(published.figures.map(|p| p.1)),
             r.error.as_deref().map(quoted).unwrap_or_default(),
-            number(published.map(|p| p.0)),
-            number(published.map(|p| p.1)),
         ]);
     }
     csv.finish()

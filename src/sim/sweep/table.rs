@@ -199,7 +199,7 @@ const COLUMNS: [&str; 12] = [
     "source",
     "light_paths",
     "camera_paths",
-    "iterations_done",
+    "iterations",
     "partial",
     "strategy",
     "luminance",

@@ -393,8 +393,8 @@ class Client:
 
     def weights(self, id: int, *, lam: Optional[float] = None) -> pd.DataFrame:
         """A job's weights table as a DataFrame, one row per cell (empty for a per-path
-        recommendation): ``cell``, ``r2_lo``, ``r2_hi``, ``r3_lo``, ``r3_hi``, ``phi_lo``,
-        ``phi_hi``, ``w0``, ``w1``, ``w2``, their ``_stderr``, ``samples``, ``status``. With `lam`,
+        recommendation): ``cell``, ``r2_lo``, ``r2_hi``, ``r3_lo``, ``r3_hi``,
+        ``phi_lo_rad``, ``phi_hi_rad``, ``w0``, ``w0_stderr``, ``w1``, … (docs/csv.md), ``samples``, ``status``. With `lam`,
         the in-sample table at that λ (as :meth:`result`)."""
         return weights_frame(self.result(id, lam=lam).get("weights") or [])
 

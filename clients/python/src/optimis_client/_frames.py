@@ -8,6 +8,7 @@ in numeric columns.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 import pandas as pd
@@ -36,20 +37,20 @@ WEIGHT_COLUMNS = (
     "r2_hi",
     "r3_lo",
     "r3_hi",
-    "phi_lo",
-    "phi_hi",
+    "phi_lo_rad",
+    "phi_hi_rad",
     "w0",
-    "w1",
-    "w2",
     "w0_stderr",
+    "w1",
     "w1_stderr",
+    "w2",
     "w2_stderr",
     "samples",
     "status",
 )
 
 #: The columns of :func:`history_frame`.
-HISTORY_COLUMNS = ("iterations", "strategy", "luminance", "rms_percent")
+HISTORY_COLUMNS = ("iterations", "strategy", "luminance", "luminance_stderr", "rms_percent")
 
 #: The per-run figure columns of a comparison (``GET /v1/compare``), in the server's order.
 COMPARE_FIGURES = (
@@ -139,7 +140,7 @@ def weights_frame(cells: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
     """A weights table (a result's ``weights``): one row per cell, in the document's order.
 
     Each bin ``[lo, hi]`` is flattened into ``r2_lo``/``r2_hi``, ``r3_lo``/``r3_hi`` and
-    ``phi_lo``/``phi_hi`` (radians); an open upper bound (the tail cell, ``null`` in JSON) is
+    ``phi_lo_rad``/``phi_hi_rad``; an open upper bound (the tail cell, ``null`` in JSON) is
     ``NaN``, as in the server's CSV. Then ``w0``, ``w1``, ``w2``, their ``_stderr`` (``NaN`` where a
     cell has no data standard error, e.g. ``smoothed``), ``samples`` and ``status``; ``cell`` is the
     cell's index. Empty (with these columns) when the recommendation is a per-path strategy.
@@ -147,9 +148,9 @@ def weights_frame(cells: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
     records = []
     for index, cell in enumerate(cells):
         record: Dict[str, Any] = {"cell": index}
-        for name in ("r2", "r3", "phi"):
+        for name, unit in (("r2", ""), ("r3", ""), ("phi", "_rad")):
             bounds = list(cell.get(name) or [None, None]) + [None, None]
-            record[f"{name}_lo"], record[f"{name}_hi"] = bounds[0], bounds[1]
+            record[f"{name}_lo{unit}"], record[f"{name}_hi{unit}"] = bounds[0], bounds[1]
         for key, value in cell.items():
             if key not in ("r2", "r3", "phi"):
                 record[key] = value
@@ -165,13 +166,18 @@ def history_frame(history: Mapping[str, Any]) -> pd.DataFrame:
     """A job's history (``GET /v1/jobs/{id}/history``) in long format.
 
     One row per checkpoint and strategy, oldest first: ``iterations``, ``strategy``,
-    ``luminance`` (model units) and ``rms_percent`` (and any further member the server adds).
+    ``luminance`` (model units), ``luminance_stderr`` = \|L\|·RMS/√M (as the server's CSV and the
+    dashboard's band) and ``rms_percent`` (and any further member the server adds).
     """
     records = []
     for point in history.get("points") or []:
         outer = {k: v for k, v in point.items() if k != "strategies"}
         for figures in point.get("strategies") or []:
-            records.append({**outer, **figures})
+            record = {**outer, **figures}
+            lum, rms, m = record.get("luminance"), record.get("rms_percent"), outer.get("iterations") or 0
+            ok = lum is not None and rms is not None and m > 0
+            record["luminance_stderr"] = abs(lum) * rms / 100.0 / math.sqrt(m) if ok else None
+            records.append(record)
     return _frame(records, _columns(records, HISTORY_COLUMNS))
 
 
@@ -180,7 +186,7 @@ def sweep_table_frame(table: Mapping[str, Any]) -> pd.DataFrame:
 
     The columns are those of the server's CSV: ``point``, one per swept field (named by its path,
     e.g. ``merge_radius``, ``scene.l3``; a field that is already a column, such as ``light_paths``,
-    is not repeated), then ``source``, ``light_paths``, ``camera_paths``, ``iterations_done``,
+    is not repeated), then ``source``, ``light_paths``, ``camera_paths``, ``iterations``,
     ``partial``, ``strategy``, ``luminance``, ``luminance_stderr``, ``rms_percent``,
     ``rms_percent_stderr``, ``respects_fixed`` and ``recommended``.
     """
@@ -193,7 +199,10 @@ def sweep_table_frame(table: Mapping[str, Any]) -> pd.DataFrame:
         record: Dict[str, Any] = {"point": row.get("point")}
         record.update({field: values.get(field) for field in swept})
         record.update({k: v for k, v in row.items() if k not in ("point", "values")})
+        # docs/csv.md's name (the JSON row says iterations_done).
+        record["iterations"] = record.pop("iterations_done", None)
         records.append(record)
+    own = ["iterations" if c == "iterations_done" else c for c in own]
     return _frame(records, ["point"] + swept + own)
 
 

@@ -1,73 +1,80 @@
-//! `optimis figure fig2 DOC --out fig2.svg`: the paper's Fig. 2 from a moments document, without
-//! a browser — w₁ against r₃ of the recommended weights table, one line per r₂ bin, ± 1 standard
-//! error (open markers, no bar, for a `smoothed` cell: its weight comes from the penalty, not its
-//! own samples), a dashed line at r₃ = a for the spot. When the run recommends a per-path
-//! strategy (no table), the table optimum at optimal_cv's λ is drawn and the title says it is not
-//! the recommendation; `--lambda` draws the in-sample table at that λ (0: the paper's). SVG
-//! (plotters' backend; the viewer renders the text); convert it to PNG or PDF with any SVG tool.
+//! The paper's Fig. 2 from a moments document: w₁ against r₃ of the recommended weights table,
+//! one line per r₂ bin, ± 1 standard error (open markers, no bar, for a `smoothed` cell: its weight
+//! comes from the penalty, not its own samples), a dashed line at r₃ = a for the spot. When the run
+//! recommends a per-path strategy (no table), the table optimum at optimal_cv's λ is drawn and the
+//! title says it is not the recommendation; `--lambda` draws the in-sample table at that λ (0: the
+//! paper's).
 
-use std::path::PathBuf;
+use std::path::Path;
 
-use clap::Args;
 use plotters::prelude::*;
 
-use super::CliError;
-use super::documents::{document_job, read_document, solver_options};
-use super::run::write_atomically;
+use super::drawing;
+use crate::cli::CliError;
+use crate::cli::documents::{document_job, read_document, solver_options};
+use crate::sim::document::MomentsDocument;
+use crate::sim::model::cells::CellGrid;
 use crate::sim::model::params::{IlluminationSpec, check};
-use crate::sim::solve::options::MAX_LAMBDA;
-use crate::sim::solve::report::{ReportInputs, WeightRow, WeightsQuery, build_report};
+use crate::sim::solve::options::{MAX_LAMBDA, SolverOptions};
+use crate::sim::solve::report::{ReportInputs, RunReport, WeightRow, WeightsQuery, build_report};
 use crate::sim::solve::solver::CellStatus;
 use crate::sim::solve::strategy::Strategy;
 
-#[derive(Debug, Args)]
-pub struct FigureArgs {
-    /// Which figure: `fig2` (w₁ against r₃ of the weights table, the paper's Fig. 2).
-    #[arg(value_parser = ["fig2"])]
-    pub which: String,
-    /// A moments document (`optimis run --out`, `GET /v1/jobs/{id}/moments`).
-    pub document: PathBuf,
-    /// Where to write the figure (SVG).
-    #[arg(long, value_name = "FILE.svg")]
-    pub out: PathBuf,
-    /// Draw the in-sample table optimum at this λ (0: the paper's procedure) instead of the
-    /// recommended table.
-    #[arg(long, allow_hyphen_values = true)]
-    pub lambda: Option<f64>,
+/// The drawing's size in SVG user units (pixels at 1×).
+pub const WIDTH: u32 = 1200;
+pub const HEIGHT: u32 = 800;
+
+/// A moments document ready to be solved as a figure asks.
+pub(super) struct Solvable {
+    pub doc: MomentsDocument,
+    cells: CellGrid,
+    solver: SolverOptions,
 }
 
-pub fn figure(args: FigureArgs) -> Result<(), CliError> {
-    if args.out.extension().and_then(|e| e.to_str()) != Some("svg") {
-        return Err(CliError::Config(format!("--out {}: figures are written as SVG (FILE.svg)", args.out.display())));
+impl Solvable {
+    /// Reads `document`; `lambda` (a flag) is checked as `report --weights-lambda` checks it.
+    pub fn read(document: &Path, lambda: Option<f64>) -> Result<Self, CliError> {
+        if let Some(l) = lambda {
+            check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--lambda", || {
+                format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
+            })?;
+        }
+        let doc = read_document(&document.to_path_buf())?;
+        let job = document_job(&doc, document)?;
+        let solver = solver_options(&doc.spec.solver, None)?;
+        Ok(Self { cells: job.config().cells.clone(), solver, doc })
     }
-    if let Some(l) = args.lambda {
-        check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--lambda", || {
-            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
-        })?;
+
+    /// The report as the run recommends (`None`), or with the in-sample table optimum at λ.
+    pub fn report(&self, lambda: Option<f64>) -> RunReport {
+        let weights = lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
+        build_report(
+            &self.doc.moments,
+            &self.cells,
+            &self.solver,
+            &ReportInputs { reference: None, expected: None, weights },
+        )
     }
-    let doc = read_document(&args.document)?;
-    let job = document_job(&doc, &args.document)?;
-    let solver = solver_options(&doc.spec.solver, None)?;
-    let cells = &job.config().cells;
-    let solve = |weights: Option<WeightsQuery>| {
-        build_report(&doc.moments, cells, &solver, &ReportInputs { reference: None, expected: None, weights })
-    };
-    let at = |lambda: f64| Some(WeightsQuery { lambda, strategy: Strategy::Optimal });
-    let report = solve(args.lambda.and_then(at));
+}
+
+/// Fig. 2 as SVG, and what it shows (for the CLI's message).
+pub(super) fn figure(document: &Path, lambda: Option<f64>) -> Result<(String, String), CliError> {
+    let solvable = Solvable::read(document, lambda)?;
+    let report = solvable.report(lambda);
     let recommended = report.recommended.as_ref().map(|r| r.strategy.to_string()).unwrap_or_else(|| "none".into());
-    let (report, what) = match (args.lambda, report.weights.is_empty()) {
+    let (report, what) = match (lambda, report.weights.is_empty()) {
         (Some(l), _) => (report, format!("in-sample table optimum at λ = {l} (recommended: {recommended})")),
         (None, false) => (report, format!("recommended table: {recommended}")),
         (None, true) => {
             let cv = report.noise_table.iter().find(|r| r.strategy == Strategy::OptimalCv).and_then(|r| r.lambda);
             match cv {
                 Some(l) => (
-                    solve(at(l)),
+                    solvable.report(Some(l)),
                     format!("table optimum at optimal_cv's λ = {l} — not recommended ({recommended} is)"),
                 ),
                 None => {
                     return Err(CliError::Unusable {
-                        path: args.document.clone(),
+                        path: document.to_path_buf(),
                         detail:
                             "no weights table to draw: a per-path strategy is recommended and optimal_cv has no fit"
                                 .into(),
@@ -76,15 +83,12 @@ pub fn figure(args: FigureArgs) -> Result<(), CliError> {
             }
         }
     };
-    let spot = match &doc.spec.scene.illumination {
+    let spot = match &solvable.doc.spec.scene.illumination {
         IlluminationSpec::Spot { a, .. } => Some(*a),
         _ => None,
     };
-    let svg = draw_fig2(&report.weights, spot, &what, report.iterations)
-        .map_err(|e| CliError::Config(format!("cannot draw the figure: {e}")))?;
-    write_atomically(&args.out, svg.as_bytes())?;
-    eprintln!("wrote {} ({what})", args.out.display());
-    Ok(())
+    let svg = draw_fig2(&report.weights, spot, &what, report.iterations).map_err(drawing)?;
+    Ok((svg, what))
 }
 
 /// The r₃ a cell is drawn at: its middle, or for the open tail cell its lower edge plus the
@@ -97,7 +101,8 @@ fn r3_of(w: &WeightRow, tail_width: f64) -> f64 {
     }
 }
 
-const COLORS: [RGBColor; 6] = [
+/// The series colours (matplotlib's first six: distinct in print and for most colour vision).
+pub(super) const COLORS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -128,7 +133,7 @@ fn draw_fig2(
     let (y_lo, y_hi) = (y_lo.max(-1.0) - 0.05, y_hi.min(2.0) + 0.05);
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1200, 800)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(format!("w1 against r3 ({iterations} iterations): {what}"), ("sans-serif", 22))

@@ -1,0 +1,111 @@
+//! `optimis figure fig2|table1|convergence DOC --out F.svg|png|pdf`: publication figures without a
+//! browser. Each figure is drawn once, as SVG, by plotters (`fig2`, `table1`, `convergence`); PNG
+//! and PDF are that SVG rendered by resvg and converted by svg2pdf (`render`), so the three files
+//! show the same drawing.
+
+mod convergence;
+mod fig2;
+mod render;
+mod table1;
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+
+use super::CliError;
+use super::run::write_atomically;
+use crate::sim::model::params::check;
+
+/// The largest PNG width: 8192 px is beyond any journal's column at 600 dpi and bounds the pixmap
+/// (8192 × 5462 × 4 bytes ≈ 180 MB).
+const MAX_WIDTH: u32 = 8192;
+
+#[derive(Debug, Args)]
+pub struct FigureArgs {
+    /// Which figure: `fig2` (w₁ against r₃ of the weights table, the paper's Fig. 2), `table1`
+    /// (each strategy's RMS ± SE, the paper's values beside them where they apply) — both from a
+    /// moments document —, or `convergence` (L ± SE and RMS against iterations, from a job's
+    /// history: `GET /v1/jobs/{id}/history`).
+    #[arg(value_parser = ["fig2", "table1", "convergence"])]
+    pub which: String,
+    /// A moments document (`optimis run --out`, `GET /v1/jobs/{id}/moments`) for fig2 and table1;
+    /// a history document (`GET /v1/jobs/{id}/history`) for convergence.
+    pub document: PathBuf,
+    /// Where to write the figure: FILE.svg, FILE.png or FILE.pdf.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// PNG only: the image's width in pixels (default 2400, twice the drawing's 1200).
+    #[arg(long, value_name = "PX")]
+    pub width: Option<u32>,
+    /// fig2 and table1: solve at this λ instead of the recommended weights (fig2: the in-sample
+    /// table optimum; 0 is the paper's procedure).
+    #[arg(long, allow_hyphen_values = true)]
+    pub lambda: Option<f64>,
+    /// convergence only: the strategies to draw, comma-separated (default: the paper's four cases,
+    /// and optimal_cv, optimal_stacked and correlation_aware_planes23 where the history has them).
+    #[arg(long, value_delimiter = ',')]
+    pub strategies: Vec<String>,
+}
+
+/// The file formats a figure is written in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Format {
+    Svg,
+    Png { width: u32 },
+    Pdf,
+}
+
+fn format_of(args: &FigureArgs) -> Result<Format, CliError> {
+    let extension = args.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let format = match extension.as_deref() {
+        Some("svg") => Format::Svg,
+        Some("png") => Format::Png { width: args.width.unwrap_or(2 * fig2::WIDTH) },
+        Some("pdf") => Format::Pdf,
+        _ => {
+            return Err(CliError::Config(format!(
+                "--out {}: figures are written as FILE.svg, FILE.png or FILE.pdf",
+                args.out.display()
+            )));
+        }
+    };
+    if let Some(w) = args.width {
+        check(matches!(format, Format::Png { .. }), "--width", || {
+            "applies to PNG output only (--out FILE.png)".into()
+        })?;
+        check((100..=MAX_WIDTH).contains(&w), "--width", || format!("must be in [100, {MAX_WIDTH}] pixels, got {w}"))?;
+    }
+    Ok(format)
+}
+
+pub fn figure(args: FigureArgs) -> Result<(), CliError> {
+    let format = format_of(&args)?;
+    check(args.which == "convergence" || args.strategies.is_empty(), "--strategies", || {
+        "applies to the convergence figure only".into()
+    })?;
+    check(args.which != "convergence" || args.lambda.is_none(), "--lambda", || {
+        "does not apply to the convergence figure (a history holds no moments to solve)".into()
+    })?;
+    let (svg, what) = match args.which.as_str() {
+        "fig2" => fig2::figure(&args.document, args.lambda)?,
+        "table1" => table1::figure(&args.document, args.lambda)?,
+        _ => convergence::figure(&args.document, &args.strategies)?,
+    };
+    write_figure(&args.out, &svg, format)?;
+    eprintln!("wrote {} ({what})", args.out.display());
+    Ok(())
+}
+
+/// Writes `svg` in `format` to `out`, atomically.
+fn write_figure(out: &Path, svg: &str, format: Format) -> Result<(), CliError> {
+    let bytes = match format {
+        Format::Svg => svg.as_bytes().to_vec(),
+        Format::Png { width } => render::png(svg, width)?,
+        Format::Pdf => render::pdf(svg)?,
+    };
+    write_atomically(out, &bytes)
+}
+
+/// A drawing error as the CLI reports it.
+fn drawing(e: impl std::fmt::Display) -> CliError {
+    CliError::Config(format!("cannot draw the figure: {e}"))
+}
