@@ -8,13 +8,16 @@
 // server's bearer token, if it has one: the page must then ask for it before anything else works.
 //
 // OPTIMIS_SCREENSHOT_DIR = where to write the README's screenshots (dashboard-job.png,
-// dashboard-compare.png), if set.
+// dashboard-compare.png), if set. (docs/dashboard-sweep.png, of a paper-scale sweep, is
+// screenshot.mjs's.)
 //
 // Exits non-zero with the reason if a check fails, the page throws, or it logs a console error.
 //
-// The steps are in harness.mjs (checks, waiting, the API, charts), jobs.mjs (the list, the form,
-// a job followed live), research.mjs (the paper's Table 1, Fig. 2, downloads, the compare page)
-// and sweeps.mjs; this module signs in and runs them in order.
+// The steps are in harness.mjs (checks, waiting, the API, charts and their axes), files.mjs
+// (downloads, CSV, PNG, docs/csv.md's columns, the README's screenshots), jobs.mjs (the list, the
+// form, a job followed live), research.mjs (the paper's Table 1, Fig. 2, the compare page),
+// downloads.mjs (a job's CSV, SVG and PNG files), budget.mjs (the ray-budget panel) and sweeps.mjs;
+// this module signs in and runs them in order.
 
 import { mkdir } from 'node:fs/promises';
 import { chromium } from 'playwright-core';
@@ -27,8 +30,10 @@ import {
   checkDirectLoad, checkInvalidSubmission, checkJobInList, checkListPage, checkNoiseTable, checkPagination, followProgress,
   submitJob,
 } from './jobs.mjs';
+import { checkBudget, submitNoiseJob } from './budget.mjs';
+import { checkDownloads } from './downloads.mjs';
 import {
-  checkCompare, checkDownloads, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
+  checkCompare, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
 } from './research.mjs';
 import { checkCsv, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
 
@@ -67,10 +72,12 @@ async function run(browser) {
   await screenshot(page, 'list.png');
   const pair = await submitPaperPair();
   const tableJobs = await submitTableJobs();
+  const noiseJob = await submitNoiseJob();
   const spot = await checkPaperJob(page, pair.spot);
   await checkDownloads(page, pair.spot, spot);
   await checkSolves(page, pair.spot);
   await checkTableJobs(page, tableJobs);
+  await checkBudget(page, noiseJob, pair.spot);
   await checkCompare(page, pair, [spot.result, (await callApi(`/v1/jobs/${pair.uniform}/result`)).json]);
   const sweep = await openSweep(page);
   await checkSweepSummary(page, sweep);
@@ -81,7 +88,7 @@ async function run(browser) {
   await checkSweepCancel(page);
   await sleep(500); // let late console messages arrive
   assertNoProblems();
-  check(allowedHttpErrors.length === 0, 'the browser logged exactly the expected 422 of the invalid job');
+  check(allowedHttpErrors.length === 0, 'the browser logged exactly the expected 422s (the invalid job, the refused budget)');
 }
 
 async function main() {

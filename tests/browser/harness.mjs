@@ -158,3 +158,73 @@ export function figureMarks(weights, r2s) {
   const open = drawn.filter((w) => w.status === 'smoothed' || w.w1_stderr === null);
   return { open: open.length, filled: drawn.length - open.length, bars: drawn.filter((w) => !open.includes(w) && w.w1_stderr > 0).length };
 }
+
+/**
+ * How the chart in `container` lays out its axes and legend, read from its uPlot instance (through
+ * plots.js's plotOf: the page's own module) and measured here with the axes' own fonts: per axis its
+ * label's width against the plot side it runs along, its widest tick label against the room the
+ * axis gives tick labels, its ticks and whether they are evenly spaced (a linear axis's steps all
+ * equal, its labels all with as many decimals); and the legend's names and values as shown.
+ */
+export async function readAxes(container) {
+  return container.evaluate(async (el) => {
+    const { plotOf } = await import('/assets/plots.js');
+    const u = plotOf(el);
+    if (!u) return null;
+    const ratio = window.uPlot.pxRatio;
+    const width = (font, text) => {
+      u.ctx.font = font;
+      return u.ctx.measureText(String(text)).width / ratio;
+    };
+    const axes = u.axes.map((a, i) => {
+      const vertical = a.side % 2 === 1;
+      const values = (a._values ?? []).map(String);
+      const splits = a._splits ?? [];
+      const steps = splits.slice(1).map((v, k) => v - splits[k]);
+      const log = u.scales[a.scale ?? (i === 0 ? 'x' : 'y')].distr === 3;
+      const decimals = values.map((v) => (/\.(\d+)$/.exec(v.replace(/,/g, ''))?.[1].length ?? 0));
+      return {
+        side: a.side,
+        label: a.label ?? null,
+        labelWidth: a.label ? width(a.labelFont[0], a.label) : 0,
+        labelRoom: (vertical ? u.bbox.height : u.bbox.width) / ratio,
+        tickWidth: vertical ? Math.max(0, ...values.map((v) => width(a.font[0], v))) : a.font[2] * 1.2,
+        tickRoom: a._size - (a.ticks.show ? a.ticks.size : 0) - a.gap,
+        values,
+        log,
+        even: log || steps.every((d) => Math.abs(d - steps[0]) <= 1e-9 * Math.abs(steps[0])),
+        sameDecimals: log || decimals.every((d) => d === decimals[0]),
+      };
+    });
+    const legend = [...el.querySelectorAll('.u-legend .u-series')].map((row) => ({
+      label: row.querySelector('.u-label')?.textContent ?? '',
+      value: row.querySelector('.u-value')?.textContent ?? '',
+      shown: row.getBoundingClientRect().width > 0,
+    }));
+    return { axes, legend };
+  });
+}
+
+/**
+ * The chart in `container` (`what` in the messages): every axis label fits the side it runs along,
+ * every axis is wide enough for its tick labels, linear ticks are evenly spaced and printed alike,
+ * and with no cursor on the chart its legend reads as a key: names, no "—" (the x entry hidden).
+ */
+export async function checkAxes(page, container, what) {
+  await page.mouse.move(0, 0); // no cursor on any chart: the legend as a screenshot shows it
+  const read = await waitFor(`${what}'s axes`, () => readAxes(container), 10_000);
+  for (const a of read.axes) {
+    const name = a.side % 2 ? 'y' : 'x';
+    check(a.label === null || a.labelWidth <= a.labelRoom,
+      `${what}: the ${name} axis label "${a.label}" (${Math.round(a.labelWidth)} px) fits along its ${Math.round(a.labelRoom)} px`);
+    check(a.tickWidth <= a.tickRoom + 0.5,
+      `${what}: the ${name} axis gives its tick labels room (${Math.round(a.tickWidth)} ≤ ${Math.round(a.tickRoom)} px: ${a.values.join(' ')})`);
+    check(a.even && a.sameDecimals, `${what}: the ${name} axis ticks are ${a.log ? 'decades and their 2 and 5 ×' : 'evenly spaced and printed alike'} (${a.values.join(' ')})`);
+  }
+  if (read.legend.length) {
+    const [x, ...ys] = read.legend;
+    check(!x.shown && ys.every((s) => s.value === '' && s.label.length > 0 && s.value !== '—'),
+      `${what}: with no cursor the legend is a key of ${ys.length} names, no "—" (${ys.slice(0, 3).map((s) => s.label).join(', ')}…)`);
+  }
+  return read;
+}

@@ -4,16 +4,15 @@
 // expectation at R, Fig. 2 (checkFigure2: the recommended table, or when a per-path strategy is
 // recommended the table optimum labelled as not recommended; ± 1 SE bars, open markers without bars
 // for smoothed cells, the r₃ = a marker), the luminance chart with SE bands and the reference
-// line —, its downloads (CSV, SVG, PNG, moments), a kept solve, and the compare page of the two
-// jobs, reached from the list's checkboxes.
+// line —, their axes and legends (checkAxes), a kept solve, and the compare page of the two jobs,
+// reached from the list's checkboxes, with its CSVs. (The job's downloads: downloads.mjs.)
 //
 // With OPTIMIS_SCREENSHOT_DIR set, also writes the README's dashboard-job.png and dashboard-compare.png there.
 
-import { readFile } from 'node:fs/promises';
-import path from 'node:path';
-
+import { PNG_MIN_WIDTH } from './downloads.mjs';
+import { csvContract, docScreenshot, downloadFrom, parseCsv, pngSize } from './files.mjs';
 import {
-  STRATEGIES, callApi, check, expectedFigure, figureMarks, parseWithError, readPlot, screenshot, sleep, waitFor,
+  STRATEGIES, callApi, check, checkAxes, expectedFigure, figureMarks, parseWithError, readPlot, screenshot, sleep, waitFor,
 } from './harness.mjs';
 import { checkZ, readNoiseRows } from './jobs.mjs';
 
@@ -33,8 +32,6 @@ const TABLE_JOBS = [
   { preset: 'paper-table1', iterations: 10000, merge_radius: 0.01 },
   { preset: 'paper-table1', iterations: 10000, merge_radius: 0.02 },
 ];
-const PNG_SIGNATURE = Buffer.from([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a]);
-const DOC_SCREENSHOT_LIMIT = 400_000;
 
 /** Submits the spot and the uniform job through the API and waits until both have succeeded. */
 export async function submitPaperPair() {
@@ -135,47 +132,6 @@ export async function checkFigure2(page, id, result) {
   return { fig, marks };
 }
 
-/**
- * Saves a screenshot for the README when OPTIMIS_SCREENSHOT_DIR is set: the page from the top of
- * `from` (or of the page) to the bottom of `until`.
- */
-async function docScreenshot(page, name, from, until) {
-  const dir = process.env.OPTIMIS_SCREENSHOT_DIR;
-  if (!dir) return;
-  const [top, bottom] = await page.evaluate(([a, b]) => [
-    a ? document.querySelector(a).getBoundingClientRect().top + window.scrollY - 12 : 0,
-    document.querySelector(b).getBoundingClientRect().bottom + window.scrollY + 12,
-  ], [from, until]);
-  const file = path.join(dir, name);
-  await page.screenshot({ path: file, fullPage: true, clip: { x: 0, y: Math.max(0, Math.floor(top)), width: page.viewportSize().width, height: Math.ceil(bottom - top) } });
-  const size = (await readFile(file)).length;
-  check(size < DOC_SCREENSHOT_LIMIT, `${file} is ${Math.round(size / 1000)} KB (under ${DOC_SCREENSHOT_LIMIT / 1000} KB)`);
-}
-
-/** Clicks `button` and returns the download: its suggested name and its bytes. */
-async function downloadFrom(page, button) {
-  const [download] = await Promise.all([page.waitForEvent('download'), button.click()]);
-  return { name: download.suggestedFilename(), bytes: await readFile(await download.path()) };
-}
-
-/** A CSV text as rows of fields (RFC 4180: CRLF lines, quoted fields with doubled quotes). */
-function parseCsv(text) {
-  const rows = [];
-  let row = [];
-  let field = '';
-  let quoted = false;
-  for (let i = 0; i < text.length; i += 1) {
-    const c = text[i];
-    if (quoted) {
-      if (c === '"' && text[i + 1] === '"') { field += '"'; i += 1; } else if (c === '"') quoted = false; else field += c;
-    } else if (c === '"') quoted = true;
-    else if (c === ',') { row.push(field); field = ''; } else if (c === '\r' && text[i + 1] === '\n') {
-      row.push(field); rows.push(row); row = []; field = ''; i += 1;
-    } else field += c;
-  }
-  return rows;
-}
-
 /** The spot job's page: Table 1 with the paper's column, Fig. 2 and the luminance chart. */
 export async function checkPaperJob(page, id) {
   await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
@@ -207,77 +163,13 @@ export async function checkPaperJob(page, id) {
   const shown = new Set(['plane1', 'plane2', 'plane3', 'switch', 'optimal_cv', result.recommended.strategy]).size;
   check(lum.bands === shown, `it shades ± 1 SE bands under the ${lum.bands} series shown at first (cases 1–4, optimal_cv, the recommended row)`);
   check(lum.guides === `y=${result.reference_luminance * 1e5}`, `it draws the quadrature reference as a horizontal line (${lum.guides})`);
+  for (const [ref, what] of [['weights-plot', 'Fig. 2'], ['luminance-plot', 'the luminance chart'], ['history-plot', 'the RMS history']]) {
+    await checkAxes(page, page.locator(`[data-ref="${ref}"]`), what);
+  }
   await screenshot(page, 'paper-job.png');
   // The noise table with its captions (with Fig. 2 beside it the picture would exceed the limit).
   await docScreenshot(page, 'dashboard-job.png', '[aria-labelledby="noise-heading"]', '[data-ref="honesty"]');
   return { result, figure };
-}
-
-/** The spot job's downloads: the noise table, Fig. 2's weights and the history as CSV, Fig. 2 as SVG, a chart as PNG, the moments. */
-export async function checkDownloads(page, id, { result, figure }) {
-  const quoting = await page.evaluate(async () => (await import('/assets/csv.js')).toCsv(['a', 'b'], [{ a: 'x,"y"', b: 'line\nbreak' }, { a: 1.5, b: null }]));
-  check(quoting === 'a,b\r\n"x,""y""","line\nbreak"\r\n1.5,\r\n', 'the CSV writer quotes as RFC 4180 says');
-
-  const csv = await downloadFrom(page, page.getByRole('button', { name: 'Noise table (CSV)' }));
-  const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
-  const col = (name) => header.indexOf(name);
-  check(csv.name === `optimis-job-${id}-noise.csv` && header.includes('luminance_model_units') && header.includes('rms_percent')
-    && header.includes('z_vs_expected') && header.includes('unstable') && header.includes('heuristics') && header.includes('paper_rms_percent')
-    && rows.length === result.noise_table.length,
-    `"Noise table (CSV)" saves ${csv.name}: ${rows.length} rows under ${header.length} named columns`);
-  check(rows.every((r, i) => Number(r[col('luminance_model_units')]) === result.noise_table[i].luminance
-    && Number(r[col('rms_percent')]) === result.noise_table[i].rms_percent && r[col('strategy')] === result.noise_table[i].strategy),
-  'its luminance (model units) and RMS (percent) are the API\'s numbers, in full');
-  check(rows.every((r, i) => (r[col('z_vs_expected')] === '' ? null : Number(r[col('z_vs_expected')])) === result.noise_table[i].z
-    && (r[col('recommended')] === 'true') === (result.noise_table[i].strategy === result.recommended.strategy)),
-  'its z is the API\'s z against the expectation at R, and it marks the recommended row');
-  const stacked = rows.find((r) => r[col('strategy')] === 'optimal_stacked');
-  check(JSON.stringify(JSON.parse(stacked[col('heuristics')] || '[]')) === JSON.stringify(result.noise_table.find((r) => r.strategy === 'optimal_stacked').heuristics),
-    'it carries the stacked row\'s β as JSON');
-
-  const weightsCsv = await downloadFrom(page, page.getByRole('button', { name: 'Weights (CSV)' }));
-  const [weightsHeader, ...weightRows] = parseCsv(weightsCsv.bytes.toString('utf8'));
-  const table = new Set(weightRows.map((r) => r[weightsHeader.indexOf('table')]));
-  const expectedTable = figure.fig.kind === 'table-optimum' ? 'table_optimum_not_recommended' : 'recommended';
-  check(weightRows.length === figure.fig.weights.length && table.size === 1 && table.has(expectedTable),
-    `"Weights (CSV)" saves the ${weightRows.length} cells Fig. 2 draws from, as "${expectedTable}"`);
-  const plane1 = rows.find((r) => r[col('strategy')] === 'plane1');
-  check(plane1[col('paper_case')] === '1' && Number(plane1[col('paper_luminance_model_units')]) === 26.484e-5 && plane1[col('paper_rms_percent')] === '208',
-    'it carries the paper\'s case and values');
-
-  const history = (await callApi(`/v1/jobs/${id}/history`)).json;
-  const historyCsv = await downloadFrom(page, page.getByRole('button', { name: 'History (CSV)' }));
-  const historyRows = parseCsv(historyCsv.bytes.toString('utf8'));
-  check(historyRows[0].join() === 'iterations,strategy,luminance_model_units,luminance_stderr_model_units,rms_percent'
-    && historyRows.length === 1 + history.points.reduce((n, p) => n + p.strategies.length, 0),
-  `"History (CSV)" saves one row per checkpoint and strategy (${historyRows.length - 1})`);
-
-  const svg = await downloadFrom(page, page.locator('[data-ref="weights-downloads"] button[data-download="svg"]'));
-  const text = svg.bytes.toString('utf8');
-  const count = (needle) => text.split(needle).length - 1;
-  check(svg.name === `optimis-job-${id}-fig2-w1.svg` && text.startsWith('<svg xmlns="http://www.w3.org/2000/svg"'),
-    `Fig. 2's "SVG" saves ${svg.name}, an SVG document`);
-  const { marks, fig } = figure;
-  check(count('class="series"') === 2 && count('class="error-bar"') === marks.bars && count('class="guide" data-axis="x" data-value="0.02"') === 1
-    && count('class="marker-open"') === marks.open && count('class="marker"') === marks.filled
-    && text.includes(`${fig.prefix}, r₂ ∈ [0.5, ∞)`) && text.includes('<title>Job'),
-  `the SVG draws the 2 series as paths, ${marks.filled} filled and ${marks.open} open markers, ${marks.bars} error bars, the r₃ = a marker and a legend`);
-  check((fig.kind !== 'table-optimum' || /<title>[^<]*not recommended[^<]*<\/title>/.test(text)) && (marks.open === 0 || text.includes('open: no data SE')),
-    'its title says when it is the table optimum, not the recommendation, and its legend explains the open markers');
-  const wellFormed = await page.evaluate((doc) => {
-    const parsed = new DOMParser().parseFromString(doc, 'image/svg+xml');
-    return parsed.documentElement.nodeName === 'svg' && parsed.getElementsByTagName('parsererror').length === 0;
-  }, text);
-  check(wellFormed, 'the SVG is well-formed XML');
-
-  const png = await downloadFrom(page, page.locator('[data-ref="luminance-downloads"] button[data-download="png"]'));
-  check(png.name === `optimis-job-${id}-luminance.png` && png.bytes.subarray(0, 8).equals(PNG_SIGNATURE) && png.bytes.length > 5000,
-    `the luminance chart's "PNG" saves ${png.name} (${Math.round(png.bytes.length / 1000)} KB)`);
-
-  const moments = await downloadFrom(page, page.getByRole('button', { name: 'Download moments' }));
-  const doc = JSON.parse(moments.bytes.toString('utf8'));
-  check(moments.name === `optimis-job-${id}-moments.json` && typeof doc === 'object' && doc !== null,
-    `"Download moments" saves ${moments.name} (named by the server's Content-Disposition)`);
 }
 
 /** Ticks the two jobs in the list, compares them, and checks the compare page. */
@@ -349,12 +241,21 @@ export async function checkCompare(page, { spot, uniform }, results) {
   await page.locator('select[data-ref="r2"]').selectOption({ index: 0 });
   await waitFor('the first r₂ bin again', async () => (await readPlot(page.locator('[data-ref="w1-plot"]'))).errorBars === first.bars, 5_000);
 
+  await checkAxes(page, page.locator('[data-ref="w1-plot"]'), 'the compare chart');
+  const contract = await csvContract();
   const csv = await downloadFrom(page, page.getByRole('button', { name: 'Compare table (CSV)' }));
   const [header, ...rows] = parseCsv(csv.bytes.toString('utf8'));
   const ids = new Set(rows.map((r) => r[header.indexOf('job_id')]));
-  check(header.slice(0, 3).join() === 'job_id,preset,illumination' && rows.length === results.reduce((n, r) => n + r.noise_table.length, 0)
+  check(header.join() === contract.compare.columns.join() && rows.length === results.reduce((n, r) => n + r.noise_table.length, 0)
     && ids.size === 2 && ids.has(String(spot)),
-    `"Compare table (CSV)" saves ${csv.name}: ${rows.length} rows, one per job and strategy`);
+  `"Compare table (CSV)" saves ${csv.name}: docs/csv.md's compare columns (the job's, then the noise table's), ${rows.length} rows, one per job and strategy`);
+  const weights = await downloadFrom(page, page.getByRole('button', { name: 'Weights (CSV)' }));
+  const [weightsHeader, ...weightRows] = parseCsv(weights.bytes.toString('utf8'));
+  check(weightsHeader.join() === ['job_id', 'table', 'strategy', 'lambda', ...contract.weights.columns].join()
+    && weightRows.length === figures.reduce((n, f) => n + f.weights.length, 0),
+  `its "Weights (CSV)" has job_id, table, strategy, lambda, then docs/csv.md's weights columns: ${weightRows.length} rows, one per job and cell`);
+  const png = await downloadFrom(page, page.locator('[data-ref="w1-downloads"] button[data-download="png"]'));
+  check(pngSize(png.bytes).width >= PNG_MIN_WIDTH, `the compare chart's PNG is ${pngSize(png.bytes).width} px wide`);
   await sleep(300); // the chart's first draw settles
   await screenshot(page, 'compare.png');
   await docScreenshot(page, 'dashboard-compare.png', null, '[aria-labelledby="compare-w1-heading"]');

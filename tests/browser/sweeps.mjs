@@ -1,16 +1,24 @@
 // The sweep steps of the browser test: a 2 × 2 sweep created through the API and followed on its
-// page to the end — its summary, points, CSV, charts and links — and a long one cancelled.
+// page to the end — its summary, points, CSV, charts (their axes and legends; the recommended w₁
+// as small multiples, one panel per point on shared axes, and their one SVG/PNG) and links — and a
+// long one cancelled.
 
 import { readFile } from 'node:fs/promises';
 
-import { UNFITTED, base, callApi, check, readPlot, waitFor } from './harness.mjs';
+import { PNG_MIN_WIDTH } from './downloads.mjs';
+import { downloadFrom, pngSize } from './files.mjs';
+import { UNFITTED, base, callApi, check, checkAxes, readPlot, waitFor } from './harness.mjs';
 
-// A 2 × 2 grid at a small budget (restricted engine: well under a second per run).
+// A 2 × 2 grid of the paper's scene at merge radii where the weights tables are informative (about
+// 3 s per run on two cores): seeded, three of its points recommend a table, the fourth
+// (R = 0.01, l3 = 3) a per-path strategy — both kinds of panel. A solver change that turns every
+// point per-path fails checkSweepCharts.
 const SWEEP = {
-  base: { iterations: 300, light_paths: 1000000, seed: 3 },
-  axes: [{ field: 'merge_radius', values: [0.003, 0.01] }, { field: 'scene.l3', values: [1, 3] }],
+  base: { iterations: 4000, seed: 3 },
+  axes: [{ field: 'merge_radius', values: [0.01, 0.02] }, { field: 'scene.l3', values: [1, 3] }],
   mode: 'grid',
 };
+const ITERATIONS = SWEEP.base.iterations * 4;
 // Runs far longer than the test: cancelled from its page.
 const LONG_SWEEP = { base: { iterations: 1000000, light_paths: 1000000 }, axes: [{ field: 'seed', values: [1, 2] }] };
 
@@ -53,7 +61,7 @@ export async function openSweep(page) {
     const badge = await page.locator('[data-ref="state"] .badge').textContent().catch(() => '');
     if (badge === 'failed' || badge === 'cancelled') throw new Error(`the sweep ended ${badge}`);
     return badge === 'succeeded';
-  }, 150_000);
+  }, 180_000);
   const sweep = (await callApi(`/v1/sweeps/${id}`)).json;
   check(sweep.state === 'succeeded' && sweep.points.every((p) => p.figures && !p.figures.partial),
     'the API agrees: the sweep succeeded and every point has final figures');
@@ -62,7 +70,8 @@ export async function openSweep(page) {
 
 export async function checkSweepSummary(page, sweep) {
   const progress = await page.locator('[data-ref="progress"] .progress-text').textContent();
-  check(progress === '1,200 / 1,200', `the sweep's progress bar reads ${progress} (4 runs × 300 iterations)`);
+  const total = ITERATIONS.toLocaleString('en-US');
+  check(progress === `${total} / ${total}`, `the sweep's progress bar reads ${progress} (4 runs × ${SWEEP.base.iterations} iterations)`);
   const runs = (await page.locator('[data-ref="runs-by-state"]').textContent()).replace(/\s+/g, ' ').trim();
   check(runs === 'succeeded 4', `the runs by state read "${runs}"`);
   check(await page.locator('[data-ref="cancel"]').isHidden(), 'a finished sweep has no Cancel button');
@@ -123,6 +132,7 @@ export async function checkSweepCharts(page, sweep) {
       return p.errorBars === moved && p;
     }, 5_000);
     check(after.labels.length === strategies.length, `with ${other.field} = ${other.values[1]} it redraws ${moved} bars, same series`);
+    await checkAxes(page, card.locator('.plot'), `the RMS chart of ${axis.field}`);
   }
   // Only points that recommend a weights table are drawn; the others recommend a per-path strategy.
   const tabled = sweep.points.filter((p) => p.figures.weights.length > 0);
@@ -130,21 +140,47 @@ export async function checkSweepCharts(page, sweep) {
   check(perPath.every((p) => p.figures.recommended.lambda === null),
     `the API's points without weights recommend a per-path strategy (λ null): ${perPath.map((p) => p.figures.recommended.strategy).join(', ') || 'none'}`);
   const note = await page.locator('[data-ref="w1-note"]').textContent();
-  check(perPath.length === 0 || (note.startsWith(`${perPath.length} of ${sweep.points.length} points recommend a per-path strategy`)
+  check(perPath.length === 0 || (note.includes(`${perPath.length} of ${sweep.points.length} points recommend a per-path strategy`)
     && perPath.every((p) => note.includes(`${describePoint(sweep, p)}: ${p.figures.recommended.strategy}`))),
   `the w₁(r₃) chart's note names the points that recommend a per-path strategy, which has no table ("${note.slice(0, 80)}…")`);
-  if (tabled.length === 0) {
-    const message = await page.locator('[data-ref="w1-plot"] .empty').textContent();
-    check(message === 'No point recommends a weights table.', `with none recommending a table the chart says so ("${message}")`);
-    return;
-  }
-  const w1 = await readPlot(page.locator('[data-ref="w1-plot"]'));
-  check(w1 !== null && w1.inked > 1000, `the w₁(r₃) chart is drawn (${w1?.inked} pixels)`);
-  const labels = tabled.map((p) => describePoint(sweep, p));
-  check(w1.labels.length === labels.length && w1.labels.every((l, i) => l.startsWith(labels[i])),
-    `it has one series per point that recommends a table, labelled ${labels.join(' | ')}`);
-  const bars = expectedW1Bars(sweep);
-  check(w1.errorBars === bars, `it draws ${w1.errorBars} error bars (± jackknife SE of w₁; none on smoothed cells)`);
+  check(tabled.length > 0, `${tabled.length} of ${sweep.points.length} points recommend a weights table`);
+  await checkW1Grid(page, sweep, tabled);
+}
+
+/**
+ * The recommended w₁(r₃) as small multiples: a panel per point in the sweep's grid (a column per
+ * value of its last axis), each named by its point; a chart in each that recommends a table, with
+ * its bars, on the same x and y ranges as the others; a line in each that does not; one SVG of the
+ * grid with a panel per chart, and its PNG at print resolution.
+ */
+async function checkW1Grid(page, sweep, tabled) {
+  const grid = page.locator('[data-ref="w1-grid"]');
+  const panels = await grid.locator('figure.w1-panel').evaluateAll((figs) => figs.map((f) => ({
+    point: Number(f.dataset.point), caption: f.querySelector('figcaption').textContent,
+    canvas: Boolean(f.querySelector('canvas')), bars: Number(f.querySelector('.plot').dataset.errorBars ?? 0), text: f.textContent,
+  })));
+  const columns = Number(await grid.getAttribute('data-columns'));
+  check(panels.length === sweep.points.length && panels.every((p, k) => p.point === sweep.points[k].index && p.caption.startsWith(describePoint(sweep, sweep.points[k])))
+    && columns === sweep.spec.axes.at(-1).values.length,
+  `the w₁(r₃) card has a panel per point, in the sweep's grid of ${columns} columns (${panels.map((p) => p.caption).join(' | ')})`);
+  const drawn = panels.filter((p) => p.canvas);
+  check(drawn.map((p) => p.point).join() === tabled.map((p) => p.index).join()
+    && panels.filter((p) => !p.canvas).every((p) => p.text.includes(`Recommends ${sweep.points[p.point].figures.recommended.strategy}, a per-path strategy`)),
+  `${drawn.length} panels draw a chart, one per point that recommends a table; the others say which per-path strategy they recommend`);
+  const bars = drawn.reduce((n, p) => n + p.bars, 0);
+  check(bars === expectedW1Bars(sweep), `they draw ${bars} error bars (± jackknife SE of w₁; none on smoothed cells)`);
+  const scales = await grid.locator('figure.w1-panel .plot').evaluateAll(async (plots) => {
+    const { plotOf } = await import('/assets/plots.js');
+    return plots.map(plotOf).filter(Boolean).map((u) => JSON.stringify([u.scales.x.min, u.scales.x.max, u.scales.y.min, u.scales.y.max]));
+  });
+  check(scales.length === drawn.length && new Set(scales).size === 1, `every panel has the same x and y ranges (${scales[0]})`);
+  await checkAxes(page, grid.locator('figure.w1-panel .plot').first(), 'a w₁(r₃) panel');
+  const card = page.locator('[data-chart="w1"]');
+  const svg = (await downloadFrom(page, card.locator('button[data-download="svg"]'))).bytes.toString('utf8');
+  check(svg.split('class="panel"').length - 1 === drawn.length && svg.includes('w₁ of the panel'),
+    `its SVG holds the ${drawn.length} panels and one legend`);
+  const png = await downloadFrom(page, card.locator('button[data-download="png"]'));
+  check(pngSize(png.bytes).width >= PNG_MIN_WIDTH, `its PNG is ${pngSize(png.bytes).width} × ${pngSize(png.bytes).height} px`);
 }
 
 /** A run's job page links back to its sweep, and so does the job list. */

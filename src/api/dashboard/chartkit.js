@@ -3,14 +3,15 @@
 // standard error of its own), and guide lines (a vertical marker such as r₃ = a, a horizontal
 // reference such as the quadrature luminance) — and the y range that keeps all of them in view.
 //
-// A chart's extras live on its PlotSlot (plots.js), indexed like the y series, so that a redraw
-// with new data needs no new plugin and the chart files (chartfiles.js) can draw the same things:
+// A chart's extras live on its PlotSlot (plots.js), indexed like the y series (null: none for that
+// series), so that a redraw with new data needs no new plugin and the chart files (chartsvg.js) can
+// draw the same things:
 //   slot.bars    [{ err: [...], color }]       error bars of series s + 1
 //   slot.bands   [{ lo: [...], hi: [...], color }]  a shaded band under series s + 1
 //   slot.markers [{ open: [...], color }]      a marker at every value of series s + 1, open where
 //                                              open[i] (the series itself then shows no points)
 //   slot.guides  { x: [{ value, label }], y: [{ value, label }] }
-//   slot.notes   ['…']                         legend lines of the chart files beside the series
+//   slot.notes   [{ marker, text }]            legend lines of the chart files beside the series
 // Every plugin writes what it drew to the container's data attributes (the browser test reads
 // them): data-error-bars, data-bands, data-markers, data-open-markers, data-guides.
 
@@ -40,8 +41,9 @@ export function errorBars(slot) {
     ctx.clip();
     ctx.lineWidth = devicePixelRatio;
     ctx.setLineDash([]);
-    (slot.bars ?? []).forEach(({ err, color }, s) => {
-      if (!u.series[s + 1]?.show) return;
+    (slot.bars ?? []).forEach((bar, s) => {
+      if (!bar || !u.series[s + 1]?.show) return;
+      const { err, color } = bar;
       ctx.strokeStyle = color;
       ctx.beginPath();
       err.forEach((e, i) => {
@@ -89,8 +91,9 @@ export function markers(slot) {
     ctx.clip();
     ctx.lineWidth = 1.5 * devicePixelRatio;
     ctx.setLineDash([]);
-    (slot.markers ?? []).forEach(({ open: isOpen, color }, s) => {
-      if (!u.series[s + 1]?.show) return;
+    (slot.markers ?? []).forEach((marker, s) => {
+      if (!marker || !u.series[s + 1]?.show) return;
+      const { open: isOpen, color } = marker;
       u.data[s + 1].forEach((y, i) => {
         if (y === null || y === undefined) return;
         const x = u.valToPos(u.data[0][i], 'x', true);

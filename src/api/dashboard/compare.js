@@ -9,10 +9,12 @@
 // one (preset uniform-illumination).
 
 import { TERMINAL, api } from './api.js';
+import { axis, legendValue } from './axes.js';
 import { errorBars, extent, guides, markers } from './chartkit.js';
 import { chartDownloads } from './chartfiles.js';
 import { csvButton } from './csv.js';
-import { figure2, figureSource, tableColumns, tableOptimumLambda } from './fig2.js';
+import { compareCsv, compareWeightsCsv } from './csvtables.js';
+import { figure2, figureSource, tableOptimumLambda, weightValue } from './fig2.js';
 import {
   badge, fixed, formatCount, formatLuminance, formatParameter, formatRms, h, instantiate, showMessage, withError,
 } from './format.js';
@@ -64,7 +66,7 @@ export function showCompare(app, query) {
 
   refs['table-downloads'].append(
     csvButton('Compare table (CSV)', `${name}.csv`, () => compareCsv(entries)),
-    csvButton('Weights (CSV)', `${name}-weights.csv`, () => weightsCsv(entries)));
+    csvButton('Weights (CSV)', `${name}-weights.csv`, () => compareWeightsCsv(entries)));
   refs['w1-downloads'].append(chartDownloads(slot, () => `${name}-w1`));
   refs.r2.addEventListener('change', () => {
     r2 = Number(refs.r2.value);
@@ -203,19 +205,16 @@ export function showCompare(app, query) {
     }
     slot.guides = { x: [...spots].map(([a, lit]) => ({ value: a, label: `a = ${formatParameter(a)} (#${lit.join(', #')})` })), y: [] };
     slot.draw({
-      series: [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) },
+      series: [{ label: 'r₃', value: legendValue(formatParameter) },
         ...series.map((s, k) => ({
           label: `#${s.e.id} ${s.e.job.spec.preset} (${describeLight(s.e.job.spec.scene.illumination)})${describeTable(s.e.figure)}`,
-          stroke: slot.bars[k].color, width: 2, points: { show: false },
-          value: (u, v, si, i) => {
-            const err = slot.bars[k]?.err[i];
-            if (v === null) return '—';
-            if (slot.markers[k]?.open[i]) return `${fixed(v, 3)} (no SE)`;
-            return `${fixed(v, 3)}${err === null || err === undefined ? '' : ` ± ${fixed(err, 3)}`}`;
-          },
+          stroke: slot.bars[k].color, width: 2, points: { show: false }, value: weightValue(slot, k),
         }))],
-      scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
-      axes: [{ label: `r₃ (cell midpoint), r₂ ∈ ${formatInterval(binsOf(withWeights[0].figure.weights, 'r2').find((b) => b[0] === r2))}` }, { label: 'w₁' }],
+      // From r₃ = 0 to the last finite cell's edge, so that the ticks start at 0.
+      scales: { x: { time: false, range: (u, min, max) => [0, Math.max(max, ...figures.map(({ fig }) => fig.edge ?? max))] },
+        y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
+      axes: [axis({ label: `r₃ (cell midpoint), r₂ ∈ ${formatInterval(binsOf(withWeights[0].figure.weights, 'r2').find((b) => b[0] === r2))}` }),
+        axis({ label: 'w₁' })],
       plugins: [errorBars(slot), markers(slot), guides(slot)],
     }, [x, ...series.map((s) => s.y)]);
     const kinds = new Set(withWeights.map((e) => e.job.spec.scene.illumination.kind));
@@ -253,46 +252,4 @@ async function tableOptimum(id, result, optima) {
 function describeTable(figure) {
   if (figure.kind === 'table-optimum') return `: table optimum (optimal_cv, λ = ${formatParameter(figure.lambda)}), not recommended`;
   return `: recommended ${figure.strategy}${figure.heuristics.length ? ' (table part)' : ''}`;
-}
-
-/** The compare table as CSV: one row per job and strategy, with the job's key parameters. */
-function compareCsv(entries) {
-  const columns = ['job_id', 'preset', 'illumination', 'spot_a', 'engine', 'light_paths', 'camera_paths', 'merge_radius', 'iterations', 'seed',
-    'reference_luminance_model_units', 'strategy', 'luminance_model_units', 'luminance_stderr_model_units', 'rms_percent', 'rms_percent_stderr',
-    'in_sample', 'unstable', 'recommended', 'error'];
-  const rows = entries.filter((e) => e.job && e.result).flatMap(({ job, result }) => result.noise_table.map((row) => ({
-    job_id: job.id,
-    preset: job.spec.preset,
-    illumination: job.spec.scene.illumination.kind,
-    spot_a: job.spec.scene.illumination.kind === 'spot' ? job.spec.scene.illumination.a : null,
-    engine: job.spec.engine || 'brute',
-    light_paths: job.spec.light_paths,
-    camera_paths: job.spec.camera_paths,
-    merge_radius: job.spec.merge_radius,
-    iterations: result.iterations,
-    seed: job.spec.seed,
-    reference_luminance_model_units: result.reference_luminance,
-    strategy: row.strategy,
-    luminance_model_units: row.luminance,
-    luminance_stderr_model_units: row.luminance_stderr,
-    rms_percent: row.rms_percent,
-    rms_percent_stderr: row.rms_percent_stderr,
-    in_sample: row.in_sample,
-    unstable: row.unstable,
-    recommended: result.recommended?.strategy === row.strategy,
-    error: row.error,
-  })));
-  return { columns, rows };
-}
-
-/** Every compared job's drawn weights table (recommended, or the table optimum: `table` says which), one row per job and cell. */
-function weightsCsv(entries) {
-  const columns = ['job_id', 'table', 'strategy', 'lambda', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2', 'w1_stderr',
-    'samples', 'status'];
-  const rows = entries.filter((e) => e.figure?.weights).flatMap(({ id, figure }) => figure.weights.map((w) => ({
-    job_id: id, ...tableColumns(figure), lambda: figure.lambda,
-    r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
-    w0: w.w0, w1: w.w1, w2: w.w2, w1_stderr: w.w1_stderr, samples: w.samples, status: w.status,
-  })));
-  return { columns, rows };
 }

@@ -8,6 +8,7 @@
 // reference, labelled as not recommended. Cells the gradient penalty set (status `smoothed`) have
 // no data standard error: open markers, no bars.
 
+import { axis, legendValue } from './axes.js';
 import { errorBars, extent, guides, markers } from './chartkit.js';
 import { fixed, formatBetas, formatParameter, showMessage, signed } from './format.js';
 import { UNFITTED, WEIGHT_RANGE, binsOf, formatInterval, spotGuide, weightRange } from './plots.js';
@@ -83,7 +84,9 @@ export function figure2(weights) {
       open: cell.map((w) => (w ? openCell(w) : false)),
     };
   });
-  return { x, series, phi, phiBins: binsOf(weights, 'phi').length };
+  // The largest finite r₃ edge: the x axis runs from 0 to it.
+  const edge = cells.length ? Math.max(...cells.map((w) => w.r3[1])) : null;
+  return { x, series, phi, phiBins: binsOf(weights, 'phi').length, edge };
 }
 
 const R2_COLORS = ['#1f5fa8', '#c4561d', '#2ca02c', '#9467bd'];
@@ -117,7 +120,7 @@ export function drawWeights(slot, { note, kind }, source, spec, jobTitle) {
   slot.title = `${jobTitle}: ${labels.title}`;
   kind.textContent = labels.heading;
   kind.dataset.kind = source.kind;
-  const { x, series: bins, phi, phiBins } = figure2(source.weights);
+  const { x, series: bins, phi, phiBins, edge } = figure2(source.weights);
   const colors = bins.map((b, k) => R2_COLORS[k % R2_COLORS.length]);
   slot.bars = bins.map((b, k) => ({ err: b.err, color: colors[k] }));
   slot.markers = bins.map((b, k) => ({ open: b.open, color: colors[k] }));
@@ -129,29 +132,33 @@ export function drawWeights(slot, { note, kind }, source, spec, jobTitle) {
     open < drawn && open ? { marker: 'filled', text: 'filled: fitted to its own samples, ± 1 jackknife SE' } : null,
     open ? { marker: 'open', text: 'open: no data SE (smoothed: set by its neighbours through λ), no bar' } : null,
   ].filter(Boolean);
-  const series = [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
+  const series = [{ label: 'r₃', value: legendValue(formatParameter) }];
   bins.forEach((b, k) => series.push({
     label: `${labels.series}, r₂ ∈ ${formatInterval(b.r2)}`, stroke: colors[k], width: 2, dash: k ? [8, 4] : [],
-    points: { show: false }, value: legendValue(slot, k),
+    points: { show: false }, value: weightValue(slot, k),
   }));
   slot.draw({
     series,
-    scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max]), part ? [0] : [0, 1]) } },
-    axes: [{ label: `r₃ (cell midpoint)${phiBins > 1 ? `, φ ∈ ${formatInterval(phi.map((v) => Number(v.toFixed(3))))}` : ''}` },
-      { label: part ? 'T₁ (table part of w₁)' : 'w₁' }],
+    scales: { x: { time: false, range: (u, min, max) => [0, edge ?? max] },
+      y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max]), part ? [0] : [0, 1]) } },
+    axes: [axis({ label: `r₃ (cell midpoint)${phiBins > 1 ? `, φ ∈ ${formatInterval(phi.map((v) => Number(v.toFixed(3))))}` : ''}` }),
+      axis({ label: part ? 'T₁ (table part of w₁)' : 'w₁' })],
     cursor: { drag: { x: true, y: false } },
     plugins: [errorBars(slot), markers(slot), guides(slot)],
   }, [x, ...bins.map((b) => b.y)]);
   showMessage(note, caption(source, { x, bins, open, drawn, phiBins, guided: slot.guides.x.length > 0 }));
 }
 
-/** The value shown in the legend: w₁ ± its SE, or that the cell has no SE. */
-const legendValue = (slot, k) => (u, v, si, i) => {
-  if (v === null) return '—';
+/**
+ * The value of series k + 1 of `slot` in the legend under the cursor: w₁ ± its SE (from slot.bars,
+ * not the series' data: a redraw with the same series keeps these functions), or that the cell has
+ * no SE. Shared by the compare overlay and the sweep's small multiples.
+ */
+export const weightValue = (slot, k) => legendValue((v, i) => {
   const e = slot.bars?.[k]?.err[i];
   if (slot.markers?.[k]?.open[i]) return `${fixed(v, 3)} (no SE)`;
   return `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
-};
+});
 
 /** What the chart shows and how to read it. */
 function caption(source, { x, bins, open, drawn, phiBins, guided }) {

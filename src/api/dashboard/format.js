@@ -73,6 +73,21 @@ export function formatParameter(x) {
   return String(Number(x.toPrecision(6)));
 }
 
+/**
+ * A number over a wide range to `digits` significant digits: as itself from 0.01 to 99,999
+ * (414, 12,300, 0.042), else mantissa·10ⁿ (3.16·10⁷, 4.2·10⁻³), a power of ten alone (10⁸).
+ */
+export function formatScientific(x, digits = 3) {
+  if (x === null || x === undefined || !Number.isFinite(x)) return '—';
+  if (x === 0) return '0';
+  const rounded = Number(x.toPrecision(digits));
+  const e = Math.floor(Math.log10(Math.abs(rounded)) + 1e-12);
+  if (e >= -2 && e < 5) return rounded.toLocaleString(undefined, { maximumFractionDigits: 12 });
+  const m = Number((rounded / 10 ** e).toPrecision(digits));
+  const power = `10${[...String(e)].map((c) => SUPERSCRIPTS[c]).join('')}`;
+  return m === 1 ? power : `${String(m).replace('-', '−')}·${power}`;
+}
+
 /** A number with a real minus sign: `−0.126`. */
 export const signed = (x, digits) => `${x < 0 ? '−' : ''}${fixed(Math.abs(x), digits)}`;
 

@@ -1,11 +1,12 @@
 // The job page: one job, streamed live while it runs, its figures and specification, cancel,
-// extend and the moments download, and its results (results.js).
+// extend and the moments download, its results (results.js) and its ray budget (budget.js).
 
 import { TERMINAL, api, download, streamJob } from './api.js';
 import {
   badge, describeBest, formatCount, formatDuration, formatParameter, formatRate, formatTime, h, instantiate, showMessage,
   updateProgress,
 } from './format.js';
+import { BudgetPanel } from './budget.js';
 import { PlotSlot } from './plots.js';
 import { ResultsLoader } from './results.js';
 
@@ -23,6 +24,9 @@ export function showJob(app, id) {
     history: new PlotSlot(refs['history-plot'], `Job ${id}: RMS error against iterations`),
   };
   const results = new ResultsLoader(id, refs, plots);
+  // After the noise table, before the charts: what to run next follows from the table.
+  const budget = new BudgetPanel(id);
+  refs.body.querySelector('.plots').before(budget.card);
   let job = null;
   let closeStream = null;
   let retryTimer = null;
@@ -43,6 +47,7 @@ export function showJob(app, id) {
     const { iterations_done: done, iterations_total: total } = job.progress;
     document.title = `Job ${job.id} · ${job.state}${TERMINAL.has(job.state) ? '' : ` ${done}/${total}`} · optimis`;
     results.update(job);
+    budget.update(job);
     if (TERMINAL.has(job.state)) setLive('');
     else openStream();
   }

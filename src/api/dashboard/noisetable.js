@@ -3,14 +3,14 @@
 // row's expected luminance at the job's merge radius R, RMS % ± SE, the paper's case number and —
 // when the job runs the paper's configuration — the paper's L and RMS; the recommended row marked
 // (the server's `recommended`, which is not always the lowest RMS: the reason says why), the
-// in-sample, unstable and outside-the-fixed-weights rows marked; and the same table as CSV rows.
+// in-sample, unstable and outside-the-fixed-weights rows marked (its CSV is csvtables.js's).
 
 import { fixed, formatBetas, formatLuminance, formatParameter, formatRms, h, signed, withError } from './format.js';
 import { paperMismatches } from './paper.js';
 
 // The paper's case numbers of the strategies that have one: which row is which case, whatever the
 // configuration (the published figures themselves come with the result, where they apply).
-const CASES = { plane1: '1', plane2: '2', plane3: '3', switch: '4', optimal: '5' };
+export const CASES = { plane1: '1', plane2: '2', plane3: '3', switch: '4', optimal: '5' };
 
 const MARKS = {
   'in-sample': 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)',
@@ -51,7 +51,7 @@ export function referenceNote(result, spec) {
  * A strategy's published row (case, L, RMS %) in the tables the server attached to the result
  * (`references`: the repository's references/*.json, for a job with the paper's configuration).
  */
-function published(result, strategy) {
+export function published(result, strategy) {
   for (const table of result.references ?? []) {
     const row = table.rows.find((r) => r.strategy === strategy);
     if (row) return row;
@@ -185,38 +185,4 @@ function describeCrossValidation(row, folds) {
   if (row.lambda !== null) parts.push(`λ = ${formatParameter(row.lambda)}`);
   if (row.in_sample_rms_percent !== null) parts.push(`in-sample RMS ${formatRms(row.in_sample_rms_percent)} %`);
   return `λ by cross-validation (one-SE rule), ${folds}-fold cross-fitted${parts.length ? ` (${parts.join('; ')})` : ''}`;
-}
-
-/** The noise table as CSV rows (luminance in model units, RMS in percent; the paper's columns empty unless they apply). */
-export function noiseCsv(result) {
-  const paper = (result.references ?? []).length > 0;
-  const columns = ['strategy', 'paper_case', 'luminance_model_units', 'luminance_stderr_model_units', 'expected_luminance_at_r_model_units',
-    'z_vs_expected', 'expected_error', 'reference_luminance_r0_model_units', 'rms_percent', 'rms_percent_stderr', 'in_sample', 'respects_fixed',
-    'unstable', 'recommended', 'lambda', 'heuristics', 'paper_luminance_model_units', 'paper_rms_percent', 'error'];
-  const rows = result.noise_table.map((row) => {
-    const ours = published(result, row.strategy);
-    return {
-      strategy: row.strategy,
-      paper_case: CASES[row.strategy],
-      luminance_model_units: row.luminance,
-      luminance_stderr_model_units: row.luminance_stderr,
-      expected_luminance_at_r_model_units: row.expected_luminance,
-      z_vs_expected: row.z,
-      expected_error: row.expected_error,
-      reference_luminance_r0_model_units: result.reference_luminance,
-      rms_percent: row.rms_percent,
-      rms_percent_stderr: row.rms_percent_stderr,
-      in_sample: row.in_sample,
-      respects_fixed: row.respects_fixed,
-      unstable: row.unstable,
-      recommended: row.strategy === result.recommended?.strategy,
-      lambda: row.lambda,
-      // β of the stacked heuristics as JSON ([{strategy, beta, beta_stderr}]); empty for the others.
-      heuristics: row.heuristics?.length ? JSON.stringify(row.heuristics) : null,
-      paper_luminance_model_units: paper ? ours?.luminance : null,
-      paper_rms_percent: paper ? ours?.rms_percent : null,
-      error: row.error,
-    };
-  });
-  return { columns, rows };
 }

@@ -2,10 +2,11 @@
 // quadrature reference) and the RMS against iterations — and what every chart shares (the chart
 // slot, the strategies' order and colours, the weights' range and cells; Fig. 2 is fig2.js's).
 // uPlot is the vendored library, loaded before this module as a classic script (a global); the
-// plugins are chartkit.js's.
+// plugins are chartkit.js's, the axes' ticks and sizes and the legend's values axes.js's.
 
 /* global uPlot */
 
+import { axis, legendValue } from './axes.js';
 import { bands, extent, guides, linearRange } from './chartkit.js';
 import { fixed, formatCount, formatLuminance, formatParameter, formatRms, h, showMessage } from './format.js';
 import { luminanceStderr } from './paper.js';
@@ -42,6 +43,12 @@ export function strategiesIn(lists) {
 // in the hundreds, which would flatten every other cell to a line.
 export const WEIGHT_RANGE = [-1, 2];
 
+// The chart drawn in each container, for the browser test (plotOf).
+const drawn = new WeakMap();
+
+/** The uPlot instance drawn in `container`, if any (the browser test reads its axes through it). */
+export const plotOf = (container) => drawn.get(container)?.plot ?? null;
+
 /**
  * One uPlot chart in a container, rebuilt only when its series change; follows the page width.
  * `title` names it in its downloads; `bars`, `bands` and `guides` are its extras (chartkit.js).
@@ -52,12 +59,14 @@ export class PlotSlot {
     this.title = title;
     this.plot = null;
     this.signature = '';
+    this.height = 300;
     this.onResize = () => this.plot?.setSize(this.size());
     window.addEventListener('resize', this.onResize);
+    drawn.set(container, this);
   }
 
   size() {
-    return { width: Math.max(280, this.container.clientWidth || 600), height: 300 };
+    return { width: Math.max(200, this.container.clientWidth || 600), height: this.height };
   }
 
   draw(options, data) {
@@ -128,7 +137,7 @@ export function drawLuminance(slot, note, points, reference, recommended) {
     return;
   }
   const x = points.map((p) => p.iterations);
-  const series = [{ label: 'iterations', value: (u, v) => (v === null ? '—' : formatCount(v)) }];
+  const series = [{ label: 'iterations', value: legendValue(formatCount) }];
   const data = [x];
   slot.bands = [];
   const shown = luminanceShown(recommended);
@@ -146,17 +155,17 @@ export function drawLuminance(slot, note, points, reference, recommended) {
     series.push({
       label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), width: 2,
       show: shown.has(strategy), points: { show: points.length < 40, size: 4 },
-      value: (u, v, si, i) => {
+      value: legendValue((v, i) => {
         const band = slot.bands[k];
-        return v === null ? '—' : `${fixed(v, 2)}${band?.hi[i] === null ? '' : ` ± ${fixed(band.hi[i] - v, 2)}`}`;
-      },
+        return `${fixed(v, 2)}${band?.hi[i] === null || band?.hi[i] === undefined ? '' : ` ± ${fixed(band.hi[i] - v, 2)}`}`;
+      }),
     });
   }
   slot.guides = { x: [], y: reference === null ? [] : [{ value: reference * 1e5, label: `reference R → 0 (quadrature) ${formatLuminance(reference)}` }] };
   slot.draw({
     series,
     scales: { x: { time: false }, y: { range: (u) => linearRange(extent(u, slot, false)) } },
-    axes: [{ label: 'iterations M' }, { label: 'L·10⁵ (± 1 SE band)', size: 60 }],
+    axes: [axis({ label: 'iterations M' }), axis({ label: 'L·10⁵ (± 1 SE band)' })],
     plugins: [bands(slot), guides(slot)],
   }, data);
   showMessage(note, `Bands: ± 1 standard error, L · (RMS/100) / √M at each checkpoint. Dashed: the quadrature reference in the limit R → 0${reference === null ? ' (none for this scene)' : ''}; at the job's R a strategy may expect another L (the noise table's z is taken against that). Shown at first: the paper's cases 1–4, optimal_cv and the recommended row; click a legend entry to show or hide a strategy; the in-sample optimum is optimistic.${points.length === 1 ? ' One checkpoint so far: lines appear from the second on.' : ''}`);
@@ -169,7 +178,7 @@ export function drawHistory(slot, note, points) {
     return;
   }
   const x = points.map((p) => p.iterations);
-  const series = [{ label: 'iterations', value: (u, v) => (v === null ? '—' : formatCount(v)) }];
+  const series = [{ label: 'iterations', value: legendValue(formatCount) }];
   const data = [x];
   for (const strategy of strategiesIn(points.map((p) => p.strategies))) {
     // Log scale: a missing or non-positive RMS becomes a gap.
@@ -179,7 +188,7 @@ export function drawHistory(slot, note, points) {
     }));
     series.push({
       label: strategy, stroke: strategyColor(strategy), width: 2, points: { show: points.length < 40, size: 4 },
-      value: (u, v) => (v === null ? '—' : `${formatRms(v)} %`),
+      value: legendValue((v) => `${formatRms(v)} %`),
     });
   }
   // One object for the slot's life: a redraw with the same series keeps the first options (and
@@ -189,7 +198,7 @@ export function drawHistory(slot, note, points) {
   slot.draw({
     series,
     scales: { x: { time: false }, y: { distr: 3, range: (u) => settledRange(u, clipped) } },
-    axes: [{ label: 'iterations' }, { label: 'RMS error (%, log scale)', size: 70 }],
+    axes: [axis({ label: 'iterations M' }), axis({ label: 'RMS error (%, log scale)' }, true)],
   }, data);
   const notes = [];
   if (points.length === 1) notes.push('One checkpoint so far: lines appear from the second on.');

@@ -7,10 +7,10 @@
 import { TERMINAL, api } from './api.js';
 import { chartDownloads } from './chartfiles.js';
 import { csvButton } from './csv.js';
+import { historyCsv, noiseCsv, weightsCsv } from './csvtables.js';
 import { fixed, formatCount, h, showMessage, withError } from './format.js';
-import { drawWeights, figureSource, tableColumns, tableOptimumLambda } from './fig2.js';
-import { noiseCsv, noiseRows, paperNote, recommendedNote, referenceNote } from './noisetable.js';
-import { luminanceStderr } from './paper.js';
+import { drawWeights, figureSource, tableOptimumLambda } from './fig2.js';
+import { noiseRows, paperNote, recommendedNote, referenceNote } from './noisetable.js';
 import { drawHistory, drawLuminance } from './plots.js';
 import { SolvesPanel } from './solves.js';
 
@@ -155,36 +155,6 @@ export class ResultsLoader {
     drawLuminance(this.plots.luminance, refs['luminance-note'], history.points, result.reference_luminance, result.recommended?.strategy);
     drawHistory(this.plots.history, refs['history-note'], history.points);
   }
-}
-
-/**
- * Every cell's weights of the table Fig. 2 shows (`figure`, fig2.js's figureSource) as CSV rows (an
- * open interval's upper edge empty): `table` says whether it is the recommended table (of a stacked
- * row: its table part) or the table optimum drawn for reference; none when there is no table.
- */
-function weightsCsv(figure) {
-  const columns = ['table', 'strategy', 'lambda', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'phi_lo', 'phi_hi', 'w0', 'w1', 'w2',
-    'w0_stderr', 'w1_stderr', 'w2_stderr', 'samples', 'status'];
-  const rows = (figure?.weights ?? []).map((w) => ({
-    ...tableColumns(figure), lambda: figure.lambda,
-    r2_lo: w.r2[0], r2_hi: w.r2[1], r3_lo: w.r3[0], r3_hi: w.r3[1], phi_lo: w.phi[0], phi_hi: w.phi[1],
-    w0: w.w0, w1: w.w1, w2: w.w2, w0_stderr: w.w0_stderr, w1_stderr: w.w1_stderr, w2_stderr: w.w2_stderr,
-    samples: w.samples, status: w.status,
-  }));
-  return { columns, rows };
-}
-
-/** The history, one row per checkpoint and strategy, with SE(L) = L · (RMS/100) / √M. */
-function historyCsv(history) {
-  const columns = ['iterations', 'strategy', 'luminance_model_units', 'luminance_stderr_model_units', 'rms_percent'];
-  const rows = history.points.flatMap((p) => p.strategies.map((s) => ({
-    iterations: p.iterations,
-    strategy: s.strategy,
-    luminance_model_units: s.luminance,
-    luminance_stderr_model_units: luminanceStderr(s.luminance, s.rms_percent, p.iterations),
-    rms_percent: s.rms_percent,
-  })));
-  return { columns, rows };
 }
 
 function describeGain(gain) {

@@ -1,15 +1,14 @@
 // The sweep page: one sweep, polled while it runs — its progress (runs by state, iterations), its
 // specification, the table of its points with their jobs, the CSV download, cancel, and the charts
-// (sweepplots.js) with their SVG/PNG downloads.
+// (sweepplots.js, sweepw1.js) with their SVG/PNG downloads.
 
 import { TERMINAL, api, download, hasToken } from './api.js';
 import {
   badge, formatCount, formatParameter, formatRms, formatTime, h, instantiate, showMessage, updateProgress, withError,
 } from './format.js';
-import { chartDownloads } from './chartfiles.js';
-import { PlotSlot } from './plots.js';
 import { describeValue } from './sweepdata.js';
-import { RmsChart, drawW1 } from './sweepplots.js';
+import { RmsChart } from './sweepplots.js';
+import { W1Grid } from './sweepw1.js';
 
 const POLL_MS = 2000;
 
@@ -22,8 +21,7 @@ export function showSweep(app, id) {
   const csv = `/v1/sweeps/${id}/table?format=csv`;
   refs.csv.href = csv;
   refs.csv.download = `sweep-${id}.csv`;
-  const w1Plot = new PlotSlot(refs['w1-plot'], `Sweep ${id}: recommended w₁ against r₃`);
-  refs['w1-plot'].parentElement.append(chartDownloads(w1Plot, `optimis-sweep-${id}-w1`));
+  const w1 = new W1Grid(id, refs['w1-plot'], refs['w1-note']);
   let charts = null; // one RmsChart per swept field, made with the first answer
   let rows = null; // point index → its <tr>
   let timer = null;
@@ -69,7 +67,7 @@ export function showSweep(app, id) {
     }
     for (const point of sweep.points) fillPointRow(rows.get(point.index), point);
     for (const chart of charts) chart.update(sweep);
-    drawW1(w1Plot, refs['w1-note'], sweep);
+    w1.update(sweep);
   }
 
   refs.cancel.addEventListener('click', async () => {
@@ -97,7 +95,7 @@ export function showSweep(app, id) {
   return () => {
     alive = false;
     clearTimeout(timer);
-    w1Plot.destroy();
+    w1.destroy();
     for (const chart of charts ?? []) chart.destroy();
   };
 }

@@ -86,7 +86,7 @@ const firstBin = (rows, key) => Math.min(...rows.map((w) => w[key][0]));
  * bin and the first φ bin: x is the union of the cells' midpoints (the open tail cell [lo, ∞) is
  * left out); per point, w₁ (null in cells whose weights the server copied from a neighbour, as on
  * the job page), its jackknife standard error and whether the cell has none (`open`: smoothed).
- * A table with heuristics stacked on it is its table part (its label says so). `bins` tells
+ * A table with heuristics stacked on it is its table part (`part`; its label says so). `bins` tells
  * whether there were several r₂ or φ bins, and which were taken; `perPath` lists the points that
  * recommend a per-path strategy (no table) and `missing` counts those without figures yet.
  */
@@ -108,6 +108,7 @@ export function w1AgainstR3(sweep) {
     const part = point.figures.recommended?.heuristics?.length > 0;
     return [{
       point: point.index,
+      part,
       label: `${describePoint(point, sweep.fields)}${part ? ` (${point.figures.recommended.strategy}: table part)` : ''}`,
       y: x.map((v) => at.get(v)?.w1 ?? null),
       err: x.map((v) => (at.has(v) && !open(at.get(v)) ? at.get(v).w1_stderr : null)),

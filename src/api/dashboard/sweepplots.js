@@ -1,19 +1,16 @@
-// The sweep page's charts: per swept field, the RMS of every strategy against the field's value
-// (with a selector per other axis of a grid), and the recommended w₁ against r₃ of every point
-// that recommends a weights table (open markers for cells without a data SE), both with error bars
-// (± 1 standard error; chartkit.js) and SVG/PNG downloads (chartfiles.js). The numbers come from
-// sweepdata.js.
+// The sweep page's RMS charts: per swept field, the RMS of every strategy against the field's value
+// (with a selector per other axis of a grid), with error bars (± 1 standard error; chartkit.js) and
+// SVG/PNG downloads (chartfiles.js). The numbers come from sweepdata.js; the recommended w₁ of
+// every point is sweepw1.js's.
 
 /* global uPlot */
 
-import { errorBars, extent, logRange, markers } from './chartkit.js';
+import { axis, fitSize, legendValue, logLabel } from './axes.js';
+import { errorBars, extent, logRange } from './chartkit.js';
 import { chartDownloads } from './chartfiles.js';
-import { fixed, formatParameter, formatRms, h, showMessage } from './format.js';
-import { PlotSlot, strategyColor, weightRange } from './plots.js';
-import { describeValue, hasSelectors, rmsAgainst, w1AgainstR3 } from './sweepdata.js';
-
-const POINT_COLORS = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
-const POINT_DASHES = [[], [6, 4], [2, 3], [12, 3, 2, 3]];
+import { formatParameter, formatRms, h, showMessage } from './format.js';
+import { PlotSlot, strategyColor } from './plots.js';
+import { describeValue, hasSelectors, rmsAgainst } from './sweepdata.js';
 
 /** The x scale and axis of a field: its values (a log scale when they span a decade or more), or its values' indices named by `labels`. */
 function xAxisOf(data, field) {
@@ -21,7 +18,7 @@ function xAxisOf(data, field) {
     const n = data.labels.length;
     return {
       scale: { time: false, range: () => [-0.5, n - 0.5] },
-      axis: { label: field, splits: () => data.labels.map((_, i) => i), values: (u, splits) => splits.map((i) => data.labels[i] ?? '') },
+      axis: { label: field, size: fitSize, splits: () => data.labels.map((_, i) => i), values: (u, splits) => splits.map((i) => data.labels[i] ?? '') },
     };
   }
   const [min, max] = [Math.min(...data.x), Math.max(...data.x)];
@@ -35,15 +32,14 @@ function xAxisOf(data, field) {
       const pad = lo === hi ? Math.abs(lo) * 0.5 || 1 : 0.06 * (hi - lo);
       return [lo - pad, hi + pad];
     };
-  const axis = {
-    label: log ? `${field} (log scale)` : field,
-    values: (u, splits) => splits.map((v) => (v === null ? '' : formatParameter(v))),
-  };
-  if (few) {
-    axis.splits = () => values;
-    axis.filter = (u, splits) => splits; // a log axis would otherwise label only 1, 2 and 5 × 10ⁿ
-  }
-  return { scale: { time: false, distr: log ? 3 : 1, range }, axis };
+  const label = log ? `${field} (log scale)` : field;
+  // Few values: a tick at each, labelled as the spec gives it (the chart files tick the same: xTicks).
+  const ticks = few ? {
+    splits: () => values,
+    filter: (u, splits) => splits, // a log axis would otherwise label only 1, 2 and 5 × 10ⁿ
+    values: (u, splits) => splits.map((v) => (v === null ? '' : log ? logLabel(v) : formatParameter(v))),
+  } : {};
+  return { scale: { time: false, distr: log ? 3 : 1, range }, axis: axis({ label, ...ticks }, log), xTicks: few ? values : null };
 }
 
 function drawRms(slot, note, data, field, sweep) {
@@ -53,10 +49,10 @@ function drawRms(slot, note, data, field, sweep) {
     showMessage(note, '');
     return;
   }
-  const { scale, axis } = xAxisOf(data, field);
+  const { scale, axis: xAxis, xTicks } = xAxisOf(data, field);
   slot.xLabels = data.numeric ? null : data.labels;
-  const xValue = (u, v) => (v === null ? '—' : data.numeric ? formatParameter(v) : data.labels[v]);
-  const series = [{ label: field, value: xValue }];
+  slot.xTicks = xTicks ?? null;
+  const series = [{ label: field, value: legendValue((v) => (data.numeric ? formatParameter(v) : data.labels[v])) }];
   slot.bars = data.series.map((s) => ({ err: s.err, color: strategyColor(s.strategy) }));
   data.series.forEach((s, k) => {
     const outside = { all: ' (outside fixed weights)', some: ' (outside fixed weights at some points)', '': '' }[s.outside];
@@ -64,16 +60,16 @@ function drawRms(slot, note, data, field, sweep) {
       label: `${s.strategy}${outside}`, stroke: slot.bars[k].color, width: 1.5, dash: s.outside ? [6, 4] : [],
       points: { show: true, size: 5 },
       // slot.bars, not s: a redraw with the same series keeps these functions but not the data.
-      value: (u, v, si, i) => {
+      value: legendValue((v, i) => {
         const e = slot.bars[k]?.err[i];
-        return v === null ? '—' : `${formatRms(v)}${e ? ` ± ${formatRms(e)}` : ''} %`;
-      },
+        return `${formatRms(v)}${e ? ` ± ${formatRms(e)}` : ''} %`;
+      }),
     });
   });
   slot.draw({
     series,
     scales: { x: scale, y: { distr: 3, range: (u) => logRange(extent(u, slot, true)) } },
-    axes: [axis, { label: 'RMS error (%, log scale)', size: 60 }],
+    axes: [xAxis, axis({ label: 'RMS error (%, log scale)' }, true)],
     plugins: [errorBars(slot)],
   }, [data.x, ...data.series.map((s) => s.y)]);
   const predicted = data.points.some((i) => sweep.points[i].figures?.source === 'predicted');
@@ -122,45 +118,4 @@ export class RmsChart {
   destroy() {
     this.slot.destroy();
   }
-}
-
-/** The recommended w₁ of every point against r₃ (cell midpoints), one line per point. */
-export function drawW1(slot, note, sweep) {
-  const data = w1AgainstR3(sweep);
-  const perPath = data.perPath.length
-    ? `${data.perPath.length} of ${sweep.points.length} points recommend a per-path strategy, which has no weights table (${data.perPath.map((p) => `${p.label}: ${p.strategy}`).join('; ')}); a measured point's job page draws its table optimum instead.`
-    : '';
-  if (data.x.length === 0) {
-    slot.clear(data.perPath.length ? 'No point recommends a weights table.' : 'No weights yet: they appear with the first checkpoint of a run.');
-    showMessage(note, perPath);
-    return;
-  }
-  slot.bars = data.series.map((s, k) => ({ err: s.err, color: POINT_COLORS[k % POINT_COLORS.length] }));
-  slot.markers = data.series.map((s, k) => ({ open: s.open, color: POINT_COLORS[k % POINT_COLORS.length] }));
-  const open = data.series.reduce((n, s) => n + s.open.filter((o, i) => o && s.y[i] !== null).length, 0);
-  slot.notes = open ? [{ marker: 'open', text: 'open: no data SE (smoothed: set by its neighbours through λ), no bar' }] : [];
-  const series = [{ label: 'r₃', value: (u, v) => (v === null ? '—' : formatParameter(v)) }];
-  data.series.forEach((s, k) => series.push({
-    label: s.label, stroke: slot.bars[k].color, width: 1.5,
-    dash: POINT_DASHES[Math.floor(k / POINT_COLORS.length) % POINT_DASHES.length], points: { show: false },
-    value: (u, v, si, i) => {
-      const e = slot.bars[k]?.err[i];
-      if (v === null) return '—';
-      if (slot.markers[k]?.open[i]) return `${fixed(v, 3)} (no SE)`;
-      return `${fixed(v, 3)}${e === null || e === undefined ? '' : ` ± ${fixed(e, 3)}`}`;
-    },
-  }));
-  const bins = [];
-  if (data.bins.r2) bins.push(`r₂ ∈ [${data.bins.r2.map((v) => (v === null ? '∞' : formatParameter(v))).join(', ')})`);
-  if (data.bins.phi) bins.push(`φ ∈ [${data.bins.phi.map((v) => fixed(v, 2)).join(', ')})`);
-  slot.draw({
-    series,
-    scales: { x: { time: false }, y: { range: (u, min, max) => weightRange(u, ...(extent(u, slot, false) ?? [min, max])) } },
-    axes: [{ label: `r₃ (cell midpoint)${bins.length ? `, first bin: ${bins.join(', ')}` : ''}` }, { label: 'w₁' }],
-    plugins: [errorBars(slot), markers(slot)],
-  }, [data.x, ...data.series.map((s) => s.y)]);
-  const parts = [`The recommended weights table of each point that has one (a stacked recommendation: its table part); bars: ± 1 jackknife standard error${open ? '; open markers: cells without a data standard error (smoothed), no bars' : ''}. The open tail cell of r₃ is left out; gaps are cells without informative samples.`];
-  if (perPath) parts.push(perPath);
-  if (data.missing) parts.push(`${data.missing} of ${sweep.points.length} points have no figures yet.`);
-  showMessage(note, parts.join(' '));
 }
