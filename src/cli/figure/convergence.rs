@@ -9,27 +9,15 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Deserialize;
 
-use super::drawing;
 use super::fig2::{HEIGHT, WIDTH};
+use super::{COLORS, drawing};
 use crate::cli::CliError;
 
 /// The strategies drawn by default (those the history has): the paper's four cases and the rows a
 /// reader compares them with.
 const DEFAULT: [&str; 7] =
     ["plane1", "plane2", "plane3", "switch", "optimal_cv", "optimal_stacked", "correlation_aware_planes23"];
-/// One colour per curve (matplotlib's ten: distinct in print); more curves would not read apart.
-const COLORS: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-];
+/// One colour per curve: more curves would not read apart.
 const MAX_CURVES: usize = COLORS.len();
 /// The legend's column, right of both panels (it would hide the curves inside them).
 const LEGEND_WIDTH: u32 = 290;

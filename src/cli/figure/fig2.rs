@@ -9,7 +9,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::drawing;
+use super::{COLORS, drawing, legend};
 use crate::cli::CliError;
 use crate::cli::documents::{document_job, read_document, solver_options};
 use crate::sim::document::MomentsDocument;
@@ -101,16 +101,6 @@ fn r3_of(w: &WeightRow, tail_width: f64) -> f64 {
     }
 }
 
-/// The series colours (matplotlib's first six: distinct in print and for most colour vision).
-pub(super) const COLORS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
-
 fn draw_fig2(
     weights: &[WeightRow],
     spot: Option<f64>,
@@ -183,13 +173,7 @@ fn draw_fig2(
                 Circle::new((*x, w.w1), 4, style)
             }))?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 16))
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present()?;
     }
     Ok(svg)

@@ -11,6 +11,8 @@ mod table1;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
 
 use super::CliError;
 use super::run::write_atomically;
@@ -103,6 +105,35 @@ fn write_figure(out: &Path, svg: &str, format: Format) -> Result<(), CliError> {
         Format::Pdf => render::pdf(svg)?,
     };
     write_atomically(out, &bytes)
+}
+
+/// The series colours, matplotlib's ten: distinct in print and for most colour vision.
+const COLORS: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+/// Draws `chart`'s series labels at `position` in the figures' one legend style.
+fn legend<'a, Y: Ranged>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
+    position: SeriesLabelPosition,
+) -> Result<(), Box<dyn std::error::Error>> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 16))
+        .draw()?;
+    Ok(())
 }
 
 /// A drawing error as the CLI reports it.

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::drawing;
-use super::fig2::{COLORS, HEIGHT, Solvable, WIDTH};
+use super::fig2::{HEIGHT, Solvable, WIDTH};
+use super::{COLORS, drawing, legend};
 use crate::cli::CliError;
 use crate::sim::checks::published::{applicable, figures};
 use crate::sim::solve::row::NoiseRow;
@@ -130,13 +130,7 @@ fn draw(bars: &[Bar], title: &str) -> Result<String, Box<dyn std::error::Error>>
                 .label("the paper's Table 1")
                 .legend(|(x, y)| TriangleMarker::new((x + 9, y), 8, BLACK.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 16))
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         root.present()?;
     }
     Ok(svg)
