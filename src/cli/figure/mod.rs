@@ -2,6 +2,8 @@
 //! browser. Each figure is drawn once, as SVG, by plotters (`fig2`, `table1`, `convergence`); PNG
 //! and PDF are that SVG rendered by resvg and converted by svg2pdf (`render`), so the three files
 //! show the same drawing.
+//!
+//! Imports: crate::cli, crate::sim
 
 mod convergence;
 mod fig2;
