@@ -91,6 +91,8 @@ fn table1_and_fig2_as_svg_png_and_pdf() {
         (vec!["--out", "x.gif"], "FILE.svg, FILE.png or FILE.pdf"),
         (vec!["--out", "x.svg", "--strategies", "switch"], "--strategies"),
         (vec!["--out", "x.svg", "--lambda", "-1"], "--lambda"),
+        // Table 1's fitted rows each have their own λ: a λ would change nothing, so it is refused.
+        (vec!["--out", "x.svg", "--lambda", "0.1"], "applies to fig2 only"),
     ] {
         let out = optimis(dir.path(), &[&["figure", "table1", "paper.json"], &args[..]].concat());
         assert_eq!(out.status.code(), Some(3), "{args:?}: {out:?}");

@@ -127,6 +127,16 @@ pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// A λ given as a flag (`flag`), checked against the solver's range.
+pub(super) fn lambda_flag(flag: &str, lambda: Option<f64>) -> Result<(), CliError> {
+    match lambda {
+        Some(l) => Ok(check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), flag, || {
+            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
+        })?),
+        None => Ok(()),
+    }
+}
+
 /// The document's solver options changed by `--solver` (see [`SolverOptions::patched`]).
 pub(super) fn solver_options(base: &SolverOptions, patch: Option<&str>) -> Result<SolverOptions, CliError> {
     let Some(text) = patch else { return Ok(base.clone()) };
@@ -139,11 +149,7 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let job = document_job(&doc, &args.document)?;
     let solver = solver_options(&doc.spec.solver, args.solver.as_deref())?;
     let reference = reference_luminance(&job.config().scene).ok();
-    if let Some(l) = args.weights_lambda {
-        check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--weights-lambda", || {
-            format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
-        })?;
-    }
+    lambda_flag("--weights-lambda", args.weights_lambda)?;
     let expected = expected_luminances(job.config());
     let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });

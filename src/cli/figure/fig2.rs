@@ -9,14 +9,11 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use super::solvable::Solvable;
 use super::{COLORS, drawing, legend};
 use crate::cli::CliError;
-use crate::cli::documents::{document_job, read_document, solver_options};
-use crate::sim::document::MomentsDocument;
-use crate::sim::model::cells::CellGrid;
-use crate::sim::model::params::{IlluminationSpec, check};
-use crate::sim::solve::options::{MAX_LAMBDA, SolverOptions};
-use crate::sim::solve::report::{ReportInputs, RunReport, WeightRow, WeightsQuery, build_report};
+use crate::sim::model::params::IlluminationSpec;
+use crate::sim::solve::report::WeightRow;
 use crate::sim::solve::solver::CellStatus;
 use crate::sim::solve::strategy::Strategy;
 
@@ -24,42 +21,9 @@ use crate::sim::solve::strategy::Strategy;
 pub const WIDTH: u32 = 1200;
 pub const HEIGHT: u32 = 800;
 
-/// A moments document ready to be solved as a figure asks.
-pub(super) struct Solvable {
-    pub doc: MomentsDocument,
-    cells: CellGrid,
-    solver: SolverOptions,
-}
-
-impl Solvable {
-    /// Reads `document`; `lambda` (a flag) is checked as `report --weights-lambda` checks it.
-    pub fn read(document: &Path, lambda: Option<f64>) -> Result<Self, CliError> {
-        if let Some(l) = lambda {
-            check(l.is_finite() && (0.0..=MAX_LAMBDA).contains(&l), "--lambda", || {
-                format!("must be in [0, {MAX_LAMBDA:e}], got {l}")
-            })?;
-        }
-        let doc = read_document(&document.to_path_buf())?;
-        let job = document_job(&doc, document)?;
-        let solver = solver_options(&doc.spec.solver, None)?;
-        Ok(Self { cells: job.config().cells.clone(), solver, doc })
-    }
-
-    /// The report as the run recommends (`None`), or with the in-sample table optimum at λ.
-    pub fn report(&self, lambda: Option<f64>) -> RunReport {
-        let weights = lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
-        build_report(
-            &self.doc.moments,
-            &self.cells,
-            &self.solver,
-            &ReportInputs { reference: None, expected: None, weights },
-        )
-    }
-}
-
 /// Fig. 2 as SVG, and what it shows (for the CLI's message).
 pub(super) fn figure(document: &Path, lambda: Option<f64>) -> Result<(String, String), CliError> {
-    let solvable = Solvable::read(document, lambda)?;
+    let solvable = Solvable::read(document)?;
     let report = solvable.report(lambda);
     let recommended = report.recommended.as_ref().map(|r| r.strategy.to_string()).unwrap_or_else(|| "none".into());
     let (report, what) = match (lambda, report.weights.is_empty()) {

@@ -8,6 +8,7 @@
 mod convergence;
 mod fig2;
 mod render;
+mod solvable;
 mod table1;
 
 use std::path::{Path, PathBuf};
@@ -17,6 +18,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::CliError;
+use super::documents::lambda_flag;
 use super::run::write_atomically;
 use crate::sim::model::params::check;
 
@@ -41,8 +43,8 @@ pub struct FigureArgs {
     /// PNG only: the image's width in pixels (default 2400, twice the drawing's 1200).
     #[arg(long, value_name = "PX")]
     pub width: Option<u32>,
-    /// fig2 and table1: solve at this λ instead of the recommended weights (fig2: the in-sample
-    /// table optimum; 0 is the paper's procedure).
+    /// fig2 only: draw the in-sample table optimum at this λ (0: the paper's procedure) instead of
+    /// the recommended table. (Table 1's rows do not depend on it: each fitted row has its own λ.)
     #[arg(long, allow_hyphen_values = true)]
     pub lambda: Option<f64>,
     /// convergence only: the strategies to draw, comma-separated (default: the paper's four cases,
@@ -86,12 +88,13 @@ pub fn figure(args: FigureArgs) -> Result<(), CliError> {
     check(args.which == "convergence" || args.strategies.is_empty(), "--strategies", || {
         "applies to the convergence figure only".into()
     })?;
-    check(args.which != "convergence" || args.lambda.is_none(), "--lambda", || {
-        "does not apply to the convergence figure (a history holds no moments to solve)".into()
+    check(args.which == "fig2" || args.lambda.is_none(), "--lambda", || {
+        "applies to fig2 only (table1's fitted rows each have their own λ; a history holds no moments to solve)".into()
     })?;
+    lambda_flag("--lambda", args.lambda)?;
     let (svg, what) = match args.which.as_str() {
         "fig2" => fig2::figure(&args.document, args.lambda)?,
-        "table1" => table1::figure(&args.document, args.lambda)?,
+        "table1" => table1::figure(&args.document)?,
         _ => convergence::figure(&args.document, &args.strategies)?,
     };
     write_figure(&args.out, &svg, format)?;

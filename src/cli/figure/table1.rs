@@ -7,7 +7,8 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::fig2::{HEIGHT, Solvable, WIDTH};
+use super::fig2::{HEIGHT, WIDTH};
+use super::solvable::Solvable;
 use super::{COLORS, drawing, legend};
 use crate::cli::CliError;
 use crate::sim::checks::published::{applicable, figures};
@@ -24,9 +25,9 @@ struct Bar {
 }
 
 /// Table 1 as SVG, and what it shows.
-pub(super) fn figure(document: &Path, lambda: Option<f64>) -> Result<(String, String), CliError> {
-    let solvable = Solvable::read(document, lambda)?;
-    let report = solvable.report(lambda);
+pub(super) fn figure(document: &Path) -> Result<(String, String), CliError> {
+    let solvable = Solvable::read(document)?;
+    let report = solvable.report(None);
     let published = applicable(&solvable.doc.spec);
     let chosen = report.recommended.as_ref().map(|r| r.strategy);
     let bars: Vec<Bar> = report
