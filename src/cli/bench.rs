@@ -14,7 +14,7 @@ use super::{CliError, cores, thread_pool};
 use crate::sim::model::config::Proposals;
 use crate::sim::model::config::{Engine, SimConfig};
 use crate::sim::model::params::parse_count;
-use crate::sim::runner::run_iterations;
+use crate::sim::runner::{BatchMoments, run_iterations};
 use crate::sim::spec::parse_job_spec;
 use crate::sim::stats::moments::Moments;
 
@@ -48,7 +48,7 @@ pub struct BenchArgs {
 pub(super) fn time_iterations(config: &SimConfig, iterations: u64) -> f64 {
     let never = AtomicBool::new(false);
     let mut moments = Moments::new(config);
-    let go_on = |_: &Moments, _| std::ops::ControlFlow::Continue(());
+    let go_on = |_: &mut dyn BatchMoments, _| std::ops::ControlFlow::Continue(());
     run_iterations(config, 1, 0..1, &mut moments, &never, go_on).expect("warm-up");
     let started = Instant::now();
     run_iterations(config, 1, 1..1 + iterations, &mut moments, &never, go_on).expect("bench run");

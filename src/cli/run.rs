@@ -210,7 +210,8 @@ fn run_moments_from(
                 && last_write.elapsed() >= c.every
             {
                 last_write = Instant::now();
-                written = write_atomically(c.path, &MomentsDocument::new(job.spec().clone(), m.clone()).to_json());
+                written =
+                    write_atomically(c.path, &MomentsDocument::new(job.spec().clone(), m.moments().clone()).to_json());
                 if written.is_err() {
                     return std::ops::ControlFlow::Break(());
                 }

@@ -16,14 +16,14 @@ use std::sync::atomic::AtomicBool;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::sim::runner::{RunError, run_iterations};
+use crate::sim::runner::{BatchMoments, RunError, run_iterations};
 use crate::sim::spec::{JobSpec, SpecError, ValidJob};
 use crate::sim::stats::moments::Moments;
 
 /// What the driver calls after each batch: the moments so far and the next iteration index
 /// (`first` + the iterations the moments hold, for an executor that runs them out of order);
 /// [`ControlFlow::Break`] ends the segment (a checkpoint is due).
-pub type OnBatch<'a> = dyn FnMut(&Moments, u64) -> ControlFlow<()> + Send + 'a;
+pub type OnBatch<'a> = dyn FnMut(&mut dyn BatchMoments, u64) -> ControlFlow<()> + Send + 'a;
 
 /// One segment of a job, as the driver hands it to the executor.
 pub struct Segment<'a> {

@@ -2,20 +2,25 @@
 //!
 //! Work is split into (iteration, chunk) items so that even a single huge iteration keeps every
 //! core busy. Items run in any order on any thread, but each draws from its own stream
-//! (seed, iteration, chunk) and the results are reduced per iteration in chunk order and added to
-//! the moments in iteration order — so the moments are bit-identical for any thread count. (They
-//! would be even without the ordering, as the moments' sums are exact; the per-iteration floating
-//! sums are what the ordering protects.) The restricted engine's iterations are one item each and
-//! take tens of microseconds, so there the workers also add them to moments of their own, which
-//! are merged — adding them one by one on the calling thread would be the serial bottleneck.
+//! (seed, iteration, chunk) and the results are reduced per iteration in chunk order — so the
+//! moments are bit-identical for any thread count. (The moments' sums are exact, so the order in
+//! which iterations are added changes nothing; the per-iteration floating sums are what the
+//! ordering protects.)
 //!
-//! Iterations are processed in batches; between batches the caller sees the moments (for progress
-//! and checkpoints) and may end the run there, and cancellation is checked before every chunk (and,
-//! inside a restricted iteration, every 1,024 candidates). A cancelled batch is dropped whole, so the
-//! moments only ever hold complete iterations.
+//! The restricted engine's iterations are one item each and take microseconds, so there every
+//! worker claims iterations a few at a time and adds them to fast exact sums of its own
+//! ([`MomentsAccumulator`]), kept for the whole run and handed to the moments only when someone
+//! looks at them ([`BatchMoments::moments`]) and at the end: adding each iteration, or each batch,
+//! to the moments' exact sums was the serial part that kept two threads from scaling (issue 26).
+//!
+//! Iterations are processed in batches; between batches the caller sees how far the run came and,
+//! on demand, the moments (for progress and checkpoints), and may end the run there.
+//! Cancellation is checked before every chunk (and, inside a restricted iteration, every 1,024
+//! candidates). A cancelled run drops what was not yet handed over, so the moments only ever hold
+//! complete iterations, a contiguous range of them from this run.
 
 use std::ops::{ControlFlow, Range};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
@@ -24,6 +29,7 @@ use crate::sim::engines::camera::CameraSet;
 use crate::sim::engines::restricted::{RestrictedPlan, RestrictedScratch, trace_restricted};
 use crate::sim::engines::tally::{ChunkScratch, ChunkTally, IterationTally};
 use crate::sim::model::config::{Engine, SimConfig};
+use crate::sim::stats::accumulator::{MomentsAccumulator, hand_over};
 use crate::sim::stats::moments::{MergeError, Moments};
 
 /// Why a run stopped early.
@@ -46,11 +52,9 @@ const MAX_BATCH_CAMERAS: u64 = 1 << 20;
 /// to report progress and honour cancellation promptly, and few enough camera paths in memory.
 fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     if let Engine::Restricted(_) = config.engine {
-        // Tens of microseconds per iteration: batches of 1024 still report many times a second
-        // (about 30 ms each on two cores), and each batch's pieces cost a fresh moments value and
-        // an exact merge of its K folds — with K = 10 at 256 iterations a batch that overhead was
-        // a third of the run (docs/results.md §6).
-        return 1024;
+        // Microseconds per iteration: batches of 4096 still report several times a second, and
+        // cost nothing of their own (the workers' sums live across batches).
+        return 4096;
     }
     let chunks = config.chunks().max(1);
     let wanted = (4 * threads as u64).div_ceil(chunks);
@@ -60,48 +64,54 @@ fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     wanted.max(light_per_batch_floor).clamp(1, 256).min(memory_cap)
 }
 
-/// Fewest iterations of a restricted batch one rayon piece runs: every piece costs a fresh moments
-/// value and an exact merge of its K folds (≈ 6·10⁴ sums at the paper's grid with the stacked
-/// columns), so a batch of 1024 is cut into at most four pieces — enough to balance two or four
-/// workers, whose iterations cost alike.
-const RESTRICTED_PIECE: usize = 256;
+/// Iterations a restricted worker claims at a time: a few microseconds each, so that claiming
+/// (one atomic addition) costs nothing beside them while the workers still share a batch's end.
+const RESTRICTED_CLAIM: u64 = 16;
 
-/// Runs iterations `range` of `seed`, adding each to `moments` in index order and calling
-/// `on_batch(&moments, next_iteration)` after every batch; `ControlFlow::Break` ends the run after
-/// that batch. Returns the next iteration to run (`range.end` when all ran).
+/// What `on_batch` sees of the moments after a batch: they are brought up to date only when asked
+/// for, as that costs an exact addition per touched sum.
+pub trait BatchMoments {
+    /// The moments with every iteration run so far.
+    fn moments(&mut self) -> &Moments;
+}
+
+/// Moments that are always up to date (the brute force's, or those an executor reads from files).
+impl BatchMoments for &Moments {
+    fn moments(&mut self) -> &Moments {
+        self
+    }
+}
+
+/// Runs iterations `range` of `seed`, adding each to `moments` and calling
+/// `on_batch(&mut view, next_iteration)` after every batch (`view.moments()` gives the moments
+/// with every iteration before `next_iteration`); `ControlFlow::Break` ends the run after that
+/// batch. Returns the next iteration to run (`range.end` when all ran).
 pub fn run_iterations(
     config: &SimConfig,
     seed: u64,
     range: Range<u64>,
     moments: &mut Moments,
     cancel: &AtomicBool,
-    mut on_batch: impl FnMut(&Moments, u64) -> ControlFlow<()>,
+    mut on_batch: impl FnMut(&mut dyn BatchMoments, u64) -> ControlFlow<()>,
 ) -> Result<u64, RunError> {
     let per_batch = batch_len(config, rayon::current_num_threads());
-    let plan = match config.engine {
-        Engine::Brute => None,
-        Engine::Restricted(proposals) => Some(RestrictedPlan::new(config, proposals)),
-    };
+    if let Engine::Restricted(proposals) = config.engine {
+        let plan = RestrictedPlan::new(config, proposals);
+        let run = RestrictedRun { config, plan: &plan, seed, cancel };
+        return run.iterations(range, per_batch, moments, on_batch);
+    }
     let mut start = range.start;
     while start < range.end {
         if cancel.load(Ordering::Relaxed) {
             return Err(RunError::Cancelled);
         }
         let end = (start + per_batch).min(range.end);
-        match &plan {
-            None => {
-                let tallies = brute_batch(config, seed, start..end, cancel).ok_or(RunError::Cancelled)?;
-                for tally in &tallies {
-                    moments.add_iteration(seed, tally)?;
-                }
-            }
-            Some(plan) => {
-                let batch = restricted_batch(config, plan, seed, start..end, moments, cancel)?;
-                moments.absorb(&batch)?;
-            }
+        let tallies = brute_batch(config, seed, start..end, cancel).ok_or(RunError::Cancelled)?;
+        for tally in &tallies {
+            moments.add_iteration(seed, tally)?;
         }
         start = end;
-        if on_batch(moments, end).is_break() {
+        if on_batch(&mut &*moments, end).is_break() {
             break;
         }
     }
@@ -153,56 +163,123 @@ struct RestrictedWorker {
     tally: IterationTally,
 }
 
-/// The restricted engine's iterations `batch` as moments of their own. An iteration takes tens of
-/// microseconds, so adding it to the moments (exact sums) would be a serial bottleneck: each
-/// worker adds its iterations to moments of their own and those are merged. The sums are exact, so
-/// the grouping does not change a bit. `Cancelled` if cancelled.
-fn restricted_batch(
-    config: &SimConfig,
-    plan: &RestrictedPlan,
+/// One call's restricted run: what every worker reads.
+struct RestrictedRun<'a> {
+    config: &'a SimConfig,
+    plan: &'a RestrictedPlan,
     seed: u64,
-    batch: Range<u64>,
-    like: &Moments,
-    cancel: &AtomicBool,
-) -> Result<Moments, RunError> {
-    let (k, norm) = (config.cells.len(), tally_norm(config));
-    let worker = || RestrictedWorker {
-        scratch: ChunkScratch::for_config(config),
-        buffers: RestrictedScratch::default(),
-        cameras: CameraSet::default(),
-        chunk: ChunkTally::default(),
-        tally: IterationTally::from_chunks(0, k, norm, []),
-    };
-    // Indexed (usize) so that the pieces can be kept long: each split costs a fresh moments value
-    // and a fresh worker.
-    (0..(batch.end - batch.start) as usize)
-        .into_par_iter()
-        .with_min_len(RESTRICTED_PIECE)
-        .try_fold(
-            || (like.empty_like(), worker()),
-            |(mut moments, mut w), i| {
-                let s = batch.start + i as u64;
-                if cancel.load(Ordering::Relaxed) {
-                    return Err(RunError::Cancelled);
+    cancel: &'a AtomicBool,
+}
+
+impl RestrictedRun<'_> {
+    /// [`run_iterations`] for the restricted engine: one worker and one [`MomentsAccumulator`]
+    /// per thread for the whole call, handed over to `moments` when `on_batch` asks and at the
+    /// end.
+    fn iterations(
+        &self,
+        range: Range<u64>,
+        per_batch: u64,
+        moments: &mut Moments,
+        mut on_batch: impl FnMut(&mut dyn BatchMoments, u64) -> ControlFlow<()>,
+    ) -> Result<u64, RunError> {
+        let threads = rayon::current_num_threads();
+        let (k, norm) = (self.config.cells.len(), tally_norm(self.config));
+        let mut workers: Vec<RestrictedWorker> = (0..threads)
+            .map(|_| RestrictedWorker {
+                scratch: ChunkScratch::for_config(self.config),
+                buffers: RestrictedScratch::default(),
+                cameras: CameraSet::default(),
+                chunk: ChunkTally::default(),
+                tally: IterationTally::from_chunks(0, k, norm, []),
+            })
+            .collect();
+        let mut sums = vec![MomentsAccumulator::like(moments); threads];
+        let (mut start, mut handed) = (range.start, range.start);
+        while start < range.end {
+            let end = (start + per_batch).min(range.end);
+            if let Err(e) = self.batch(start..end, &mut workers, &mut sums) {
+                // What was not handed over is dropped whole: the moments keep a contiguous range.
+                sums.iter_mut().for_each(MomentsAccumulator::clear);
+                return Err(e);
+            }
+            start = end;
+            let mut view =
+                Pending { moments, sums: &mut sums, seed: self.seed, handed: &mut handed, upto: end, error: None };
+            let flow = on_batch(&mut view, end);
+            if let Some(e) = view.error {
+                return Err(e.into());
+            }
+            if flow.is_break() {
+                break;
+            }
+        }
+        hand_over(&mut sums, moments, self.seed, handed..start)?;
+        Ok(start)
+    }
+
+    /// Runs iterations `batch`: every worker claims [`RESTRICTED_CLAIM`] of them at a time and adds
+    /// them to its own sums, until none is left.
+    fn batch(
+        &self,
+        batch: Range<u64>,
+        workers: &mut [RestrictedWorker],
+        sums: &mut [MomentsAccumulator],
+    ) -> Result<(), RunError> {
+        let (config, k, norm) = (self.config, self.config.cells.len(), tally_norm(self.config));
+        let next = AtomicU64::new(batch.start);
+        // Raised by a worker that fails, so that the others stop too.
+        let failed = AtomicBool::new(false);
+        workers.par_iter_mut().zip(sums.par_iter_mut()).try_for_each(|(w, acc)| {
+            let result = (|| loop {
+                let first = next.fetch_add(RESTRICTED_CLAIM, Ordering::Relaxed);
+                if first >= batch.end {
+                    return Ok(());
                 }
-                w.cameras.regenerate(config, seed, s);
-                let RestrictedWorker { scratch, buffers, cameras, chunk, tally } = &mut w;
-                if !trace_restricted(config, plan, cameras, seed, s, scratch, buffers, cancel, chunk) {
-                    return Err(RunError::Cancelled);
+                for s in first..(first + RESTRICTED_CLAIM).min(batch.end) {
+                    if self.cancel.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed) {
+                        return Err(RunError::Cancelled);
+                    }
+                    w.cameras.regenerate(config, self.seed, s);
+                    let RestrictedWorker { scratch, buffers, cameras, chunk, tally } = w;
+                    if !trace_restricted(config, self.plan, cameras, self.seed, s, scratch, buffers, self.cancel, chunk)
+                    {
+                        return Err(RunError::Cancelled);
+                    }
+                    tally.set_from_chunks(s, k, norm, std::iter::once(&*chunk));
+                    acc.add_iteration(tally)?;
                 }
-                tally.set_from_chunks(s, k, norm, std::iter::once(&*chunk));
-                moments.add_iteration(seed, tally)?;
-                Ok((moments, w))
-            },
-        )
-        .map(|piece| piece.map(|(moments, _)| moments))
-        .try_reduce(
-            || like.empty_like(),
-            |mut a, b| {
-                a.absorb(&b)?;
-                Ok(a)
-            },
-        )
+            })();
+            if result.is_err() {
+                failed.store(true, Ordering::Relaxed);
+            }
+            result
+        })
+    }
+}
+
+/// The view `on_batch` gets of a restricted run: the moments, brought up to date on demand.
+struct Pending<'a> {
+    moments: &'a mut Moments,
+    sums: &'a mut [MomentsAccumulator],
+    seed: u64,
+    /// The moments hold this run's iterations before `handed`.
+    handed: &'a mut u64,
+    /// Every iteration before `upto` ran.
+    upto: u64,
+    /// A hand-over that was refused (the run ends with it).
+    error: Option<MergeError>,
+}
+
+impl BatchMoments for Pending<'_> {
+    fn moments(&mut self) -> &Moments {
+        if *self.handed < self.upto && self.error.is_none() {
+            match hand_over(self.sums, self.moments, self.seed, *self.handed..self.upto) {
+                Ok(()) => *self.handed = self.upto,
+                Err(e) => self.error = Some(e),
+            }
+        }
+        self.moments
+    }
 }
 
 /// Runs iterations `range` of `seed` into fresh moments.

@@ -370,7 +370,7 @@ impl SlurmExecutor {
                 if next >= segment.total {
                     return Ok(next);
                 }
-                if changed && on_batch(moments, next).is_break() {
+                if changed && on_batch(&mut &*moments, next).is_break() {
                     return Ok(next);
                 }
             }

@@ -305,8 +305,14 @@ impl IterationTally {
     /// B = Σ_α C⁽²⁾_α at 2K, then each of the layout's stackable strategies' C_s (H_h).
     pub fn moment_vector(&self, layout: Layout) -> Vec<(usize, f64)> {
         let mut y = Vec::new();
-        moment_vector_into(&self.cell_values, &self.strategies, layout, &mut y);
+        self.moment_vector_into(layout, &mut y);
         y
+    }
+
+    /// [`IterationTally::moment_vector`] into `y`, reusing its buffer.
+    pub fn moment_vector_into(&self, layout: Layout, y: &mut Vec<(usize, f64)>) {
+        y.clear();
+        moment_vector_into(&self.cell_values, &self.strategies, layout, y);
     }
 
     /// The moment vector of block `b` (noise components), into `y`: empty when the iteration

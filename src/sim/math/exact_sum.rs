@@ -98,6 +98,11 @@ impl ExactSum {
         }
     }
 
+    /// Back to zero, keeping the buffer (the runner's accumulators reuse theirs).
+    pub fn clear(&mut self) {
+        self.parts.clear();
+    }
+
     /// Adds another exact sum, exactly.
     pub fn add_sum(&mut self, other: &ExactSum) {
         for &p in &other.parts {

@@ -4,6 +4,7 @@
 //! * [`rng`] — the stream of each (seed, iteration, chunk), scalar and multi-lane;
 //! * [`fastmath`] — branch-free sine and cosine the hot loop can vectorise, with tested bounds;
 //! * [`exact_sum`] — exact, order-independent sums of doubles (bounded when read from outside);
+//! * [`window_sum`] — the same exact sums, fast: fixed-point limbs over a window of exponents;
 //! * [`poisson`] — Poisson variates that can be interrupted;
 //! * [`sampling`] — points of the unit disc, cosine directions, rotations about an axis;
 //! * [`digest`] — SHA-256 as hex;
@@ -18,3 +19,4 @@ pub mod fastmath;
 pub mod poisson;
 pub mod rng;
 pub mod sampling;
+pub mod window_sum;

@@ -41,9 +41,8 @@ use serde::{Deserialize, Serialize};
 use super::bounded::bounded;
 use crate::sim::engines::layout::{Layout, MAX_PACKED};
 use crate::sim::engines::strategies::PathStrategy;
-use crate::sim::engines::tally::{BLOCKS, IterationTally};
 use crate::sim::math::exact_sum::ExactSum;
-use crate::sim::model::config::{packed_index, packed_len};
+use crate::sim::model::config::packed_len;
 
 /// The three kinds of block pairs, as indices of [`ComponentSums::matrix`]: blocks sharing a
 /// light half (U_L).
@@ -73,9 +72,6 @@ pub struct ComponentSums {
     pub strategies: Vec<[ExactSum; 3]>,
 }
 
-/// The pairs of blocks (block = 2·L + K) behind each kind, each weighted ½.
-const PAIRS: [[(usize, usize); 2]; 3] = [[(0, 1), (2, 3)], [(0, 2), (1, 3)], [(0, 3), (1, 2)]];
-
 impl ComponentSums {
     /// Zero sums for the moment vectors of `layout`.
     pub fn empty(layout: Layout) -> Self {
@@ -100,26 +96,6 @@ impl ComponentSums {
         [&self.light, &self.camera, &self.cross][kind]
     }
 
-    /// Adds one iteration's block products (its block vectors are empty when nothing merged).
-    pub fn add_iteration(&mut self, layout: Layout, tally: &IterationTally) {
-        let n = layout.dimension();
-        let mut y: [Vec<(usize, f64)>; BLOCKS] = Default::default();
-        for (b, v) in y.iter_mut().enumerate() {
-            tally.block_moment_vector(b, layout, v);
-        }
-        for (kind, pairs) in PAIRS.iter().enumerate() {
-            let sums = [&mut self.light, &mut self.camera, &mut self.cross][kind].as_mut_slice();
-            for &(p, q) in pairs {
-                add_symmetric_product(sums, n, &y[p], &y[q]);
-            }
-            for (s, acc) in self.strategies.iter_mut().enumerate() {
-                let value: f64 =
-                    pairs.iter().map(|&(p, q)| tally.block_strategies[p][s] * tally.block_strategies[q][s]).sum();
-                acc[kind].add(0.5 * value);
-            }
-        }
-    }
-
     /// Every sum, for checks that treat them alike.
     pub fn sums(&self) -> impl Iterator<Item = &ExactSum> {
         self.light.iter().chain(&self.camera).chain(&self.cross).chain(self.strategies.iter().flatten())
@@ -138,45 +114,6 @@ impl ComponentSums {
     pub fn add(&mut self, other: &ComponentSums) {
         for (a, b) in self.sums_mut().zip(other.sums()) {
             a.add_sum(b);
-        }
-    }
-}
-
-/// Adds ½·sym(u vᵀ) = ¼(u vᵀ + v uᵀ) to the packed upper triangle `sums` of side n.
-fn add_symmetric_product(sums: &mut [ExactSum], n: usize, u: &[(usize, f64)], v: &[(usize, f64)]) {
-    for &(i, ui) in u {
-        for &(j, vj) in v {
-            // (i, j) and (j, i) both occur when both vectors hold both indices: ¼ each; a diagonal
-            // entry occurs once and gets ½ u_i v_i.
-            let weight = if i == j { 0.5 } else { 0.25 };
-            sums[packed_index(n, i.min(j), i.max(j))].add(weight * ui * vj);
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_symmetric_product_is_half_the_symmetrised_outer_product() {
-        let n = 3;
-        let mut sums = vec![ExactSum::new(); packed_len(n)];
-        let (u, v) = ([(0, 2.0), (2, 3.0)], [(0, 5.0), (1, 7.0)]);
-        add_symmetric_product(&mut sums, n, &u, &v);
-        let dense = |x: &[(usize, f64)]| {
-            let mut d = [0.0; 3];
-            for &(i, a) in x {
-                d[i] = a;
-            }
-            d
-        };
-        let (du, dv) = (dense(&u), dense(&v));
-        for i in 0..n {
-            for j in i..n {
-                let want = 0.25 * (du[i] * dv[j] + du[j] * dv[i]);
-                assert_eq!(sums[packed_index(n, i, j)].value(), want, "({i}, {j})");
-            }
         }
     }
 }

@@ -33,6 +33,7 @@ use super::bounded::bounded;
 
 use super::components::ComponentSums;
 use super::coverage::{Coverage, MAX_ITERATION_INDEX, Overlap};
+use super::terms::{SumIndex, TermBuffers, for_each_term};
 use crate::sim::engines::layout::{Layout, MAX_DIMENSION, MAX_PACKED};
 use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::engines::tally::IterationTally;
@@ -92,53 +93,46 @@ impl FoldMoments {
     }
 
     fn add_iteration(&mut self, layout: Layout, tally: &IterationTally) -> Result<(), MergeError> {
-        let n = layout.dimension();
-        // Products of up to four values enter the sums (ΣYYᵀ, Σ C⁴): beyond 10⁷⁰ they would leave
-        // the doubles. No valid scene comes near (its values are below 10⁴⁰), so this only stops a
-        // configuration the validation did not foresee, as an error instead of a poisoned sum.
-        let representable = |v: f64| v.is_finite() && v.abs() <= MAX_TALLY_VALUE;
-        if !(tally.cell_values.iter().all(|&v| representable(v)) && tally.strategies.iter().all(|&v| representable(v)))
-        {
-            return Err(MergeError::Overflow(format!(
-                "iteration {} produced a contribution beyond {MAX_TALLY_VALUE:e} (an extreme scene)",
-                tally.iteration
-            )));
-        }
+        check_representable(tally)?;
         // Counters first, checked, so that an overflow leaves the fold unchanged.
-        let mut merges = self.merges;
-        let mut merges_sq = self.merges_sq;
-        for m in 0..3 {
-            merges[m] = merges[m].checked_add(tally.merges[m]).ok_or_else(|| overflow("merge count"))?;
-            let sq = u128::from(tally.merges[m]) * u128::from(tally.merges[m]);
-            merges_sq[m] = merges_sq[m].checked_add(sq).ok_or_else(|| overflow("squared merge count"))?;
-        }
-        if self.cell_counts.iter().zip(&tally.cell_counts).any(|(a, b)| a.checked_add(*b).is_none()) {
-            return Err(overflow("cell event count"));
-        }
-        let y = tally.moment_vector(layout);
-        for (a, &(i, yi)) in y.iter().enumerate() {
-            self.sum_y[i].add(yi);
-            for &(j, yj) in &y[a..] {
-                self.sum_yy[packed_index(n, i, j)].add(yi * yj);
-            }
-        }
-        for (sums, &c) in self.strategies.iter_mut().zip(&tally.strategies) {
-            let mut power = c;
-            for s in sums.iter_mut() {
-                s.add(power);
-                power *= c;
-            }
-        }
+        let (merges, merges_sq) = add_tally_counters(self.merges, self.merges_sq, &self.cell_counts, tally)?;
+        let index = SumIndex::new(layout, self.components.is_some());
+        let mut buffers = TermBuffers::default();
+        for_each_term(layout, &index, tally, &mut buffers, |i, v| self.sum_mut(&index, i).add(v));
         self.merges = merges;
         self.merges_sq = merges_sq;
         for (acc, &c) in self.cell_counts.iter_mut().zip(&tally.cell_counts) {
             *acc += c;
         }
-        if let Some(components) = &mut self.components {
-            components.add_iteration(layout, tally);
-        }
         self.iterations += 1;
         Ok(())
+    }
+
+    /// Sum `i` of [`FoldMoments::sums`], laid out by `index`.
+    pub(super) fn sum_mut(&mut self, index: &SumIndex, i: usize) -> &mut ExactSum {
+        let (n, packed, strategies) = (index.n, index.packed, index.strategies);
+        if i < n {
+            return &mut self.sum_y[i];
+        }
+        let i = i - n;
+        if i < packed {
+            return &mut self.sum_yy[i];
+        }
+        let i = i - packed;
+        if i < 4 * strategies {
+            return &mut self.strategies[i / 4][i % 4];
+        }
+        let components = self.components.as_mut().expect("component sums are indexed only when kept");
+        let i = i - 4 * strategies;
+        match i / packed {
+            0 => &mut components.light[i],
+            1 => &mut components.camera[i - packed],
+            2 => &mut components.cross[i - 2 * packed],
+            _ => {
+                let j = i - 3 * packed;
+                &mut components.strategies[j / 3][j % 3]
+            }
+        }
     }
 
     /// The sums in one list, for checks that treat them alike.
@@ -215,6 +209,41 @@ fn counters_fit(folds: &[&FoldMoments]) -> bool {
 
 fn overflow(what: &str) -> MergeError {
     MergeError::Overflow(what.to_string())
+}
+
+/// Refuses an iteration whose values could overflow a sum: products of up to four values enter
+/// the sums (ΣYYᵀ, Σ C⁴), and beyond 10⁷⁰ they would leave the doubles. No valid scene comes near
+/// (its values are below 10⁴⁰), so this only stops a configuration the validation did not foresee,
+/// as an error instead of a poisoned sum.
+pub(super) fn check_representable(tally: &IterationTally) -> Result<(), MergeError> {
+    let representable = |v: f64| v.is_finite() && v.abs() <= MAX_TALLY_VALUE;
+    if tally.cell_values.iter().all(|&v| representable(v)) && tally.strategies.iter().all(|&v| representable(v)) {
+        Ok(())
+    } else {
+        Err(MergeError::Overflow(format!(
+            "iteration {} produced a contribution beyond {MAX_TALLY_VALUE:e} (an extreme scene)",
+            tally.iteration
+        )))
+    }
+}
+
+/// The merge counters with `tally`'s added (checked), and whether its cell counts fit beside
+/// `cell_counts`: the first step of adding an iteration, which changes nothing when it fails.
+pub(super) fn add_tally_counters(
+    mut merges: [u64; 3],
+    mut merges_sq: [u128; 3],
+    cell_counts: &[u64],
+    tally: &IterationTally,
+) -> Result<([u64; 3], [u128; 3]), MergeError> {
+    for m in 0..3 {
+        merges[m] = merges[m].checked_add(tally.merges[m]).ok_or_else(|| overflow("merge count"))?;
+        let sq = u128::from(tally.merges[m]) * u128::from(tally.merges[m]);
+        merges_sq[m] = merges_sq[m].checked_add(sq).ok_or_else(|| overflow("squared merge count"))?;
+    }
+    if cell_counts.iter().zip(&tally.cell_counts).any(|(a, b)| a.checked_add(*b).is_none()) {
+        return Err(overflow("cell event count"));
+    }
+    Ok((merges, merges_sq))
 }
 
 /// The moments of a set of iterations of one configuration.
@@ -329,24 +358,6 @@ impl Moments {
             a.add(b);
         }
         self.coverage = coverage;
-        Ok(())
-    }
-
-    /// Adds a batch of iterations this process ran itself (the runner's pieces and batches):
-    /// [`Moments::merge`] without the per-sum overflow test, which such moments cannot fail —
-    /// [`FoldMoments::add_iteration`] keeps every value within 10⁷⁰, so no sum over at most 2⁶²
-    /// iterations (fourth powers included) comes near 2¹⁰¹⁵. Overlaps and counters are still
-    /// checked; nothing changes on a refusal.
-    pub(crate) fn absorb(&mut self, other: &Moments) -> Result<(), MergeError> {
-        self.check_same_configuration_and_new(other)?;
-        if !counters_fit(&self.folds.iter().chain(&other.folds).collect::<Vec<_>>()) {
-            return Err(overflow("pooled counts"));
-        }
-        debug_assert!(self.folds.iter().zip(&other.folds).all(|(a, b)| a.check_add(b).is_ok()));
-        for (a, b) in self.folds.iter_mut().zip(&other.folds) {
-            a.add(b);
-        }
-        self.coverage.union(&other.coverage);
         Ok(())
     }
 
