@@ -19,6 +19,8 @@
 //! give the same bits. A [`CameraSet`] is reused from iteration to iteration by
 //! [`CameraSet::regenerate`]: no allocation once its buffers have grown.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use nalgebra::Vector3;
 use rand::Rng;
 
@@ -52,7 +54,13 @@ pub struct CameraSet {
     pub plane2: MergeGrid,
     /// Vertices x3c (of the paths that reached plane 3).
     pub plane3: MergeGrid,
+    /// A number no other camera set of this process has had (each [`CameraSet::regenerate`] takes
+    /// a new one): what a cache of per-camera values is keyed by (`tally::ChunkScratch`).
+    pub generation: u64,
 }
+
+/// The next [`CameraSet::generation`].
+static NEXT_GENERATION: AtomicU64 = AtomicU64::new(1);
 
 /// Camera paths per block of the tracing loop.
 const BLOCK: usize = 64;
@@ -100,6 +108,7 @@ impl CameraSet {
     /// generator steps) would cost more than the hundred paths of the paper; drawing three words a
     /// path in order is a few hundred nanoseconds.
     pub fn regenerate(&mut self, config: &SimConfig, seed: u64, iteration: u64) {
+        self.generation = NEXT_GENERATION.fetch_add(1, Ordering::Relaxed);
         let mut rng = stream(seed, iteration, CAMERA_STREAM);
         let mut block = Block::empty();
         let total = config.camera_paths as usize;

@@ -16,7 +16,8 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 
 use super::camera::CameraSet;
-use super::strategies::{Technique, strategy_weights};
+use super::grid::Candidates;
+use super::strategies::{Technique, light_start, strategy_weights, strategy_weights_with};
 use super::tally::{CameraPaths, ChunkScratch};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::{angle_between, theta_over_sin};
@@ -36,18 +37,21 @@ pub(crate) fn within(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
 pub(crate) fn merge_plane3(
     config: &SimConfig,
     cameras: &CameraSet,
-    near: &[u32],
+    near: Candidates<'_>,
     x3l: [f64; 2],
     scratch: &mut ChunkScratch,
 ) {
     let k = config.cells.len();
-    for &j in near {
+    for j in near {
         let cam = &cameras.paths[j as usize];
         let Some(x3c) = cam.x3 else { continue };
         if within(x3l, x3c, config.merge_radius) {
             let c = cam.energy3 * kernel(config) / PI;
-            let weights = strategy_weights(config, Technique::Plane3, cam.x2, x3c, x3l);
-            scratch.record(Technique::Plane3, config.cells.index(cam.x2, x3c), k, c, &weights, CameraPaths::One(j));
+            let start = light_start(config, x3l);
+            let (cell, weights) = scratch.plane3_weights(cameras.generation, j, start, || {
+                (config.cells.index(cam.x2, x3c), strategy_weights_with(config, Technique::Plane3, cam.x2, x3c, start))
+            });
+            scratch.record(Technique::Plane3, cell, k, c, &weights, CameraPaths::One(j));
             scratch.count_merge(Technique::Plane3);
         }
     }
@@ -56,14 +60,14 @@ pub(crate) fn merge_plane3(
 pub(crate) fn merge_plane2(
     config: &SimConfig,
     cameras: &CameraSet,
-    near: &[u32],
+    near: Candidates<'_>,
     x2l: [f64; 2],
     x3l: [f64; 2],
     d: &Vector3<f64>,
     scratch: &mut ChunkScratch,
 ) {
     let k = config.cells.len();
-    for &j in near {
+    for j in near {
         let cam = &cameras.paths[j as usize];
         if within(x2l, cam.x2, config.merge_radius) {
             // f2(dir x3l→x2l, dir x2c→x1c): deflection between the light's incident direction and

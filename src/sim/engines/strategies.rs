@@ -8,6 +8,7 @@ use std::f64::consts::PI;
 
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
+use crate::sim::model::scene::radius;
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -163,10 +164,31 @@ pub fn strategy_weights(
     x3: [f64; 2],
     x3_light: [f64; 2],
 ) -> [f64; PathStrategy::COUNT] {
+    strategy_weights_with(config, technique, x2, x3, light_start(config, x3_light))
+}
+
+/// The light's start density p_l(x3l) = I(x3l)/Φ where the light path starts: the one input of
+/// the weights that a plane-3 merge takes from the light path rather than the camera's (see
+/// `model::heuristics`), so the engine can reuse a camera's weights for every light path with the
+/// same start density.
+#[inline]
+pub fn light_start(config: &SimConfig, x3_light: [f64; 2]) -> f64 {
+    config.scene.illumination.density(radius(x3_light))
+}
+
+/// [`strategy_weights`] given the light's start density (see [`light_start`]).
+#[inline]
+pub fn strategy_weights_with(
+    config: &SimConfig,
+    technique: Technique,
+    x2: [f64; 2],
+    x3: [f64; 2],
+    light_start: f64,
+) -> [f64; PathStrategy::COUNT] {
     let scene = &config.scene;
     let plane = technique.index();
     let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
-    let inside = x3[0].hypot(x3[1]) <= scene.illumination.switch_radius();
+    let inside = radius(x3) <= scene.illumination.switch_radius();
     let switch = match plane {
         1 if inside => 1.0,
         2 if !inside => 1.0,
@@ -174,7 +196,6 @@ pub fn strategy_weights(
     };
     let geometry = JoinGeometry::new(scene, x2, x3);
     let p = geometry.technique_densities(scene);
-    let light_start = scene.illumination.density(x3_light[0].hypot(x3_light[1]));
     let area = PI * config.merge_radius * config.merge_radius;
     let sharing = Sharing::new(&geometry.vertex_densities(scene), light_start, area);
     let (nf, nb) = (config.light_paths as f64, config.camera_paths as f64);

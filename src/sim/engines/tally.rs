@@ -51,6 +51,23 @@ pub struct ChunkScratch {
     light_half: usize,
     /// The restricted engine's coin stream of the current iteration (with noise components).
     coins: Option<StreamRng>,
+    /// Per camera path, the cell and weights of its latest plane-3 merge (see
+    /// [`ChunkScratch::plane3_weights`]).
+    plane3: Vec<Plane3Weights>,
+}
+
+/// A camera's plane-3 merge: its join path is the camera's (x2c, x3c) whatever the light path, so
+/// its cell and weights depend on the light path only through the light's start density — one of
+/// a few values (the rings' levels). A camera in the bright spot merges with hundreds of light
+/// paths an iteration; their cells and weights are computed once.
+#[derive(Debug, Clone, Copy)]
+struct Plane3Weights {
+    /// The camera set ([`super::camera::CameraSet::generation`]); 0: never filled.
+    generation: u64,
+    /// The light's start density, as bits.
+    light_start: u64,
+    cell: usize,
+    weights: [f64; PathStrategy::COUNT],
 }
 
 /// What one chunk hands to its iteration: the touched slots in slot order.
@@ -81,7 +98,33 @@ impl ChunkScratch {
             block_strategies: [[0.0; PathStrategy::COUNT]; BLOCKS],
             light_half: 0,
             coins: None,
+            plane3: Vec::new(),
         }
+    }
+
+    /// The cell and weights of a plane-3 merge of camera `camera` of the camera set `generation`
+    /// with a light path of start density `light_start`: `compute()` unless the camera's previous
+    /// plane-3 merge had the same set and density (then the same values, bit for bit).
+    #[inline]
+    pub fn plane3_weights(
+        &mut self,
+        generation: u64,
+        camera: u32,
+        light_start: f64,
+        compute: impl FnOnce() -> (usize, [f64; PathStrategy::COUNT]),
+    ) -> (usize, [f64; PathStrategy::COUNT]) {
+        let j = camera as usize;
+        if j >= self.plane3.len() {
+            let unfilled =
+                Plane3Weights { generation: 0, light_start: 0, cell: 0, weights: [0.0; PathStrategy::COUNT] };
+            self.plane3.resize(j + 1, unfilled);
+        }
+        let entry = &mut self.plane3[j];
+        if entry.generation != generation || entry.light_start != light_start.to_bits() {
+            let (cell, weights) = compute();
+            *entry = Plane3Weights { generation, light_start: light_start.to_bits(), cell, weights };
+        }
+        (entry.cell, entry.weights)
     }
 
     /// A scratch for `config`'s grid that also sums the noise components' blocks if it keeps them.

@@ -13,12 +13,16 @@ use std::f64::consts::PI;
 
 use serde::Serialize;
 
+use super::scene::radius;
+
 /// The grid of tabulated-weight cells.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CellGrid {
     r2_edges: Vec<f64>,
     r3_edges: Vec<f64>,
     phi_bins: u32,
+    /// 1/step of each radial axis whose edges are equally spaced (0 when they are not).
+    inv_steps: [f64; 2],
 }
 
 /// Bounds of one cell, as reported in results (`hi = None` for a tail cell).
@@ -32,17 +36,40 @@ pub struct CellBounds {
     pub phi: [Option<f64>; 2],
 }
 
-/// Index of the cell of axis `edges` containing `r` (edges[0] = 0 ≤ r).
+/// Index of the cell of axis `edges` containing `r` (edges[0] = 0 ≤ r): the last k with
+/// edges[k] ≤ r (0 for NaN).
+///
+/// With equally spaced edges (`inv_step` > 0, the paper's r3 axis) the index is guessed as
+/// ⌊r/step⌋ and then moved to the exact answer by comparing with the edges themselves — one or two
+/// comparisons instead of a binary search, and the same result whatever the rounding of the guess.
 #[inline]
-fn axis_index(edges: &[f64], r: f64) -> usize {
+fn axis_index(edges: &[f64], inv_step: f64, r: f64) -> usize {
+    if inv_step > 0.0 {
+        let mut i = ((r * inv_step) as usize).min(edges.len() - 1);
+        while i > 0 && edges[i] > r {
+            i -= 1;
+        }
+        while i + 1 < edges.len() && edges[i + 1] <= r {
+            i += 1;
+        }
+        return i;
+    }
     edges.partition_point(|&e| e <= r).saturating_sub(1)
+}
+
+/// 1/step of `edges` if they are equally spaced (within 10⁻⁹ of a step), else 0.
+fn uniform_inv_step(edges: &[f64]) -> f64 {
+    let Some(&step) = edges.get(1) else { return 0.0 };
+    let uniform = step > 0.0 && edges.iter().enumerate().all(|(k, &e)| (e - k as f64 * step).abs() <= 1e-9 * step);
+    if uniform { 1.0 / step } else { 0.0 }
 }
 
 impl CellGrid {
     /// A grid from validated edges (starting at 0, strictly increasing) and φ bins ≥ 1.
     pub fn new(r2_edges: Vec<f64>, r3_edges: Vec<f64>, phi_bins: u32) -> Self {
         debug_assert!(r2_edges.first() == Some(&0.0) && r3_edges.first() == Some(&0.0) && phi_bins >= 1);
-        Self { r2_edges, r3_edges, phi_bins }
+        let inv_steps = [uniform_inv_step(&r2_edges), uniform_inv_step(&r3_edges)];
+        Self { r2_edges, r3_edges, phi_bins, inv_steps }
     }
 
     /// Number of cells K.
@@ -73,10 +100,9 @@ impl CellGrid {
     /// The cell of the join path (x2, x3).
     #[inline]
     pub fn index(&self, x2: [f64; 2], x3: [f64; 2]) -> usize {
-        let r2 = x2[0].hypot(x2[1]);
-        let r3 = x3[0].hypot(x3[1]);
-        let i2 = axis_index(&self.r2_edges, r2);
-        let i3 = axis_index(&self.r3_edges, r3);
+        let (r2, r3) = (radius(x2), radius(x3));
+        let i2 = axis_index(&self.r2_edges, self.inv_steps[0], r2);
+        let i3 = axis_index(&self.r3_edges, self.inv_steps[1], r3);
         let iphi = if self.phi_bins == 1 {
             0
         } else {

@@ -59,7 +59,7 @@ impl Iteration<'_> {
         };
         let in_plane2 = || {
             let near = self.cameras.plane2.candidates(c.x2);
-            near.iter().any(|&i| i < plane2_before && within(c.x2, paths[i as usize].x2, r))
+            near.take_while(|&i| i < plane2_before).any(|i| within(c.x2, paths[i as usize].x2, r))
         };
         let in_plane3 = || match own {
             Component::Plane2(_) => false,
@@ -67,8 +67,8 @@ impl Iteration<'_> {
                 .cameras
                 .plane3
                 .candidates(c.x3)
-                .iter()
-                .any(|&i| i < j && paths[i as usize].x3.is_some_and(|x3c| within(c.x3, x3c, r))),
+                .take_while(|&i| i < j)
+                .any(|i| paths[i as usize].x3.is_some_and(|x3c| within(c.x3, x3c, r))),
         };
         c.x1.is_some() || in_plane2() || in_plane3()
     }
