@@ -287,7 +287,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     if let Some(path) = &out {
         write_atomically(path, &MomentsDocument::new(job.spec().clone(), moments.clone()).to_json())?;
     }
-    let expected = expected_luminances(config);
+    // On the run's pool: the quadrature evaluates its nodes in parallel there.
+    let expected = pool.install(|| expected_luminances(config));
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
     let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);

@@ -29,8 +29,8 @@
 //! other length — reports [`ReferenceError::NotConverged`] instead of refining forever (the
 //! outer bisection alone could otherwise visit 2⁴⁰ panels).
 
-use std::cell::Cell;
 use std::f64::consts::PI;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use nalgebra::Vector3;
 
@@ -77,30 +77,30 @@ pub enum ReferenceError {
 
 /// Counts evaluations against [`EVALUATION_BUDGET`]; once spent, every rule returns 0 at once and
 /// the caller reports [`ReferenceError::NotConverged`]. Shared with [`super::expected`].
+/// Atomic, so that the expected-luminance quadrature can evaluate its nodes on several threads.
 pub(super) struct Budget {
-    used: Cell<u64>,
+    used: AtomicU64,
     limit: u64,
 }
 
 impl Budget {
     pub(super) fn new(limit: u64) -> Self {
-        Self { used: Cell::new(0), limit }
+        Self { used: AtomicU64::new(0), limit }
     }
 
     /// Charges `n` evaluations; false once the budget is spent.
     pub(super) fn charge(&self, n: u64) -> bool {
-        let used = self.used.get().saturating_add(n);
-        self.used.set(used);
-        used <= self.limit
+        let before = self.used.fetch_add(n, Ordering::Relaxed);
+        before.saturating_add(n) <= self.limit
     }
 
     pub(super) fn spent(&self) -> bool {
-        self.used.get() > self.limit
+        self.used.load(Ordering::Relaxed) > self.limit
     }
 
     /// Evaluations charged so far.
     pub(super) fn used(&self) -> u64 {
-        self.used.get()
+        self.used.load(Ordering::Relaxed)
     }
 }
 
@@ -126,7 +126,7 @@ pub fn reference_with_budget(scene: &Scene, limit: u64) -> Result<(f64, u64), Re
     if !value.is_finite() {
         return Err(ReferenceError::NotFinite);
     }
-    Ok((value, budget.used.get()))
+    Ok((value, budget.used()))
 }
 
 /// G(r3) = ∫dA2 (L2/d1³)(L3²/d2⁴) g(ϑ).

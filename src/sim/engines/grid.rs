@@ -26,8 +26,6 @@ pub struct MergeGrid {
     entries: Vec<(u32, u32)>,
     /// Buckets with entries, to clear them (and only them) at the next rebuild.
     used: Vec<u32>,
-    /// The points of the last rebuild (their number chooses the cell size), kept for reuse.
-    points: Vec<(u32, [f64; 2])>,
 }
 
 /// The end of a bucket's list.
@@ -80,7 +78,11 @@ impl Iterator for Candidates<'_> {
 
 impl MergeGrid {
     /// Builds the grid of `points` (vertex `j` at `points[j]`) for merge radius `radius`.
-    pub fn new(points: impl IntoIterator<Item = (u32, [f64; 2])>, radius: f64) -> Self {
+    pub fn new<P>(points: P, radius: f64) -> Self
+    where
+        P: IntoIterator<Item = (u32, [f64; 2])>,
+        P::IntoIter: DoubleEndedIterator + Clone,
+    {
         let mut grid = Self::default();
         grid.rebuild(points, radius);
         grid
@@ -88,11 +90,17 @@ impl MergeGrid {
 
     /// Replaces the grid's contents by `points` (in increasing vertex order), as
     /// [`MergeGrid::new`] would build them, reusing the buffers. (What a query returns does not
-    /// depend on the table's size or history: the vertices of its bucket, in index order.)
-    pub fn rebuild(&mut self, points: impl IntoIterator<Item = (u32, [f64; 2])>, radius: f64) {
-        self.points.clear();
-        self.points.extend(points);
-        debug_assert!(self.points.is_sorted_by(|a, b| a.0 < b.0), "points in increasing vertex order");
+    /// depend on the table's size or history: the vertices of its bucket, in index order.) The
+    /// points are read twice — counted, then entered back to front — rather than copied: copying
+    /// them was a quarter of a rebuild.
+    pub fn rebuild<P>(&mut self, points: P, radius: f64)
+    where
+        P: IntoIterator<Item = (u32, [f64; 2])>,
+        P::IntoIter: DoubleEndedIterator + Clone,
+    {
+        let points = points.into_iter();
+        let count = points.clone().count();
+        debug_assert!(points.clone().is_sorted_by(|a, b| a.0 < b.0), "points in increasing vertex order");
         // Cells of side 2R·s: a vertex's R-disc meets (1 + 1/s)² cells on average, and a query
         // offers the vertices of a (2Rs)² cell. Any superset in index order gives the callers the
         // same merges (they test the exact distance), so s only trades build work against false
@@ -100,9 +108,9 @@ impl MergeGrid {
         // takes s = 4: 1.6 entries per vertex instead of 4, and ~0.06 extra candidates a query for
         // vertices spread over a unit disc; a large one keeps s = 1, where dense vertices would make
         // wide cells crowded.
-        let scale = if self.points.len() <= SMALL_SET { 4.0 } else { 1.0 };
+        let scale = if count <= SMALL_SET { 4.0 } else { 1.0 };
         self.inv_cell = 1.0 / (2.0 * radius * scale);
-        let wanted = (BUCKETS_PER_VERTEX * self.points.len()).next_power_of_two().max(64);
+        let wanted = (BUCKETS_PER_VERTEX * count).next_power_of_two().max(64);
         if self.heads.len() < wanted {
             self.heads = vec![NONE; wanted];
             self.used.clear();
@@ -117,7 +125,7 @@ impl MergeGrid {
         // Back to front, each entry at the head of its bucket's list, so that every list is in
         // increasing vertex order; a vertex whose cells share a bucket is entered there once (its
         // own earlier entry is then the head).
-        for &(j, [x, y]) in self.points.iter().rev() {
+        for (j, [x, y]) in points.rev() {
             let (x0, x1) = (cell_of((x - radius) * inv_cell), cell_of((x + radius) * inv_cell));
             let (y0, y1) = (cell_of((y - radius) * inv_cell), cell_of((y + radius) * inv_cell));
             for ix in x0..=x1 {

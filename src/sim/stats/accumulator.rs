@@ -33,8 +33,11 @@ struct FoldAccumulator {
     cell_counts: Vec<u64>,
 }
 
-/// One worker's sums of the iterations it ran since the last hand-over.
+/// One worker's sums of the iterations it ran since the last hand-over. Aligned to two cache lines:
+/// the workers' accumulators sit side by side in a vector, and each writes its own buffers' headers
+/// every iteration.
 #[derive(Debug, Clone)]
+#[repr(align(128))]
 pub struct MomentsAccumulator {
     layout: Layout,
     index: SumIndex,
@@ -56,6 +59,11 @@ impl MomentsAccumulator {
             cell_counts: vec![0; 3 * layout.cells],
         };
         Self { layout, index, folds: vec![fold; moments.fold_count()], buffers: TermBuffers::default() }
+    }
+
+    /// K, the folds (iteration s goes to fold s mod K).
+    pub fn fold_count(&self) -> usize {
+        self.folds.len()
     }
 
     /// Iterations summed since the last hand-over.

@@ -4,6 +4,8 @@
 
 use std::f64::consts::PI;
 
+use rayon::prelude::*;
+
 use super::super::quadrature::{Budget, ReferenceError, WG, WGK, XGK};
 use super::{MAX_KERNEL_RATIO, Values};
 use crate::sim::engines::strategies::PathStrategy;
@@ -134,7 +136,7 @@ pub(in crate::sim::checks) fn disc_fraction_inside(d: f64, r: f64, rho: f64) -> 
 /// the piece with the largest error estimate (max over strategies of |Kronrod − Gauss|) is
 /// bisected until the summed estimates fall below `tol` of the largest strategy's value.
 pub(super) fn adaptive_gk(
-    f: &dyn Fn(usize, f64) -> Values,
+    f: &(dyn Fn(usize, f64) -> Values + Sync),
     panels: usize,
     tol: f64,
     budget: &Budget,
@@ -148,11 +150,25 @@ pub(super) fn adaptive_gk(
     }
     let rule = |panel: usize, a: f64, b: f64| -> Piece {
         let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
-        let centre = f(panel, mid);
+        // The 15 nodes: the centre, then each ±XGK[i]. Every node is an inner integral of its own,
+        // so when called on a rayon pool (the command line's, which is idle once the run is done)
+        // they are evaluated in parallel — the same values, combined in the same order below.
+        let node = |k: usize| match k {
+            0 => mid,
+            k if k % 2 == 1 => mid - half * XGK[k / 2],
+            k => mid + half * XGK[k / 2 - 1],
+        };
+        let mut values = [[0.0; PathStrategy::COUNT]; 15];
+        if rayon::current_thread_index().is_some() && rayon::current_num_threads() > 1 {
+            values.par_iter_mut().enumerate().for_each(|(k, v)| *v = f(panel, node(k)));
+        } else {
+            values.iter_mut().enumerate().for_each(|(k, v)| *v = f(panel, node(k)));
+        }
+        let centre = values[0];
         let mut kronrod = centre.map(|c| WGK[7] * c);
         let mut gauss = centre.map(|c| WG[3] * c);
         for i in 0..7 {
-            let (left, right) = (f(panel, mid - half * XGK[i]), f(panel, mid + half * XGK[i]));
+            let (left, right) = (values[2 * i + 1], values[2 * i + 2]);
             for s in 0..PathStrategy::COUNT {
                 let pair = left[s] + right[s];
                 kronrod[s] += WGK[i] * pair;
