@@ -19,7 +19,7 @@ use crate::sim::math::rng::{StreamRng, uniform, uniform_open0};
 use crate::sim::math::sampling::{cosine_direction, disc_point};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::illumination::Ring;
-use crate::sim::model::scene::{advance, sample_lobe};
+use crate::sim::model::scene::{advance, radius, sample_lobe};
 
 /// A light path being drawn: its vertices, its direction into x2, and (once known) x1 and ϑ.
 struct Candidate {
@@ -79,7 +79,7 @@ impl Iteration<'_> {
 /// [`CANCEL_CHECK_INTERVAL`] candidates, and while drawing a huge count).
 fn for_each_candidate(
     rng: &mut StreamRng,
-    buffers: &RestrictedScratch,
+    buffers: &mut RestrictedScratch,
     cancel: &AtomicBool,
     mut draw: impl FnMut(&mut StreamRng, u32, u32, Kind),
 ) -> bool {
@@ -88,12 +88,13 @@ fn for_each_candidate(
     }
     let total = buffers.total();
     let Some(count) = poisson_until(rng, total, cancel) else { return false };
+    buffers.prepare_draws(count);
     for k in 0..count {
         if k % CANCEL_CHECK_INTERVAL == CANCEL_CHECK_INTERVAL - 1 && cancel.load(Ordering::Relaxed) {
             return false;
         }
         let u = uniform(rng) * total;
-        let i = buffers.bundle.partition_point(|e| e.cumulative <= u).min(buffers.bundle.len() - 1);
+        let i = buffers.find(u);
         let BundleEntry { layer, camera, kind, .. } = buffers.bundle[i];
         draw(rng, layer, camera, kind);
     }
@@ -170,9 +171,12 @@ pub(super) fn build_plane2(
     buffers: &mut RestrictedScratch,
 ) {
     buffers.bundle.clear();
+    // |x2c| of every camera once, not once per layer (the same expression, so the same bits).
+    buffers.radii.clear();
+    buffers.radii.extend(cameras.paths.iter().map(|cam| radius(cam.x2)));
     for (l, layer) in plan.layers.iter().enumerate() {
-        for (j, cam) in cameras.paths.iter().enumerate() {
-            let (mass, kind) = plan.plane2(layer, config, cam.x2);
+        for j in 0..cameras.paths.len() {
+            let (mass, kind) = plan.plane2(layer, config, buffers.radii[j]);
             buffers.push(mass, l, j, kind);
         }
     }
@@ -204,7 +208,8 @@ pub(super) fn plane2_bundle(
             }
             Kind::Forward | Kind::ForwardBulk | Kind::ForwardTail => {
                 let x3 = ring_point(rng, &layer.ring);
-                let Some(d) = thin_by_distance(rng, x3, x2, l3, d_min_squared(config, layer, x2c)) else { return };
+                let d_min2 = d_min_squared(config, layer, radius(x2c));
+                let Some(d) = thin_by_distance(rng, x3, x2, l3, d_min2) else { return };
                 (x3, d)
             }
         };
@@ -225,12 +230,16 @@ pub(super) fn build_plane3(
 ) {
     let r = config.merge_radius;
     buffers.bundle.clear();
+    // |x3c| of every camera once, not once per layer (NaN, which no test admits, for a path that
+    // did not reach plane 3).
+    buffers.radii.clear();
+    buffers.radii.extend(cameras.paths.iter().map(|cam| cam.x3.map_or(f64::NAN, radius)));
     for (l, layer) in plan.layers.iter().enumerate() {
-        for (j, cam) in cameras.paths.iter().enumerate() {
-            let Some(x3c) = cam.x3 else { continue };
-            // A disc that misses the ring holds no start point: no candidates.
-            let dist = (x3c[0] * x3c[0] + x3c[1] * x3c[1]).sqrt();
-            if dist + r < layer.ring.r_in || dist - r >= layer.ring.r_out {
+        for j in 0..cameras.paths.len() {
+            let dist = buffers.radii[j];
+            // A disc that misses the ring holds no start point: no candidates (nor a camera path
+            // that did not reach plane 3: every comparison with NaN is false).
+            if !(dist + r >= layer.ring.r_in && dist - r < layer.ring.r_out) {
                 continue;
             }
             buffers.push(layer.nu * PI * r * r, l, j, Kind::Forward);
