@@ -3,6 +3,8 @@
 //! that are handed to the [`Moments`] only when someone needs them (a checkpoint, a progress view,
 //! the end of the run).
 //!
+//! [`ExactSum`]: crate::sim::math::exact_sum::ExactSum
+//!
 //! The moments' own [`ExactSum`]s cost a walk over ~20 parts per addition, and adding one moments
 //! value to another costs that for each of their ~6·10⁴ sums — per rayon piece, it was a fifth of
 //! the restricted engine's time and capped its parallel speed-up (issue 26). Here an iteration

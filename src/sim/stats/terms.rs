@@ -1,6 +1,7 @@
 //! What one iteration adds to the sums of its fold: every term of ΣY, ΣYYᵀ, the per-path
 //! strategies' power sums and the noise components' block products, as (index, value) pairs over
-//! the fold's sums in [`FoldMoments::sums`](super::moments::FoldMoments::sums) order.
+//! the fold's sums in the order of `FoldMoments::sums` (ΣY, ΣYYᵀ packed, the power sums, then the
+//! component sums).
 //!
 //! Both accumulators of the moments add exactly these terms: the documents' [`ExactSum`]s
 //! (`moments`) and the runner's fast per-worker [`WindowSum`]s (`accumulator`). One list of terms
