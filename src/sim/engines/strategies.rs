@@ -6,9 +6,9 @@ use serde::{Deserialize, Serialize};
 
 use std::f64::consts::PI;
 
+use crate::sim::math::plane::radius;
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
-use crate::sim::model::scene::radius;
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -13,7 +13,7 @@ use std::f64::consts::PI;
 
 use serde::Serialize;
 
-use super::scene::radius;
+use crate::sim::math::plane::radius;
 
 /// The grid of tabulated-weight cells.
 #[derive(Debug, Clone, PartialEq)]

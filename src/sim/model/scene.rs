@@ -82,14 +82,6 @@ pub fn theta_over_sin(theta: f64) -> f64 {
     if theta < 1e-4 { 1.0 + theta * theta / 6.0 } else { theta / libm::sin(theta) }
 }
 
-/// |p| of a point of a plane: √(x² + y²), not `hypot`, whose overflow-safe library call costs
-/// four times as much in the engines' hot paths (issue 26); the coordinates of the scene are far
-/// from the squares' overflow and underflow.
-#[inline(always)]
-pub fn radius(p: [f64; 2]) -> f64 {
-    (p[0] * p[0] + p[1] * p[1]).sqrt()
-}
-
 /// The angle between two unit vectors, accurate for small angles (atan2 of |a×b| and a·b).
 #[inline]
 pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {

@@ -14,12 +14,13 @@ use crate::sim::engines::camera::CameraSet;
 use crate::sim::engines::merge::{merge_plane1, merge_plane2, merge_plane3, within};
 use crate::sim::engines::pixel::{land_on_pixel, pixel_hit};
 use crate::sim::engines::tally::ChunkScratch;
+use crate::sim::math::plane::radius;
 use crate::sim::math::poisson::poisson_until;
 use crate::sim::math::rng::{StreamRng, uniform, uniform_open0};
 use crate::sim::math::sampling::{cosine_direction, disc_point};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::illumination::Ring;
-use crate::sim::model::scene::{advance, radius, sample_lobe};
+use crate::sim::model::scene::{advance, sample_lobe};
 
 /// A light path being drawn: its vertices, its direction into x2, and (once known) x1 and ϑ.
 struct Candidate {
