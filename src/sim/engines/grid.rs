@@ -161,6 +161,29 @@ impl MergeGrid {
 
 #[cfg(test)]
 mod tests {
+
+    /// However many cells share a bucket, a query lists each vertex once, in index order: points
+    /// on a lattice of the cell size put every vertex in four cells, and a wide radius crowds the
+    /// buckets.
+    #[test]
+    fn crowded_buckets_list_each_vertex_once_in_order() {
+        let r = 0.01;
+        let points: Vec<(u32, [f64; 2])> =
+            (0..900u32).map(|k| (k, [(k % 30) as f64 * 0.08 - 1.2, (k / 30) as f64 * 0.08 - 1.2])).collect();
+        let grid = MergeGrid::new(points.iter().copied(), r);
+        let mut rng = stream(8, 8, 8);
+        for _ in 0..20_000 {
+            let q = [uniform(&mut rng) * 2.6 - 1.3, uniform(&mut rng) * 2.6 - 1.3];
+            let cands: Vec<u32> = grid.candidates(q).collect();
+            assert!(cands.windows(2).all(|w| w[0] < w[1]), "sorted and distinct at {q:?}: {cands:?}");
+            for &(j, p) in &points {
+                if (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) <= r * r {
+                    assert!(cands.contains(&j), "missed vertex {j} near {q:?}");
+                }
+            }
+        }
+    }
+
     use super::*;
     use crate::sim::math::rng::{stream, uniform};
 

@@ -262,6 +262,51 @@ pub(super) fn d_min_squared(config: &SimConfig, layer: &Layer, x2c_radius: f64) 
 
 #[cfg(test)]
 mod tests {
+    /// The guide table finds the entry the bisection finds, for skewed and equal masses, zero
+    /// masses, and draws at the cumulative masses themselves (where `<=` decides).
+    #[test]
+    fn guided_draws_pick_the_bisections_entry() {
+        let mut rng = stream(4, 5, 6);
+        for case in 0..200 {
+            let mut scratch = RestrictedScratch::default();
+            let n = 1 + case % 40;
+            for k in 0..n {
+                let u = crate::sim::math::rng::uniform(&mut rng);
+                let mass = match case % 4 {
+                    0 => 1.0,
+                    1 => 1e-6 + u.powi(8) * 1e3,
+                    2 => {
+                        if k % 3 == 0 {
+                            0.0
+                        } else {
+                            u
+                        }
+                    }
+                    _ => {
+                        if k < n / 2 {
+                            1e4
+                        } else {
+                            1e-4
+                        }
+                    }
+                };
+                scratch.push(mass, 0, k, Kind::Reverse);
+            }
+            let total = scratch.total();
+            if total == 0.0 {
+                continue;
+            }
+            let bisect = |u: f64| scratch.bundle.partition_point(|e| e.cumulative <= u).min(n - 1);
+            let mut draws: Vec<f64> = (0..50).map(|_| crate::sim::math::rng::uniform(&mut rng) * total).collect();
+            draws.extend(scratch.bundle.iter().map(|e| e.cumulative).filter(|&c| c < total));
+            let wanted: Vec<usize> = draws.iter().map(|&u| bisect(u)).collect();
+            scratch.prepare_draws(draws.len() as u64);
+            assert_eq!(scratch.guide.is_empty(), n <= 8, "case {case}: a guide for n = {n}");
+            let found: Vec<usize> = draws.iter().map(|&u| scratch.find(u)).collect();
+            assert_eq!(found, wanted, "case {case}");
+        }
+    }
+
     use super::*;
     use crate::sim::engines::merge::within;
     use crate::sim::math::rng::stream;
