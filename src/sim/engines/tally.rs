@@ -51,10 +51,15 @@ pub struct ChunkScratch {
     light_half: usize,
     /// The restricted engine's coin stream of the current iteration (with noise components).
     coins: Option<StreamRng>,
-    /// Per camera path, the cell and weights of its latest plane-3 merge (see
-    /// [`ChunkScratch::plane3_weights`]).
-    plane3: Vec<Plane3Weights>,
+    /// The cell and weights of recent plane-3 merges, camera path j in slot j mod
+    /// [`PLANE3_SLOTS`] (see [`ChunkScratch::plane3_weights`]).
+    plane3: Box<[Plane3Weights; PLANE3_SLOTS]>,
 }
+
+/// Slots of the plane-3 weight cache: one per camera path up to 256 (the paper has 100); with more
+/// camera paths, paths 256 apart share a slot. A fixed size, so that the cache neither grows with
+/// N_B (10⁶ camera paths would have cost ~100 MB a worker) nor allocates in the merge loop.
+const PLANE3_SLOTS: usize = 256;
 
 /// A camera's plane-3 merge: its join path is the camera's (x2c, x3c) whatever the light path, so
 /// its cell and weights depend on the light path only through the light's start density — one of
@@ -64,6 +69,8 @@ pub struct ChunkScratch {
 struct Plane3Weights {
     /// The camera set ([`super::camera::CameraSet::generation`]); 0: never filled.
     generation: u64,
+    /// The camera path within the set.
+    camera: u32,
     /// The light's start density, as bits.
     light_start: u64,
     cell: usize,
@@ -98,13 +105,22 @@ impl ChunkScratch {
             block_strategies: [[0.0; PathStrategy::COUNT]; BLOCKS],
             light_half: 0,
             coins: None,
-            plane3: Vec::new(),
+            plane3: Box::new(
+                [Plane3Weights {
+                    generation: 0,
+                    camera: 0,
+                    light_start: 0,
+                    cell: 0,
+                    weights: [0.0; PathStrategy::COUNT],
+                }; PLANE3_SLOTS],
+            ),
         }
     }
 
     /// The cell and weights of a plane-3 merge of camera `camera` of the camera set `generation`
     /// with a light path of start density `light_start`: `compute()` unless the camera's previous
-    /// plane-3 merge had the same set and density (then the same values, bit for bit).
+    /// plane-3 merge in its slot was this one's camera with the same set and density (then the same
+    /// values, bit for bit).
     #[inline]
     pub fn plane3_weights(
         &mut self,
@@ -113,16 +129,10 @@ impl ChunkScratch {
         light_start: f64,
         compute: impl FnOnce() -> (usize, [f64; PathStrategy::COUNT]),
     ) -> (usize, [f64; PathStrategy::COUNT]) {
-        let j = camera as usize;
-        if j >= self.plane3.len() {
-            let unfilled =
-                Plane3Weights { generation: 0, light_start: 0, cell: 0, weights: [0.0; PathStrategy::COUNT] };
-            self.plane3.resize(j + 1, unfilled);
-        }
-        let entry = &mut self.plane3[j];
-        if entry.generation != generation || entry.light_start != light_start.to_bits() {
+        let entry = &mut self.plane3[camera as usize % PLANE3_SLOTS];
+        if entry.generation != generation || entry.camera != camera || entry.light_start != light_start.to_bits() {
             let (cell, weights) = compute();
-            *entry = Plane3Weights { generation, light_start: light_start.to_bits(), cell, weights };
+            *entry = Plane3Weights { generation, camera, light_start: light_start.to_bits(), cell, weights };
         }
         (entry.cell, entry.weights)
     }

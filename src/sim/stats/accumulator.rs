@@ -15,7 +15,9 @@
 use std::ops::Range;
 
 use super::coverage::Coverage;
-use super::moments::{MergeError, Moments, add_tally_counters, check_representable};
+use super::moments::{
+    Counters, FoldMoments, MergeError, Moments, add_tally_counters, check_representable, counters_fit,
+};
 use super::terms::{SumIndex, TermBuffers, for_each_term};
 use crate::sim::engines::layout::Layout;
 use crate::sim::engines::tally::IterationTally;
@@ -167,30 +169,13 @@ pub fn hand_over(
 /// Whether every counter of `moments` plus `workers`' fits its type, pooled over the folds (what
 /// the noise table adds), and so per fold.
 fn check_counters(workers: &[MomentsAccumulator], moments: &Moments) -> Result<(), MergeError> {
-    let overflow = |what: &str| MergeError::Overflow(what.to_string());
-    let worker_folds = || workers.iter().flat_map(|w| &w.folds);
-    for m in 0..3 {
-        let merges = moments.folds.iter().map(|f| u128::from(f.merges[m])).sum::<u128>()
-            + worker_folds().map(|f| u128::from(f.merges[m])).sum::<u128>();
-        if merges > u128::from(u64::MAX) {
-            return Err(overflow("merge count"));
-        }
-        moments
-            .folds
-            .iter()
-            .map(|f| f.merges_sq[m])
-            .chain(worker_folds().map(|f| f.merges_sq[m]))
-            .try_fold(0u128, u128::checked_add)
-            .ok_or_else(|| overflow("squared merge count"))?;
-    }
-    for slot in 0..3 * moments.cells {
-        let total = moments.folds.iter().map(|f| u128::from(f.cell_counts[slot])).sum::<u128>()
-            + worker_folds().map(|f| u128::from(f.cell_counts[slot])).sum::<u128>();
-        if total > u128::from(u64::MAX) {
-            return Err(overflow("cell event count"));
-        }
-    }
-    Ok(())
+    let worker_folds = workers.iter().flat_map(|w| &w.folds).map(|f| Counters {
+        merges: &f.merges,
+        merges_sq: &f.merges_sq,
+        cell_counts: &f.cell_counts,
+    });
+    let folds: Vec<Counters> = moments.folds.iter().map(FoldMoments::counters).chain(worker_folds).collect();
+    if counters_fit(&folds) { Ok(()) } else { Err(MergeError::Overflow("pooled counts".to_string())) }
 }
 
 #[cfg(test)]

@@ -198,8 +198,23 @@ impl FoldMoments {
     }
 }
 
+/// The integer counters of one fold — a document's ([`FoldMoments`]) or a worker's
+/// (`accumulator`) — for [`counters_fit`].
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Counters<'a> {
+    pub(super) merges: &'a [u64; 3],
+    pub(super) merges_sq: &'a [u128; 3],
+    pub(super) cell_counts: &'a [u64],
+}
+
+impl FoldMoments {
+    pub(super) fn counters(&self) -> Counters<'_> {
+        Counters { merges: &self.merges, merges_sq: &self.merges_sq, cell_counts: &self.cell_counts }
+    }
+}
+
 /// Whether the counters of `folds` added together fit their types.
-fn counters_fit(folds: &[&FoldMoments]) -> bool {
+pub(super) fn counters_fit(folds: &[Counters]) -> bool {
     let fits = |total: u128| total <= u128::from(u64::MAX);
     (0..3).all(|m| {
         fits(folds.iter().map(|f| u128::from(f.merges[m])).sum())
@@ -340,7 +355,7 @@ impl Moments {
             return Err(overflow("iteration count"));
         }
         // The pooled folds (what the noise table adds) must fit as well.
-        if !counters_fit(&self.folds.iter().chain(&other.folds).collect::<Vec<_>>()) {
+        if !counters_fit(&self.folds.iter().chain(&other.folds).map(FoldMoments::counters).collect::<Vec<_>>()) {
             return Err(overflow("pooled counts"));
         }
         Ok(())
@@ -417,7 +432,7 @@ impl Moments {
         }
         // The folds' counters must pool without overflow (the noise table adds them; their sums
         // pool safely: moments from outside are below 2^1000, merged ones are checked).
-        if !counters_fit(&self.folds.iter().collect::<Vec<_>>()) {
+        if !counters_fit(&self.folds.iter().map(FoldMoments::counters).collect::<Vec<_>>()) {
             return Err(MergeError::Malformed("the folds' counts overflow when pooled".into()));
         }
         Ok(())
