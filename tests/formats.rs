@@ -5,13 +5,19 @@
 //! A format-2 value is made by keeping exactly what format 2 kept of a format-3 run: the first
 //! seven strategies' sums and the (A, B) block of ΣY and ΣYYᵀ. Exact sums do not depend on what
 //! else was summed beside them, so this is bit for bit what the earlier build wrote.
+//!
+//! Format 3 with noise components (before issue 26: components over all of Y) is made by this
+//! build itself: a job checkpointed in format 3 resumes in it, so running into an empty format-3
+//! value writes what the earlier build wrote.
 
 use std::sync::atomic::AtomicBool;
 
 use optimis::sim::document::MomentsDocument;
 use optimis::sim::runner::{run, run_iterations};
+use optimis::sim::solve::predict::{Budget, predict};
 use optimis::sim::solve::report::{ReportInputs, build_report};
 use optimis::sim::spec::{ValidJob, parse_job_spec};
+use optimis::sim::stats::components::ComponentSums;
 use optimis::sim::stats::moments::{MergeError, Moments, packed_index};
 use serde_json::json;
 
@@ -106,4 +112,90 @@ fn a_format_2_checkpoint_resumes_in_format_2() {
     let whole = as_format_2(&pool.install(|| run(config, 7, 0..400)), &job);
     assert_eq!(resumed, whole);
     assert_eq!(resumed.format_version, 2);
+}
+
+/// An empty format-3 value with noise components for `job` (what a job checkpointed by an earlier
+/// build before its first iteration holds).
+fn empty_format_3(job: &ValidJob) -> Moments {
+    let mut moments = Moments::new(job.config());
+    assert_eq!(moments.format_version, 4, "moments with components are format 4");
+    moments.format_version = 3;
+    moments.fingerprint = job.config().fingerprint_of_format(3);
+    let layout = moments.layout();
+    for fold in &mut moments.folds {
+        fold.components = Some(ComponentSums::empty(layout));
+    }
+    moments
+}
+
+/// Format 4 keeps of the noise components exactly the entries a prediction reads: its sums are
+/// format 3's over Y's leading n_c entries, bit for bit, the predictions at other budgets are the
+/// same, moments without components are still format 3 (same fingerprint and sums as before), and
+/// formats 3 and 4 with components never merge.
+#[test]
+fn format_4_components_are_format_3_s_over_the_predictable_prefix() {
+    let doc = json!({ "preset": "paper-table1", "light_paths": 1_000_000, "iterations": 300, "seed": 5,
+        "noise_components": true });
+    let job = parse_job_spec(&doc).unwrap().validate().unwrap();
+    let config = job.config();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let new = pool.install(|| run(config, 5, 0..300));
+    let mut old = empty_format_3(&job);
+    let never = AtomicBool::new(false);
+    pool.install(|| run_iterations(config, 5, 0..300, &mut old, &never, |_, _| std::ops::ControlFlow::Continue(())))
+        .unwrap();
+    assert_eq!((old.format_version, new.format_version), (3, 4));
+    old.check_well_formed().expect("a well-formed format-3 value");
+    new.check_well_formed().expect("a well-formed format-4 value");
+
+    // Everything but the components is the same, and the components agree on the prefix.
+    let (n, n_c) = (new.layout().dimension(), new.layout().component_dimension());
+    assert_eq!((n, n_c), (old.layout().dimension(), 2 * new.cells + 2));
+    assert_eq!(old.layout().component_dimension(), n);
+    for (a, b) in old.folds.iter().zip(&new.folds) {
+        assert_eq!((&a.sum_y, &a.sum_yy, &a.strategies), (&b.sum_y, &b.sum_yy, &b.strategies));
+        let (ca, cb) = (a.components.as_ref().unwrap(), b.components.as_ref().unwrap());
+        assert_eq!(ca.strategies, cb.strategies);
+        for kind in 0..3 {
+            let (full, kept) = (ca.matrix(kind), cb.matrix(kind));
+            assert_eq!(kept.len(), n_c * (n_c + 1) / 2);
+            for i in 0..n_c {
+                for j in i..n_c {
+                    assert_eq!(full[packed_index(n, i, j)], kept[packed_index(n_c, i, j)], "kind {kind} ({i}, {j})");
+                }
+            }
+            // Format 3 summed the heuristics' columns too (they are not all zero).
+            assert!(
+                (n_c..n)
+                    .any(|j| full[packed_index(n, 0, j)].value() != 0.0 || full[packed_index(n, j, j)].value() != 0.0)
+            );
+        }
+    }
+
+    // Predictions at other budgets read only the prefix: the same rows and weights.
+    let from = Budget { light_paths: 1_000_000, camera_paths: 100 };
+    for to in
+        [Budget { light_paths: 10_000_000, camera_paths: 1000 }, Budget { light_paths: 100_000, camera_paths: 10 }]
+    {
+        let p = |m: &Moments| predict(m, config.cells(), &job.spec().solver, from, to).unwrap();
+        let (p_old, p_new) = (p(&old), p(&new));
+        assert_eq!(p_old.noise_table, p_new.noise_table, "{to:?}");
+        assert_eq!(p_old.weights, p_new.weights, "{to:?}");
+        assert_eq!(p_old.recommended, p_new.recommended, "{to:?}");
+    }
+
+    // A format-3 document with components still verifies; the two formats never merge.
+    let read = MomentsDocument::from_json(&MomentsDocument::new(job.spec().clone(), old.clone()).to_json())
+        .expect("a format-3 document with components reads");
+    assert_eq!(read.moments, old);
+    let mut target = new.clone();
+    let other = pool.install(|| run(config, 6, 0..10));
+    assert!(matches!(target.merge(&old), Err(MergeError::FormatMix { found: 3, expected: 4 })));
+    let mut old_target = old.clone();
+    assert!(matches!(old_target.merge(&other), Err(MergeError::FormatMix { found: 4, expected: 3 })));
+
+    // Without components nothing changed: format 3, with format 3's fingerprint.
+    let plain = (**config).clone().with_noise_components(false);
+    assert_eq!(Moments::new(&plain).format_version, 3);
+    assert_eq!(plain.fingerprint(), plain.fingerprint_of_format(3));
 }

@@ -12,8 +12,11 @@
 //!
 //! with c = 1, or c = [`COMPONENTS_FACTOR`] when the job keeps noise components: each merge and
 //! each iteration's sums then also go into the components' blocks (`stats::components`), which
-//! made the restricted engine's iterations 2.2× as long (issue 22's review, paper parameters);
-//! tracing is not repeated, so the traced paths keep their weight.
+//! made the restricted engine's iterations 2.2× as long (issue 22's review, paper parameters) until
+//! moments format 4 kept the components over the predictable part of the moment vector only
+//! (issue 26): whole runs with components then took 1.25× a plain run at the paper's parameters
+//! and 1.2× at R = 0.05, where merges are nearly all the work — 1.5 on the merges' and iterations'
+//! share bounds both; tracing is not repeated, so the traced paths keep their weight.
 //!
 //! E[merge events] is N_F·Σ_j P(the light vertex falls within R of camera vertex j) at planes 2 and
 //! 3 (the closed forms of [`crate::sim::checks::expectation`]; both engines share it by Campbell's theorem). It
@@ -33,8 +36,8 @@ use crate::sim::model::densities::start_probability_in_disc;
 pub const MERGE_WEIGHT: f64 = 50.0;
 
 /// How much longer the per-merge and per-iteration work is when the noise components are kept
-/// (measured on the restricted engine at the paper's parameters, module docs).
-pub const COMPONENTS_FACTOR: f64 = 2.2;
+/// (measured on the restricted engine, module docs).
+pub const COMPONENTS_FACTOR: f64 = 1.5;
 
 /// Camera paths of the pilot.
 pub const PILOT_CAMERAS: u64 = 4096;
@@ -153,8 +156,8 @@ mod tests {
         assert!(wide.total() > 1e8 && wide.total() < 1e10, "{wide:?}");
     }
 
-    /// Issue 22, item 11: noise components make the merges' and iterations' work 2.2× as large
-    /// (the traced paths are not traced again), so the work limit sees them.
+    /// Issue 22, item 11: noise components make the merges' and iterations' work larger (1.5×
+    /// since issue 26; the traced paths are not traced again), so the work limit sees them.
     #[test]
     fn noise_components_count_in_the_work() {
         let plain = iteration_work(&config(json!({ "merge_radius": 0.5 })));
@@ -162,7 +165,7 @@ mod tests {
         assert_eq!((plain.light_paths, plain.merges), (with.light_paths, with.merges));
         let per_merge = MERGE_WEIGHT * plain.merges + plain.camera_paths;
         assert_eq!(with.total(), plain.light_paths + COMPONENTS_FACTOR * per_merge);
-        // At R = 0.5 the merges are most of the work: the total grows by well over half.
-        assert!(with.total() > 1.5 * plain.total(), "{plain:?} vs {with:?}");
+        // At R = 0.5 the merges are most of the work: the total grows by about a third.
+        assert!(with.total() > 1.3 * plain.total(), "{plain:?} vs {with:?}");
     }
 }

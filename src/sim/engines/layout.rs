@@ -8,6 +8,14 @@
 //! w0 = 0 variants of the heuristics. Format 2 documents and checkpoints are still read: they hold
 //! the first seven strategies and no H columns, and everything that needs what they lack says so.
 //! Strategies are only ever appended to [`PathStrategy::ALL`], so a format keeps a prefix of it.
+//!
+//! Format 4 (issue 26) keeps the same sums, except that the noise components' block products cover
+//! only the entries of Y a prediction at another budget can use (docs/model.md §12): A, B and the
+//! H columns of the stacked heuristics whose weights do not depend on the budget — the switch,
+//! Y's first H column, so the components cover a prefix of Y. The other H columns (the
+//! correlation-aware heuristics, whose weights change with N_F and N_B, and the balance and power
+//! heuristics, which no predicted row stacks) took three quarters of the components' products
+//! and no prediction read them. Format 3 documents and checkpoints are still read.
 
 use super::strategies::PathStrategy;
 use crate::sim::model::cells::MAX_CELLS;
@@ -16,9 +24,21 @@ use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, Si
 /// The oldest format this build reads: the first seven strategies, no H columns.
 pub const FORMAT_WITHOUT_HEURISTICS: u32 = 2;
 /// The format with the stackable strategies' H columns and the w0 = 0 variants (issue 21): the
-/// one this build writes ([`MOMENTS_FORMAT_VERSION`]).
+/// one this build wrote before issue 26: its noise components cover all of Y.
 pub const FORMAT_WITH_HEURISTICS: u32 = 3;
-const _: () = assert!(MOMENTS_FORMAT_VERSION == FORMAT_WITH_HEURISTICS);
+/// Format 3 with noise components over the predictable prefix of Y only (issue 26): the one this
+/// build writes ([`MOMENTS_FORMAT_VERSION`]).
+pub const FORMAT_WITH_PREDICTABLE_COMPONENTS: u32 = 4;
+const _: () = assert!(MOMENTS_FORMAT_VERSION == FORMAT_WITH_PREDICTABLE_COMPONENTS);
+
+/// The H columns format 4's noise components keep: a prefix of [`PathStrategy::STACKABLE`], the
+/// stacked heuristics whose weights do not depend on the budget (the only ones a prediction at
+/// another budget stacks, `solve::predict`).
+pub const COMPONENT_HEURISTICS: [PathStrategy; 1] = [PathStrategy::Switch];
+const _: () = {
+    assert!(matches!(PathStrategy::STACKABLE[0], PathStrategy::Switch));
+    assert!(!PathStrategy::Switch.depends_on_budget());
+};
 
 /// Most H columns any format has.
 pub const MAX_HEURISTIC_COLUMNS: usize = PathStrategy::STACKABLE.len();
@@ -36,7 +56,9 @@ pub const MAX_FOLD_SUMS: usize = 2 * MAX_PACKED;
 
 /// Most folds a grid of `cells` cells may have (at least [`MIN_FOLDS`]); with noise components
 /// every fold holds four packed matrices instead of one (ΣYYᵀ and the three component sums of
-/// `stats::components`), so a quarter as many.
+/// `stats::components`), so a quarter as many. Format 4's component matrices are a little smaller,
+/// but the bound is counted as in format 3 so that every configuration keeps the folds (and so the
+/// fingerprint and the results) it had.
 pub fn folds_allowed(cells: usize, noise_components: bool) -> usize {
     let n = Layout::new(cells, MOMENTS_FORMAT_VERSION).dimension();
     let per_fold = packed_len(n) * if noise_components { 4 } else { 1 };
@@ -55,7 +77,7 @@ pub struct Layout {
 impl Layout {
     /// The layout of the moments this build writes for `config`.
     pub fn of(config: &SimConfig) -> Self {
-        Self::new(config.cells.len(), MOMENTS_FORMAT_VERSION)
+        Self::new(config.cells.len(), config.moments_format())
     }
 
     /// The layout of `format` (a supported one: see [`Layout::supports`]).
@@ -66,7 +88,7 @@ impl Layout {
 
     /// Whether this build reads moments of `format`.
     pub fn supports(format: u32) -> bool {
-        (FORMAT_WITHOUT_HEURISTICS..=FORMAT_WITH_HEURISTICS).contains(&format)
+        (FORMAT_WITHOUT_HEURISTICS..=FORMAT_WITH_PREDICTABLE_COMPONENTS).contains(&format)
     }
 
     /// The per-path strategies whose power sums the format keeps, in [`PathStrategy::ALL`] order.
@@ -104,6 +126,16 @@ impl Layout {
     pub fn dimension(&self) -> usize {
         2 * self.cells + 1 + self.heuristics().len()
     }
+
+    /// How many leading entries of Y the noise components' block products cover: all of Y before
+    /// format 4, then A, B and the [`COMPONENT_HEURISTICS`] columns.
+    pub fn component_dimension(&self) -> usize {
+        if self.format >= FORMAT_WITH_PREDICTABLE_COMPONENTS {
+            2 * self.cells + 1 + COMPONENT_HEURISTICS.len()
+        } else {
+            self.dimension()
+        }
+    }
 }
 
 #[cfg(test)]
@@ -122,5 +154,23 @@ mod tests {
         assert_eq!(new.heuristic_index(PathStrategy::CorrelationAwarePlanes23), Some(111));
         assert_eq!(new.heuristic_index(PathStrategy::Plane1), None);
         assert!(PathStrategy::ALL.iter().enumerate().all(|(i, s)| s.index() == i));
+        assert_eq!((old.component_dimension(), new.component_dimension()), (105, 112));
+    }
+
+    #[test]
+    fn format_4_keeps_the_sums_of_format_3_and_components_over_a_predictable_prefix() {
+        let (three, four) = (Layout::new(52, 3), Layout::new(52, 4));
+        assert_eq!(four.dimension(), three.dimension());
+        assert_eq!(four.strategies(), three.strategies());
+        assert_eq!(four.heuristics(), three.heuristics());
+        assert_eq!(four.component_dimension(), 2 * 52 + 2);
+        // The prefix ends with the H columns of COMPONENT_HEURISTICS, which are Y's first.
+        for (i, h) in COMPONENT_HEURISTICS.iter().enumerate() {
+            assert_eq!(four.heuristic_index(*h), Some(2 * 52 + 1 + i));
+        }
+        // Every heuristic a prediction at another budget stacks has its column in the prefix.
+        for h in PathStrategy::STACKED.iter().filter(|h| !h.depends_on_budget()) {
+            assert!(four.heuristic_index(*h).is_some_and(|i| i < four.component_dimension()), "{h:?}");
+        }
     }
 }

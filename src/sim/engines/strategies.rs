@@ -110,7 +110,7 @@ impl PathStrategy {
     /// predicted from the components of a run at this one): the correlation-aware heuristic's
     /// effective sample counts do; the cases and the VCM balance and power heuristics (whose pdfs
     /// are the techniques' relative densities) do not.
-    pub fn depends_on_budget(self) -> bool {
+    pub const fn depends_on_budget(self) -> bool {
         matches!(self, Self::CorrelationAware | Self::CorrelationAwarePlanes23)
     }
 

@@ -24,13 +24,19 @@ pub enum Proposals {
     Reverse,
 }
 
-/// Version of the moments layout this build writes; part of the fingerprint. Format 3 (issue 21)
+/// Version of the moments layout this build writes; part of the fingerprint. Format 4 (issue 26)
+/// keeps the noise components over the predictable prefix of the moment vector only
+/// (`engines::layout`); format 3 (issue 21)
 /// adds the w0 = 0 heuristics and one moment-vector column per stackable strategy
 /// (`stats::layout`); format 2 (issue 13) keeps K folds by iteration index s mod K, for K-fold
 /// cross-fitting, and is still read (its jobs even resume in it); format 1 kept two folds (even,
 /// odd) that cannot be split into more, so its documents and checkpoints are refused with a message
 /// that says so.
-pub const MOMENTS_FORMAT_VERSION: u32 = 3;
+pub const MOMENTS_FORMAT_VERSION: u32 = 4;
+
+/// The format of moments without noise components ([`SimConfig::moments_format`]): format 4
+/// changed only the components.
+pub const PLAIN_MOMENTS_FORMAT: u32 = 3;
 
 /// Fewest cross-fitting folds K.
 pub const MIN_FOLDS: usize = 2;
@@ -197,7 +203,15 @@ impl SimConfig {
     }
 
     fn compute_fingerprint(&self) -> String {
-        self.fingerprint_of_format(MOMENTS_FORMAT_VERSION)
+        self.fingerprint_of_format(self.moments_format())
+    }
+
+    /// The moments format this build writes for this configuration: [`MOMENTS_FORMAT_VERSION`]
+    /// with noise components; without them format 3, whose sums format 4 did not change — so
+    /// such moments, their fingerprints and documents stay what they were and merge with those of
+    /// earlier builds.
+    pub fn moments_format(&self) -> u32 {
+        if self.noise_components { MOMENTS_FORMAT_VERSION } else { PLAIN_MOMENTS_FORMAT }
     }
 
     /// The fingerprint the same configuration had in moments `format` (a supported one): what a

@@ -106,8 +106,14 @@ fn rescale(v: f64, [ul, uc, u0]: [f64; 3], from: Budget, to: Budget) -> f64 {
 impl ComponentStats {
     fn from_fold(fold: &FoldMoments, layout: Layout) -> Option<Self> {
         let c = fold.components.as_ref()?;
-        let n = layout.dimension();
-        let parts = [LIGHT, CAMERA, CROSS].map(|k| unpack(c.matrix(k), n));
+        // The components cover Y's first n_c entries (engines::layout): the rest stay zero, and
+        // `predict` keeps those entries as measured.
+        let (n, n_c) = (layout.dimension(), layout.component_dimension());
+        let parts = [LIGHT, CAMERA, CROSS].map(|k| {
+            let mut full = DMatrix::zeros(n, n);
+            full.view_mut((0, 0), (n_c, n_c)).copy_from(&unpack(c.matrix(k), n_c));
+            full
+        });
         let strategies = fold
             .strategies
             .iter()
@@ -131,17 +137,20 @@ impl ComponentStats {
     }
 
     /// The sums a measured run at `to` would be expected to have (same M and ΣY; ΣYYᵀ from the
-    /// predicted covariance), for the solver. None with fewer than 2 iterations.
+    /// predicted covariance), for the solver. None with fewer than 2 iterations. Entries beyond
+    /// the components' n_c (the H columns of heuristics no prediction stacks, format 4) keep
+    /// their measured value: finite, so that products with the zero weights of those columns
+    /// stay zero, and never read for another budget.
     fn predict(&self, from: Budget, to: Budget) -> Option<YStats> {
         let m = self.y.m;
         if m < 2.0 {
             return None;
         }
         let outer = &self.y.sum_y * self.y.sum_y.transpose() / m;
-        let n = outer.nrows();
-        let mut sum_yy = DMatrix::zeros(n, n);
-        for i in 0..n {
-            for j in 0..n {
+        let n_c = self.y.layout.component_dimension();
+        let mut sum_yy = self.y.sum_yy.clone();
+        for i in 0..n_c {
+            for j in 0..n_c {
                 let v = (self.y.sum_yy[(i, j)] - outer[(i, j)]) / (m - 1.0);
                 let u = [0, 1, 2].map(|k| self.parts[k][(i, j)] / m);
                 sum_yy[(i, j)] = (m - 1.0) * rescale(v, u, from, to) + outer[(i, j)];

@@ -35,6 +35,14 @@
 //!
 //! The sums are exact and kept per fold like the rest of the moments, so shards and merges stay
 //! bit-identical and the prediction can be cross-fitted and jackknifed over folds.
+//!
+//! # Which entries
+//!
+//! The matrices cover the leading [`Layout::component_dimension`] entries of Y: since format 4,
+//! A, B and the switch's H column — what a prediction at another budget can use. The other H
+//! columns are those of the correlation-aware heuristics, whose weights change with N_F and N_B
+//! (so no prediction of their rows exists), and of the balance and power heuristics, which no
+//! predicted row stacks; with them the block products were four times as many (issue 26).
 
 use serde::{Deserialize, Serialize};
 
@@ -57,7 +65,8 @@ pub const CROSS: usize = 2;
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct ComponentSums {
-    /// Σ_s U_L = ½ Σ_L sym(y_L0 y_L1ᵀ) (blocks sharing a light half), packed like ΣYYᵀ.
+    /// Σ_s U_L = ½ Σ_L sym(y_L0 y_L1ᵀ) (blocks sharing a light half), packed like ΣYYᵀ over the
+    /// leading [`Layout::component_dimension`] entries of Y.
     #[serde(deserialize_with = "bounded::<_, _, MAX_PACKED>")]
     pub light: Vec<ExactSum>,
     /// Σ_s U_C = ½ Σ_K sym(y_0K y_1Kᵀ) (sharing a camera half).
@@ -75,7 +84,7 @@ pub struct ComponentSums {
 impl ComponentSums {
     /// Zero sums for the moment vectors of `layout`.
     pub fn empty(layout: Layout) -> Self {
-        let zeros = || vec![ExactSum::new(); packed_len(layout.dimension())];
+        let zeros = || vec![ExactSum::new(); packed_len(layout.component_dimension())];
         Self {
             light: zeros(),
             camera: zeros(),
@@ -86,7 +95,7 @@ impl ComponentSums {
 
     /// Whether the lists have the lengths of `layout`.
     pub fn has_shape(&self, layout: Layout) -> bool {
-        let n = layout.dimension();
+        let n = layout.component_dimension();
         [&self.light, &self.camera, &self.cross].iter().all(|m| m.len() == packed_len(n))
             && self.strategies.len() == layout.strategies().len()
     }

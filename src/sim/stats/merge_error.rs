@@ -17,9 +17,9 @@ pub enum MergeError {
         /// The format this build writes.
         expected: u32,
     },
-    /// Moments of two formats: the older lacks sums the newer keeps, so they cannot be added.
+    /// Moments of two formats: their sums differ in shape, so they cannot be added.
     #[error(
-        "moments of format {found} cannot be merged with moments of format {expected}: format 2 (written before optimis kept the w0 = 0 heuristics and the stacked optimum's columns) lacks sums that format 3 keeps; merge format-2 documents with each other, or run the iterations again with this build"
+        "moments of format {found} cannot be merged with moments of format {expected}: format 2 (written before optimis kept the w0 = 0 heuristics and the stacked optimum's columns) lacks sums that format 3 keeps, and format 3's noise components cover entries that format 4's do not (moments without noise components are format 3 in every build since); merge documents of one format with each other, or run the iterations again with this build"
     )]
     FormatMix {
         /// The format of the moments merged in.

@@ -123,7 +123,7 @@ impl FoldMoments {
             return &mut self.strategies[i / 4][i % 4];
         }
         let components = self.components.as_mut().expect("component sums are indexed only when kept");
-        let i = i - 4 * strategies;
+        let (i, packed) = (i - 4 * strategies, index.packed_components);
         match i / packed {
             0 => &mut components.light[i],
             1 => &mut components.camera[i - packed],
@@ -266,8 +266,9 @@ pub(super) fn add_tally_counters(
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct Moments {
-    /// Layout version: [`MOMENTS_FORMAT_VERSION`] for moments this build makes, 2 for those an
-    /// earlier build made (`engines::layout`).
+    /// Layout version (`engines::layout`): 4 for moments this build makes with noise components,
+    /// 3 without (format 4 changed only the components); 2, or 3 with components, for those an
+    /// earlier build made.
     pub format_version: u32,
     /// Fingerprint of the configuration the iterations were drawn under.
     pub fingerprint: String,
@@ -287,7 +288,7 @@ impl Moments {
     pub fn new(config: &SimConfig) -> Self {
         let k = config.cells.len();
         Self {
-            format_version: MOMENTS_FORMAT_VERSION,
+            format_version: config.moments_format(),
             fingerprint: config.fingerprint().to_string(),
             cells: k,
             coverage: Coverage::new(),

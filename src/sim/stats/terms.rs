@@ -21,6 +21,10 @@ pub struct SumIndex {
     pub n: usize,
     /// Sums of ΣYYᵀ, packed: n(n + 1)/2.
     pub packed: usize,
+    /// Leading entries of Y the noise components cover ([`Layout::component_dimension`]).
+    pub n_components: usize,
+    /// Sums of each component matrix, packed: n_c(n_c + 1)/2.
+    pub packed_components: usize,
     /// Per-path strategies the format keeps.
     pub strategies: usize,
     /// Whether the fold keeps the noise components.
@@ -30,8 +34,15 @@ pub struct SumIndex {
 impl SumIndex {
     /// The flat list of a fold of `layout`, with or without the noise components.
     pub fn new(layout: Layout, components: bool) -> Self {
-        let n = layout.dimension();
-        Self { n, packed: packed_len(n), strategies: layout.strategies().len(), components }
+        let (n, n_components) = (layout.dimension(), layout.component_dimension());
+        Self {
+            n,
+            packed: packed_len(n),
+            n_components,
+            packed_components: packed_len(n_components),
+            strategies: layout.strategies().len(),
+            components,
+        }
     }
 
     /// ΣY_i.
@@ -55,19 +66,19 @@ impl SumIndex {
     /// The component matrix `kind` (`components::LIGHT`, `CAMERA`, `CROSS`) at packed position `p`.
     #[inline]
     pub fn component(&self, kind: usize, p: usize) -> usize {
-        self.n + self.packed + 4 * self.strategies + kind * self.packed + p
+        self.n + self.packed + 4 * self.strategies + kind * self.packed_components + p
     }
 
     /// The component `kind` of strategy `s`.
     #[inline]
     pub fn component_strategy(&self, s: usize, kind: usize) -> usize {
-        self.n + 4 * self.packed + 4 * self.strategies + 3 * s + kind
+        self.n + self.packed + 3 * self.packed_components + 4 * self.strategies + 3 * s + kind
     }
 
     /// How many sums a fold has.
     pub fn len(&self) -> usize {
         let base = self.n + self.packed + 4 * self.strategies;
-        if self.components { base + 3 * self.packed + 3 * self.strategies } else { base }
+        if self.components { base + 3 * self.packed_components + 3 * self.strategies } else { base }
     }
 
     /// Whether a fold has no sums (never: n ≥ 1).
@@ -116,8 +127,12 @@ pub fn for_each_term(
     if !index.components {
         return;
     }
+    let n_c = index.n_components;
     for (b, v) in buffers.blocks.iter_mut().enumerate() {
         tally.block_moment_vector(b, layout, v);
+        // The components cover Y's first n_c entries only (the vector is in index order).
+        let kept = v.partition_point(|&(i, _)| i < n_c);
+        v.truncate(kept);
     }
     for (kind, pairs) in PAIRS.iter().enumerate() {
         for &(p, q) in pairs {
@@ -126,7 +141,7 @@ pub fn for_each_term(
             for &(i, ui) in &buffers.blocks[p] {
                 for &(j, vj) in &buffers.blocks[q] {
                     let weight = if i == j { 0.5 } else { 0.25 };
-                    add(index.component(kind, packed_index(n, i.min(j), i.max(j))), weight * ui * vj);
+                    add(index.component(kind, packed_index(n_c, i.min(j), i.max(j))), weight * ui * vj);
                 }
             }
         }
