@@ -65,8 +65,8 @@ const POINT_ERROR: f64 = 1.0 / (1u64 << 20) as f64;
 /// (x, y), and C = c|c|. Write τ = |t| and u = cos θ·D/τ (the cosine of the angle between the
 /// direction and the pixel, so |u| ≤ 1 up to 10⁻¹⁵), and Q = u|u|: every term of D and τ² is
 /// bounded by τ and τ² (cos θ·tan θ = sin θ ≤ 1, |(x, y)| ≤ τ), so the f64 test's roundings move Q
-/// by less than ω = 2⁻⁴⁰, and an f64 pass implies Q ≥ C − ω. The f32 test computes Q₃₂ =
-/// fl₃₂(cos² θ)·D₃₂|D₃₂|/τ₃₂² from the f32 hit (within E2 per coordinate) and direction. With
+/// by less than ω = 2⁻⁴⁰, and an f64 pass implies Q ≥ C − ω. The f32 test compares Q₃₂ = u₃₂|u₃₂|,
+/// u₃₂ = √fl₃₂(cos² θ)·D₃₂/τ₃₂, from the f32 hit (within E2 per coordinate) and direction. With
 /// e = E2/L2 (τ ≥ L2): the f32 D, times cos θ, is within τ(1.51e + √2·1.01η + 6.8ε) of cos θ·D (the
 /// hit's error enters through tan θ·cos φ, of weight sin θ ≤ 1; the cosines' through |(x, y)|; the
 /// roundings through τ), the root of fl₃₂(cos² θ) adds 0.51ε, and τ₃₂² = τ²(1 + κ) with κ ≤
@@ -75,7 +75,8 @@ const POINT_ERROR: f64 = 1.0 / (1u64 << 20) as f64;
 /// fl(fl₃₂(cos² θ)·fl(D₃₂|D₃₂|)) ≥ fl(C_μ·τ₃₂²) rounds each side once or twice (2.01ε of |Q₃₂| ≤ 1.3
 /// and ε of |C_μ| ≤ 1.3, relative to τ₃₂²), so it passes whenever Q ≥ C − ω and C_μ ≤ C − μ with
 /// μ = ω + (2.0001 + β)β + 4ε. C_μ is C − μ rounded down to f32; for e > 0.03 it is −∞ (every path
-/// passes the f32 cone test, and the exact test decides).
+/// passes the f32 cone test, and the exact test decides). (For C = −4, a lobe that can reach the
+/// pixel from anywhere, |C_μ| is about 4, and every path passes both tests: Q₃₂ ≥ −1.3.)
 pub(super) struct Filter32 {
     l2: f32,
     l2_sq: f32,
