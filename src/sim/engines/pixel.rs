@@ -48,6 +48,12 @@ impl PixelCone {
         Self { c_abs_c: c * c.abs(), delta }
     }
 
+    /// The threshold C = c·|c| of [`PixelCone::may_reach`]'s test (−4 when every path passes), for
+    /// tests that bound it from outside (the brute force's single-precision filter).
+    pub fn c_abs_c(&self) -> f64 {
+        self.c_abs_c
+    }
+
     /// Whether a path at (`x`, `y`) on plane 2 travelling along the unit direction (`u`, `v`, −`z`)
     /// can reach the pixel's merge disc.
     ///

@@ -80,6 +80,51 @@ pub fn sincos_turn(k: u32) -> (f64, f64) {
     (f64::from_bits(sin.to_bits() ^ sin_sign), f64::from_bits(cos.to_bits() ^ cos_sign))
 }
 
+// Single-precision minimax polynomials on |x| ≤ π/4 (Cephes' sinf and cosf, S. Moshier): their
+// approximation error is below 2⁻²⁶ (tested against `libm` in f64 arithmetic below).
+const SF1: f32 = -1.666_665_5e-1;
+const SF2: f32 = 8.332_161e-3;
+const SF3: f32 = -1.951_529_6e-4;
+const CF1: f32 = 4.166_664_6e-2;
+const CF2: f32 = -1.388_731_6e-3;
+const CF3: f32 = 2.443_315_7e-5;
+
+/// Bound on the error of [`sincos_turn_f32`]: each result is within 2⁻²¹ of the exact
+/// sin/cos(2πk/2³²).
+pub const SINCOS_TURN_F32_ERROR: f64 = 1.0 / (1u64 << 21) as f64;
+
+/// `(sin, cos)` of the angle 2π·k/2³² in single precision, for every `k: u32`, with an error of at
+/// most [`SINCOS_TURN_F32_ERROR`] = 2⁻²¹ = 8·2⁻²⁴ (for the conservative single-precision filters
+/// of the light-path loop, which need a bound, not the last bit; eight lanes to a 256-bit vector).
+///
+/// The reduction is [`sincos_turn`]'s in 32-bit integers: kk = k + 2²⁹ (mod 2³²), the quadrant in
+/// bits 30 and 31 of kk, and m = (kk mod 2³⁰) − 2²⁹ ∈ [−2²⁹, 2²⁹), so x = m·(2π/2³²) has |x| ≤ π/4.
+/// Proof of the bound: m → f32, the f32 value of 2π/2³² and the product each have a relative
+/// error ≤ 2⁻²⁴, so |x − x_exact| ≤ 3·2⁻²⁴·π/4 < 2.4·2⁻²⁴, which moves sin and cos (slopes ≤ 1) as
+/// much; the polynomials approximate sin and cos on |x| ≤ π/4 within 2⁻²⁶ = 0.25·2⁻²⁴ (tested);
+/// their Horner evaluation with fused multiply-adds adds less than 1.7·2⁻²⁴: the last fused
+/// multiply-add rounds a value ≤ 1 (≤ 2⁻²⁴), and the term it adds to x or 1, of magnitude ≤ 0.31
+/// (x²/2 at π/4), carries relative errors of about 2·2⁻²⁴ (z = x² and the inner Horner steps). The
+/// total, < 4.4·2⁻²⁴, is within 2⁻²¹ = 8·2⁻²⁴ with room (tested on the whole domain). The quadrant
+/// only swaps and negates. Exactly rounded operations only, so every build gives the same bits.
+#[inline(always)]
+pub fn sincos_turn_f32(k: u32) -> (f32, f32) {
+    const ANGLE_PER_STEP: f32 = (TAU / (1u64 << 32) as f64) as f32;
+    const SIGN: u32 = 1 << 31;
+    let kk = k.wrapping_add(1 << 29);
+    let m = (kk & ((1 << 30) - 1)) as i32 - (1 << 29);
+    let x = m as f32 * ANGLE_PER_STEP;
+    let z = x * x;
+    let s = (z * x).mul_add(z.mul_add(z.mul_add(SF3, SF2), SF1), x);
+    let c = z.mul_add(z.mul_add(z.mul_add(z.mul_add(CF3, CF2), CF1), -0.5), 1.0);
+    // Odd quadrants swap sine and cosine (bit 30 of kk); the sine is negative in quadrants 2 and
+    // 3 (bit 31 of kk), the cosine in 1 and 2 (bit 31 of kk + 2³⁰): selects and sign flips.
+    let (sin, cos) = if kk & (1 << 30) != 0 { (c, s) } else { (s, c) };
+    let sin_sign = kk & SIGN;
+    let cos_sign = kk.wrapping_add(1 << 30) & SIGN;
+    (f32::from_bits(sin.to_bits() ^ sin_sign), f32::from_bits(cos.to_bits() ^ cos_sign))
+}
+
 /// 1.5·2⁵²: adding it to a double of magnitude < 2⁵¹ rounds that double to an integer j and leaves
 /// 2⁵¹ + j (two's complement in the low bits) in the mantissa; subtracting it again gives j as a
 /// double. The vectorisable round-to-integer and integer → double conversion of this module.
@@ -247,6 +292,43 @@ mod tests {
             let (s, c) = sincos_turn(k);
             assert!((s * s + c * c - 1.0).abs() < 5e-16);
         }
+    }
+
+    /// The single-precision sine and cosine of a turn fraction stay within their stated bound of
+    /// the exact values (within 3·10⁻¹⁶ of [`sincos_turn`]'s), on the whole u32 domain (a stride
+    /// and every octant edge), with room to spare; the axes are exact.
+    #[test]
+    fn sincos_turn_f32_is_within_its_bound() {
+        let mut worst: f64 = 0.0;
+        for k in inputs() {
+            let (s, c) = sincos_turn_f32(k);
+            let (rs, rc) = sincos_turn(k);
+            worst = worst.max((f64::from(s) - rs).abs()).max((f64::from(c) - rc).abs());
+        }
+        assert!(worst + 3e-16 <= SINCOS_TURN_F32_ERROR / 4.0, "worst error {worst:e}");
+        assert_eq!(sincos_turn_f32(0), (0.0, 1.0));
+        assert_eq!(sincos_turn_f32(1 << 30), (1.0, 0.0));
+        assert_eq!(sincos_turn_f32(1 << 31), (0.0, -1.0));
+        assert_eq!(sincos_turn_f32(3 << 30), (-1.0, 0.0));
+    }
+
+    /// The polynomials of [`sincos_turn_f32`], evaluated in f64 (so without the f32 rounding),
+    /// approximate sin and cos within 2⁻²⁶ on [−π/4, π/4], as its proof assumes: a dense grid (the
+    /// error curves are smooth polynomials minus sin/cos, whose extrema the grid resolves).
+    #[test]
+    fn sincos_turn_f32_polynomials_are_within_2_pow_m26() {
+        let (s1, s2, s3) = (f64::from(SF1), f64::from(SF2), f64::from(SF3));
+        let (c1, c2, c3) = (f64::from(CF1), f64::from(CF2), f64::from(CF3));
+        let mut worst: f64 = 0.0;
+        let n = 1_000_000;
+        for i in -n..=n {
+            let x = std::f64::consts::FRAC_PI_4 * f64::from(i) / f64::from(n);
+            let z = x * x;
+            let s = x + x * z * (s1 + z * (s2 + z * s3));
+            let c = 1.0 + z * (-0.5 + z * (c1 + z * (c2 + z * c3)));
+            worst = worst.max((s - libm::sin(x)).abs()).max((c - libm::cos(x)).abs());
+        }
+        assert!(worst <= 2f64.powi(-26), "approximation error {worst:e}");
     }
 
     #[test]

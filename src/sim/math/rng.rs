@@ -151,11 +151,15 @@ impl LaneRng {
     /// which splits every step between vector and scalar registers.) Integer operations only, so
     /// the outputs are exactly those of `fill`.
     ///
+    /// Not inlined: the state lives in eight vector registers during the fill, and a caller's own
+    /// vector code would otherwise keep it in registers across its loops too, or spill it there.
+    ///
     /// # Safety
     ///
     /// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline(never)]
     pub fn fill_avx2(&mut self, out: &mut [u64]) {
         use std::arch::x86_64::{
             __m256i, _mm256_add_epi64, _mm256_loadu_si256, _mm256_or_si256, _mm256_slli_epi64, _mm256_srli_epi64,

@@ -162,40 +162,48 @@ impl Illumination {
     /// exceed r_out by a relative 2⁻⁵¹ (all far below anything the statistics can resolve).
     #[inline(always)]
     pub fn sample_block<const B: usize>(&self, ring_bits: &[u64; B], azimuth_bits: &[u64; B], out: &mut [[f64; B]; 2]) {
+        let mut r2 = [0.0; B];
+        self.radius2_block(ring_bits, &mut r2);
+        polar_block(|i| r2[i], azimuth_bits, out);
+    }
+
+    /// The squared radii r² of [`Illumination::sample_block`]'s start points, from the same words
+    /// and by the same operations (`sample_block` takes their square roots): for the light-path
+    /// loop's single-precision filter, which starts from r² rounded to f32.
+    #[inline(always)]
+    pub fn radius2_block<const B: usize>(&self, ring_bits: &[u64; B], out: &mut [f64; B]) {
         // The ring search is unrolled into selects for up to three rings (the paper's spot has
         // two); more rings take one pass over the block each.
         let u = |i: usize| unit52(ring_bits[i]);
         match self.block[..] {
-            [a] => polar_block(|i| a.radius2(u(i)), azimuth_bits, out),
-            [a, b] => polar_block(
-                |i| {
+            [a] => {
+                for (i, r2) in out.iter_mut().enumerate() {
+                    *r2 = a.radius2(u(i));
+                }
+            }
+            [a, b] => {
+                for (i, r2) in out.iter_mut().enumerate() {
                     let u = u(i);
-                    a.or_above(&b, u).radius2(u)
-                },
-                azimuth_bits,
-                out,
-            ),
-            [a, b, c] => polar_block(
-                |i| {
+                    *r2 = a.or_above(&b, u).radius2(u);
+                }
+            }
+            [a, b, c] => {
+                for (i, r2) in out.iter_mut().enumerate() {
                     let u = u(i);
-                    a.or_above(&b, u).or_above(&c, u).radius2(u)
-                },
-                azimuth_bits,
-                out,
-            ),
+                    *r2 = a.or_above(&b, u).or_above(&c, u).radius2(u);
+                }
+            }
             _ => {
                 let first = &self.block[0];
-                let mut r2 = [0.0; B];
-                for (i, r2) in r2.iter_mut().enumerate() {
+                for (i, r2) in out.iter_mut().enumerate() {
                     *r2 = first.radius2(u(i));
                 }
                 for ring in &self.block[1..] {
-                    for (i, r2) in r2.iter_mut().enumerate() {
+                    for (i, r2) in out.iter_mut().enumerate() {
                         let u = u(i);
                         *r2 = if u >= ring.lo { ring.radius2(u) } else { *r2 };
                     }
                 }
-                polar_block(|i| r2[i], azimuth_bits, out);
             }
         }
     }
