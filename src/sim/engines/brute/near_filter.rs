@@ -78,9 +78,14 @@ impl NearFilter {
     /// 1 if a camera vertex may lie within R of a point of `cell`, else 0.
     #[inline(always)]
     pub(super) fn holds(&self, cell: u32) -> u32 {
-        let word = self.words[(cell as usize >> 5) & (NEAR_WORDS - 1)];
-        (word >> (cell & 31)) & 1
+        bit(&self.words, cell)
     }
+}
+
+/// The bit of folded cell `cell` in a filter's bitmap (both filters share the layout).
+#[inline(always)]
+fn bit(words: &[u32; NEAR_WORDS], cell: u32) -> u32 {
+    (words[(cell as usize >> 5) & (NEAR_WORDS - 1)] >> (cell & 31)) & 1
 }
 
 /// Sets the bits of the cells whose folded coordinates are lo + k (mod 2⁸), k ≤ len, on each axis
@@ -151,8 +156,7 @@ impl NearFilter32 {
     /// 1 if a camera vertex may lie within R of a point of `cell`, else 0.
     #[inline(always)]
     pub(super) fn holds(&self, cell: u32) -> u32 {
-        let word = self.words[(cell as usize >> 5) & (NEAR_WORDS - 1)];
-        (word >> (cell & 31)) & 1
+        bit(&self.words, cell)
     }
 }
 
