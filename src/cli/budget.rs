@@ -12,7 +12,7 @@ use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, thread_pool};
 use crate::sim::model::config::Engine;
 use crate::sim::model::params::check;
-use crate::sim::solve::budget::{Costs, plan};
+use crate::sim::solve::budget::{BestBudget, Costs, SUPPORT_RELATIVE_SE, plan};
 use crate::sim::solve::predict::Budget;
 use crate::sim::spec::JobSpec;
 
@@ -99,7 +99,7 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     let s = &p.search;
     writeln!(
         out,
-        "(predicted from {} iterations at N_F = {}, N_B = {}; searched N_F {}–{}, N_B {}–{} in half-decade steps{}; * = at the edge of that range, the optimum may lie beyond)\n",
+        "(predicted from {} iterations at N_F = {}, N_B = {}; searched N_F {}–{}, N_B {}–{} in half-decade steps{}; * = at the edge of that range, the optimum may lie beyond; † = no budget of that strategy is supported by this run: its RMS SE is above {:.0}% of the RMS)\n",
         doc.moments.iterations(),
         measured.light_paths,
         measured.camera_paths,
@@ -107,7 +107,8 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         s.light_paths[1],
         s.camera_paths[0],
         s.camera_paths[1],
-        if s.at_limit { ", widened to the limit of what this run can predict" } else { "" }
+        if s.at_limit { ", widened to the limit of what this run can predict" } else { "" },
+        SUPPORT_RELATIVE_SE * 100.0
     )?;
     if let Some(h) = p.headline.and_then(|h| p.best.iter().find(|b| b.point.strategy == h)) {
         let speed = match (h.speedup, h.speedup_stderr) {
@@ -125,6 +126,9 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             "{} (recommended) at (N_F, N_B) = ({}, {}) reaches {}% {speed}{edge}",
             h.point.strategy, h.point.budget.light_paths, h.point.budget.camera_paths, args.target_rms
         )?;
+        if let Some(warning) = support_warning(h) {
+            writeln!(out, "warning: {warning}")?;
+        }
     }
     if let Some(note) = &p.headline_note {
         writeln!(out, "note: {note}")?;
@@ -140,6 +144,9 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         let mut label = pt.strategy.to_string();
         if b.at_edge {
             label.push('*');
+        }
+        if !b.supported {
+            label.push('†');
         }
         let se = pt.rms_percent_stderr.map_or_else(String::new, |s| format!(" ± {s:.1}"));
         let speed = match (b.speedup, b.speedup_stderr) {
@@ -184,4 +191,22 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         }
     }
     Ok(())
+}
+
+/// What the headline's figures cannot tell, when the run's noise left budgets unsupported.
+fn support_warning(b: &BestBudget) -> Option<String> {
+    let limit = SUPPORT_RELATIVE_SE * 100.0;
+    if !b.supported {
+        Some(format!(
+            "no budget of {} is supported by this run (every predicted RMS has an SE above {limit:.0}% of itself): the figures above are noise more than prediction; run longer before planning",
+            b.point.strategy
+        ))
+    } else if b.faster_unsupported {
+        Some(format!(
+            "budgets predicted to be faster for {} have an RMS SE above {limit:.0}% of the RMS, which this run cannot support: they are left aside (a longer run, or one nearer them, can resolve them)",
+            b.point.strategy
+        ))
+    } else {
+        None
+    }
 }

@@ -65,6 +65,10 @@ export async function checkBudget(page, id, plain) {
     plan.headline_note ? `the server's note on the headline is shown ("${plan.headline_note.slice(0, 60)}…")` : 'the server has no note on the headline, and none is shown');
   check(Boolean(warnings.edge) === best.at_edge && (!best.at_edge || /searched/.test(warnings.edge)),
     best.at_edge ? `the headline's budget lies on the edge of the search, and the panel says which ("${warnings.edge.slice(0, 70)}…")` : 'the headline\'s budget is inside the searched range: no edge warning');
+  const unsupported = !best.supported || best.faster_unsupported;
+  check(Boolean(warnings.unsupported) === unsupported && (!unsupported || /standard error above 25 %|below 25 %/.test(warnings.unsupported)),
+    unsupported ? `the run's noise left ${best.supported ? 'faster budgets' : 'every budget'} of the headline unsupported, and the panel says so ("${warnings.unsupported.slice(0, 70)}…")`
+      : 'every faster budget of the headline is supported by the run: no support warning');
   check(!warnings.partial && !plan.partial, 'a finished job\'s plan carries no partial-run warning');
 
   const rows = await panel.locator('table.budget-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
@@ -81,13 +85,14 @@ export async function checkBudget(page, id, plain) {
     const [rms, rmsSe] = parseWithError(row.cells.rms);
     return row.cells.rank === (b.respects_fixed ? String(rank) : '—')
       && row.marks.includes('outside fixed weights, not ranked') === !b.respects_fixed
-      && row.marks.includes('at edge') === b.at_edge && row.headline === (b.strategy === plan.headline)
+      && row.marks.includes('at edge') === b.at_edge && row.marks.includes('not supported') === !b.supported
+      && row.headline === (b.strategy === plan.headline)
       && near(parseScientific(row.cells.light_paths), b.budget.light_paths) && near(parseScientific(row.cells.camera_paths), b.budget.camera_paths)
       && Math.abs(rms - b.rms_percent) < 0.06 && (b.rms_percent_stderr === null ? rmsSe === null : Math.abs(rmsSe - b.rms_percent_stderr) < 0.06)
       && near(parseScientific(row.cells.seconds_to_target), b.seconds_to_target);
   });
   const outside = plan.best.filter((b) => !b.respects_fixed).map((b) => b.strategy);
-  check(agree && outside.length > 0, `each row is the API's: rank among those that keep the fixed weights, N_F, N_B, RMS ± SE, time; ${outside.join(', ')} marked outside the fixed weights, not ranked`);
+  check(agree && outside.length > 0, `each row is the API's: rank among those that keep the fixed weights, N_F, N_B, RMS ± SE, time, the support mark; ${outside.join(', ')} marked outside the fixed weights, not ranked`);
   const paper = rows.at(-1);
   check(near(parseScientific(paper.cells.seconds_to_target), plan.paper.seconds_to_target) && paper.cells.speedup === '1×',
     `the paper's switch at (10⁷, 100) closes the table (${paper.cells.seconds_to_target} s to ${REQUEST.target_rms} %)`);

@@ -12,6 +12,12 @@
 //! best predictable one), and widens its grid while that strategy's best lies on the edge — up to
 //! what the run can predict, where it says so.
 //!
+//! A point is used only where the run's noise supports it ([`BudgetPoint::supported`]: the
+//! predicted RMS known within [`SUPPORT_RELATIVE_SE`] of itself): far from the measured budget a
+//! predicted variance can come out near zero, and the fastest of many such points would be chosen
+//! for its noise — a headline speed-up of hundreds with an SE of thousands (docs/results.md §10).
+//! The fastest supported point is reported, and whether an unsupported one predicted faster.
+//!
 //! The same points also give the other view of the trade-off (`FixedTime`): the RMS each budget
 //! reaches in a fixed wall time — the time the paper's configuration takes to the target — as a
 //! curve against the ratio N_F/N_B.
@@ -65,6 +71,23 @@ pub struct BudgetPoint {
     pub seconds_to_target: f64,
 }
 
+/// A predicted RMS whose standard error exceeds this fraction of it does not support a budget.
+/// The time to a target goes as R², so such a point's time is uncertain by more than ±50% at one
+/// SE, where the first-order (delta-method) SE no longer describes it — one SE low, R gives
+/// 1/0.75² = 1.8× the speed-up, one SE high 1/1.25² = 0.64× — and the fastest of many such points
+/// is picked mostly for its noise (the winner's curse). Measured on 30 paper runs of 2·10⁴
+/// iterations (docs/results.md §10): without the guard, 2 of 30 headlined 200–750× ± 1,000–4,800
+/// where the rest cluster at 19 ± 8.
+pub const SUPPORT_RELATIVE_SE: f64 = 0.25;
+
+impl BudgetPoint {
+    /// Whether the run's noise supports this prediction: its RMS has a standard error of at most
+    /// [`SUPPORT_RELATIVE_SE`] of itself (a point without an SE is not supported).
+    pub fn supported(&self) -> bool {
+        self.rms_percent_stderr.is_some_and(|se| se <= SUPPORT_RELATIVE_SE * self.rms_percent)
+    }
+}
+
 /// A strategy's fastest budget in the searched range.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
@@ -81,6 +104,14 @@ pub struct BestBudget {
     /// Whether the budget lies on the edge of the searched range: the optimum may lie beyond what
     /// this run can predict.
     pub at_edge: bool,
+    /// Whether the run supports this point's prediction (its RMS SE is at most 25% of the RMS);
+    /// false only when no point of the strategy is supported, and this is its fastest unsupported
+    /// one.
+    pub supported: bool,
+    /// Whether a point the run does not support predicted a shorter time than this one: the
+    /// optimum may lie there, but this run cannot tell (a longer run, or one nearer that budget,
+    /// can).
+    pub faster_unsupported: bool,
 }
 
 /// The budgets searched: a grid in half-decade steps, widened from a decade around the measured
@@ -114,15 +145,16 @@ pub struct BudgetPlan {
     pub headline_note: Option<String>,
     /// The budgets searched, after widening.
     pub search: SearchRange,
-    /// Per strategy (that could be predicted), its fastest point: those that keep the fixed
-    /// weights first (ranked by time), then the others (shown, not ranked).
+    /// Per strategy (that could be predicted), its fastest supported point: those that keep the
+    /// fixed weights first (ranked by time, strategies with no supported point last), then the
+    /// others (shown, not ranked).
     pub best: Vec<BestBudget>,
     /// `switch` at (10⁷, 100): the paper's configuration.
     pub paper: Option<BudgetPoint>,
     /// Every (strategy, budget) evaluated.
     pub points: Vec<BudgetPoint>,
-    /// The RMS at the paper configuration's time against N_F/N_B (absent if the paper's
-    /// configuration could not be predicted).
+    /// The RMS at the paper configuration's time against N_F/N_B, from the supported points
+    /// (absent if the paper's configuration could not be predicted).
     pub fixed_time: Option<FixedTime>,
 }
 
@@ -296,7 +328,7 @@ pub fn plan(
                 }
             }
         }
-        let Some(best) = headline.and_then(|h| fastest(&points, h)) else { break false };
+        let Some(Fastest { point: best, .. }) = headline.and_then(|h| fastest(&points, h)) else { break false };
         // Widen every side the headline's fastest budget touches, while that side can grow.
         let mut widened = false;
         for (axis, v) in [(0, best.budget.light_paths), (1, best.budget.camera_paths)] {
@@ -342,18 +374,19 @@ pub fn plan(
     let mut best: Vec<BestBudget> = strategies
         .iter()
         .filter_map(|&s| fastest(&points, s))
-        .map(|point| {
+        .map(|Fastest { point, supported, faster_unsupported }| {
             let (speedup, speedup_stderr) = speedup(&point, paper.as_ref());
-            BestBudget { point, speedup, speedup_stderr, at_edge: edge(&point) }
+            BestBudget { point, speedup, speedup_stderr, at_edge: edge(&point), supported, faster_unsupported }
         })
         .collect();
     best.sort_by(|a, b| {
-        (!a.point.respects_fixed, a.point.seconds_to_target)
-            .partial_cmp(&(!b.point.respects_fixed, b.point.seconds_to_target))
+        (!a.point.respects_fixed, !a.supported, a.point.seconds_to_target)
+            .partial_cmp(&(!b.point.respects_fixed, !b.supported, b.point.seconds_to_target))
             .unwrap_or(std::cmp::Ordering::Equal)
     });
     let order: Vec<Strategy> = best.iter().map(|b| b.point.strategy).collect();
-    let fixed_time = paper.map(|p| fixed_time(&points, p.seconds_to_target, &order));
+    let supported: Vec<BudgetPoint> = points.iter().filter(|p| p.supported()).copied().collect();
+    let fixed_time = paper.map(|p| fixed_time(&supported, p.seconds_to_target, &order));
     Ok(BudgetPlan {
         target_rms_percent: target,
         costs,
@@ -368,13 +401,30 @@ pub fn plan(
     })
 }
 
-/// The point of `strategy` that reaches the target soonest.
-fn fastest(points: &[BudgetPoint], strategy: Strategy) -> Option<BudgetPoint> {
-    points
-        .iter()
-        .filter(|p| p.strategy == strategy)
-        .min_by(|a, b| a.seconds_to_target.total_cmp(&b.seconds_to_target))
-        .copied()
+/// A strategy's fastest point, and what the guard on support left aside.
+struct Fastest {
+    point: BudgetPoint,
+    supported: bool,
+    faster_unsupported: bool,
+}
+
+/// The supported point of `strategy` that reaches the target soonest — or, if none is supported,
+/// its fastest point, marked so.
+fn fastest(points: &[BudgetPoint], strategy: Strategy) -> Option<Fastest> {
+    let soonest = |supported: Option<bool>| {
+        points
+            .iter()
+            .filter(|p| p.strategy == strategy && supported.is_none_or(|s| p.supported() == s))
+            .min_by(|a, b| a.seconds_to_target.total_cmp(&b.seconds_to_target))
+            .copied()
+    };
+    let any = soonest(None)?;
+    Some(match soonest(Some(true)) {
+        Some(point) => {
+            Fastest { point, supported: true, faster_unsupported: any.seconds_to_target < point.seconds_to_target }
+        }
+        None => Fastest { point: any, supported: false, faster_unsupported: false },
+    })
 }
 
 /// The speed-up of `point` over the paper's configuration, with its delta-method SE: time to the
@@ -421,6 +471,32 @@ mod tests {
             seconds_per_iteration: seconds,
             seconds_to_target: rms_percent.powi(2) * seconds,
         }
+    }
+
+    /// The fastest point is taken among those the run supports; an unsupported faster one is
+    /// reported as such, and a strategy with no supported point keeps its fastest, marked.
+    #[test]
+    fn the_fastest_budget_is_the_fastest_the_run_supports() {
+        let with_se = |p: BudgetPoint, se: f64| BudgetPoint { rms_percent_stderr: Some(se), ..p };
+        let points = [
+            // Supported (SE 10% and 25% of the RMS): 400·1 and 100·2 seconds.
+            with_se(point(Strategy::Switch, 1_000_000, 10, 20.0, 1.0), 2.0),
+            with_se(point(Strategy::Switch, 1_000_000, 100, 10.0, 2.0), 2.5),
+            // Faster (4·3 seconds) but its SE is 150% of its RMS: noise, not a budget.
+            with_se(point(Strategy::Switch, 100_000_000, 10, 2.0, 3.0), 3.0),
+            // No SE at all, and the only point of its strategy.
+            point(Strategy::Plane1, 1_000_000, 10, 8.0, 1.0),
+        ];
+        assert!(points[1].supported() && !points[2].supported() && !points[3].supported());
+        let f = fastest(&points, Strategy::Switch).unwrap();
+        assert_eq!(f.point.budget, Budget { light_paths: 1_000_000, camera_paths: 100 });
+        assert!(f.supported && f.faster_unsupported);
+        let only = fastest(&points[..2], Strategy::Switch).unwrap();
+        assert!(only.supported && !only.faster_unsupported);
+        let unsupported = fastest(&points, Strategy::Plane1).unwrap();
+        assert!(!unsupported.supported && !unsupported.faster_unsupported);
+        assert_eq!(unsupported.point.rms_percent, 8.0);
+        assert!(fastest(&points, Strategy::Plane2).is_none());
     }
 
     #[test]
