@@ -145,10 +145,15 @@ async fn a_restarted_server_adopts_the_running_tasks_and_a_cancel_stops_them() {
     let server = start(1, optimis()).await;
     let mut spec = small_job(2000, 6);
     spec["execution"] = json!({ "tasks": 2 });
+    // The tasks are held until the server is down: they run (a few tenths of a second each) while
+    // it is, whatever the machine's speed, and a task is surely seen running before the shutdown.
+    let hold = server.dir.path().join("bin/state/hold");
+    std::fs::write(&hold, "").unwrap();
     let id = server.submit(&spec).await;
     until_a_task_is(&server, id, "running").await;
     // A shutdown leaves the tasks running; the next start finds them and merges what they wrote.
     let dir = server.stop().await;
+    std::fs::remove_file(&hold).unwrap();
     let slurm = options(dir.path(), optimis(), 1);
     let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
     let job = settle(&server, id).await;
