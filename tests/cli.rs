@@ -259,8 +259,10 @@ fn predict_and_budget_read_a_run_with_noise_components() {
     }
     // Each strategy's best is its fastest point among those the run supports (RMS SE ≤ 25% of the
     // RMS); faster unsupported points are said to exist; with none supported, its fastest point.
+    let limit = plan["support_relative_se"].as_f64().unwrap();
+    assert_eq!(limit, 0.25);
     let supported =
-        |p: &Value| p["rms_percent_stderr"].as_f64().is_some_and(|se| se <= 0.25 * p["rms_percent"].as_f64().unwrap());
+        |p: &Value| p["rms_percent_stderr"].as_f64().is_some_and(|se| se <= limit * p["rms_percent"].as_f64().unwrap());
     let mut left_aside = 0;
     for best in plan["best"].as_array().unwrap() {
         let t = best["seconds_to_target"].as_f64().unwrap();

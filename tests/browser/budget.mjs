@@ -66,7 +66,7 @@ export async function checkBudget(page, id, plain) {
   check(Boolean(warnings.edge) === best.at_edge && (!best.at_edge || /searched/.test(warnings.edge)),
     best.at_edge ? `the headline's budget lies on the edge of the search, and the panel says which ("${warnings.edge.slice(0, 70)}…")` : 'the headline\'s budget is inside the searched range: no edge warning');
   const unsupported = !best.supported || best.faster_unsupported;
-  check(Boolean(warnings.unsupported) === unsupported && (!unsupported || /standard error above 25 %|below 25 %/.test(warnings.unsupported)),
+  check(Boolean(warnings.unsupported) === unsupported && (!unsupported || warnings.unsupported.includes(`${100 * plan.support_relative_se} % of the RMS`)),
     unsupported ? `the run's noise left ${best.supported ? 'faster budgets' : 'every budget'} of the headline unsupported, and the panel says so ("${warnings.unsupported.slice(0, 70)}…")`
       : 'every faster budget of the headline is supported by the run: no support warning');
   check(!warnings.partial && !plan.partial, 'a finished job\'s plan carries no partial-run warning');

@@ -8,15 +8,14 @@
 
 import { fixed, formatDuration, formatRms, formatScientific, h, withError } from './format.js';
 
-/** The server's limit on a supported prediction: RMS SE at most this share of the RMS (budget.rs). */
-const SUPPORT_PERCENT = 25;
-
 /** A count as the plan's tables print it: 10⁸, 3.16·10⁷, 1,000. */
 const count = (n) => formatScientific(n);
 /** Seconds, with days or hours beside them when they are many. */
 const seconds = (s) => `${formatScientific(s)} s${s >= 3600 ? ` (${formatDuration(s)})` : ''}`;
 /** A speed-up ± its SE: "12.1 ± 1.9×". */
 const speedup = (x, se) => (x === null || x === undefined ? '—' : `${withError(x, se ?? null, (v) => fixed(v, v >= 100 ? 0 : v >= 10 ? 1 : 2))}×`);
+/** The plan's limit on a supported prediction, as a percentage: RMS SE at most this share of the RMS. */
+const supportPercent = (plan) => Number((100 * plan.support_relative_se).toPrecision(6));
 /** RMS % ± SE. */
 const rms = (p) => withError(p.rms_percent, p.rms_percent_stderr ?? null, formatRms);
 
@@ -56,14 +55,15 @@ export function headlineOf(plan, { iterations }) {
     }
   }
   const warnings = [];
+  const limit = supportPercent(plan);
   if (plan.headline_note) warnings.push(['headline', `Note: ${plan.headline_note}.`]);
   if (best?.at_edge) {
     warnings.push(['edge', `At the edge: ${edgesOf(best, plan.search).join(' and ')}${plan.search.at_limit ? ', as far as this run can predict (two decades from its own budget)' : ''}. The optimum may lie beyond; to look further, run a job with noise components nearer this budget and plan from it.`]);
   }
   if (best && !best.supported) {
-    warnings.push(['unsupported', `Not supported: no budget of ${best.strategy} is predicted with an RMS standard error below ${SUPPORT_PERCENT} % of the RMS; these figures are more noise than prediction. Run the job longer before planning.`]);
+    warnings.push(['unsupported', `Not supported: no budget of ${best.strategy} is predicted with an RMS standard error below ${limit} % of the RMS; these figures are more noise than prediction. Run the job longer before planning.`]);
   } else if (best?.faster_unsupported) {
-    warnings.push(['unsupported', `Budgets predicted to be faster for ${best.strategy} have an RMS standard error above ${SUPPORT_PERCENT} % of the RMS, which this run cannot support: they are left aside. A longer run, or one nearer them, can resolve them.`]);
+    warnings.push(['unsupported', `Budgets predicted to be faster for ${best.strategy} have an RMS standard error above ${limit} % of the RMS, which this run cannot support: they are left aside. A longer run, or one nearer them, can resolve them.`]);
   }
   if (plan.partial) {
     warnings.push(['partial', `Planned from the job's latest checkpoint (${iterations} iterations) while it is ${plan.state}: the figures change as it runs; plan again when it has finished.`]);
@@ -78,7 +78,7 @@ export function headlineOf(plan, { iterations }) {
 /** What the plan searched and with which costs, in one line. */
 export function searchNote(plan, measured) {
   const { search: s, costs: c } = plan;
-  return `Predicted from the run at (N_F, N_B) = (${count(measured.light_paths)}, ${count(measured.camera_paths)}); searched N_F ${count(s.light_paths[0])}–${count(s.light_paths[1])}, N_B ${count(s.camera_paths[0])}–${count(s.camera_paths[1])} in half-decade steps${s.at_limit ? ' (widened to the limit of what the run can predict)' : ''}. Time per iteration t = t_F·N_F + t_B·N_B·P + t_0 with t_F = ${formatScientific(c.light_path)} s, t_B = ${formatScientific(c.camera_path)} s, t_0 = ${formatScientific(c.iteration)} s, P = ${formatScientific(c.pixels)} pixels; an iteration at least, (RMS / target)² iterations. RMS and speed-up ± 1 SE (jackknife over the folds; the speed-up's treats both RMS as independent, which overstates it). Only budgets whose RMS is predicted with an SE of at most ${SUPPORT_PERCENT} % of itself are chosen: beyond, the fastest budget would be picked for its noise.`;
+  return `Predicted from the run at (N_F, N_B) = (${count(measured.light_paths)}, ${count(measured.camera_paths)}); searched N_F ${count(s.light_paths[0])}–${count(s.light_paths[1])}, N_B ${count(s.camera_paths[0])}–${count(s.camera_paths[1])} in half-decade steps${s.at_limit ? ' (widened to the limit of what the run can predict)' : ''}. Time per iteration t = t_F·N_F + t_B·N_B·P + t_0 with t_F = ${formatScientific(c.light_path)} s, t_B = ${formatScientific(c.camera_path)} s, t_0 = ${formatScientific(c.iteration)} s, P = ${formatScientific(c.pixels)} pixels; an iteration at least, (RMS / target)² iterations. RMS and speed-up ± 1 SE (jackknife over the folds; the speed-up's treats both RMS as independent, which overstates it). Only budgets whose RMS is predicted with an SE of at most ${supportPercent(plan)} % of itself are chosen: beyond, the fastest budget would be picked for its noise.`;
 }
 
 /** The table of every strategy's fastest budget, the headline's row marked, then the paper's configuration. */
@@ -90,7 +90,7 @@ export function planTable(plan) {
     const marks = [
       b.strategy === plan.headline ? h('span', { class: 'recommended-mark', title: 'The plan\'s headline' }, 'headline') : null,
       b.at_edge ? h('span', { class: 'edge-mark', title: 'On the edge of the searched range: the optimum may lie beyond' }, 'at edge') : null,
-      b.supported ? null : h('span', { class: 'edge-mark', title: `No budget of this strategy is predicted with an RMS SE below ${SUPPORT_PERCENT} % of the RMS` }, 'not supported'),
+      b.supported ? null : h('span', { class: 'edge-mark', title: `No budget of this strategy is predicted with an RMS SE below ${supportPercent(plan)} % of the RMS` }, 'not supported'),
       ranked ? null : h('span', { class: 'outside-mark', title: "Does not keep the solver's fixed weights: shown for comparison, not ranked" }, 'outside fixed weights, not ranked'),
     ];
     return h('tr', { 'data-strategy': b.strategy, 'data-ranked': String(ranked), 'data-at-edge': String(b.at_edge), 'data-supported': String(b.supported), class: b.strategy === plan.headline ? 'recommended' : null },

@@ -104,9 +104,9 @@ pub struct BestBudget {
     /// Whether the budget lies on the edge of the searched range: the optimum may lie beyond what
     /// this run can predict.
     pub at_edge: bool,
-    /// Whether the run supports this point's prediction (its RMS SE is at most 25% of the RMS);
-    /// false only when no point of the strategy is supported, and this is its fastest unsupported
-    /// one.
+    /// Whether the run supports this point's prediction (its RMS SE is at most the plan's
+    /// `support_relative_se` of the RMS); false only when no point of the strategy is supported,
+    /// and this is its fastest unsupported one.
     pub supported: bool,
     /// Whether a point the run does not support predicted a shorter time than this one: the
     /// optimum may lie there, but this run cannot tell (a longer run, or one nearer that budget,
@@ -145,6 +145,9 @@ pub struct BudgetPlan {
     pub headline_note: Option<String>,
     /// The budgets searched, after widening.
     pub search: SearchRange,
+    /// The largest RMS standard error, as a fraction of the RMS, of a point the plan uses (0.25,
+    /// `SUPPORT_RELATIVE_SE`): what `supported` and `faster_unsupported` refer to.
+    pub support_relative_se: f64,
     /// Per strategy (that could be predicted), its fastest supported point: those that keep the
     /// fixed weights first (ranked by time, strategies with no supported point last), then the
     /// others (shown, not ranked).
@@ -394,6 +397,7 @@ pub fn plan(
         headline,
         headline_note,
         search,
+        support_relative_se: SUPPORT_RELATIVE_SE,
         best,
         paper,
         points,
