@@ -96,5 +96,16 @@ fn predictions_match_direct_runs_at_other_budgets() {
         let expected = if recommended.lambda.is_some() { source.config().cells().len() } else { 0 };
         eprintln!("({light_paths}, {camera_paths}) recommended {}", recommended.strategy);
         assert_eq!(p.weights.len(), expected, "re-fitted weights for every cell of a fitted recommendation");
+        // Only supported predictions compete: the listed rows are exactly those whose RMS SE
+        // exceeds the limit, and the recommendation is none of them.
+        for r in &p.noise_table {
+            let listed = p.unsupported.contains(&r.strategy);
+            let over = r.error.is_none()
+                && r.rms_percent.is_some_and(|v| r.rms_percent_stderr.is_none_or(|se| se > p.support_relative_se * v));
+            assert_eq!(listed, over, "{} listed as unsupported: {listed}", r.strategy);
+        }
+        assert!(!p.unsupported.contains(&recommended.strategy));
     }
+    let same = predict(&moments, source.config().cells(), &source.spec().solver, from, from).unwrap();
+    assert!(same.unsupported.is_empty(), "nothing is extrapolated at the measured budget");
 }

@@ -56,6 +56,15 @@ pub fn predict(args: PredictArgs) -> Result<(), CliError> {
     )?;
     table::write_noise_rows(&mut out, &prediction.noise_table, prediction.folds, prediction.recommended.as_ref())?;
     writeln!(out)?;
+    if !prediction.unsupported.is_empty() {
+        let names: Vec<String> = prediction.unsupported.iter().map(|s| s.to_string()).collect();
+        writeln!(
+            out,
+            "warning [unsupported]: this run does not support the predictions of {} at this budget (RMS SE above {:.0}% of the RMS): shown, not recommended; a longer run narrows them",
+            names.join(", "),
+            prediction.support_relative_se * 100.0
+        )?;
+    }
     match (&prediction.recommended, &prediction.solve_error) {
         (Some(r), _) => {
             writeln!(out, "recommended at this budget: {} — {}", r.strategy, r.reason)?;

@@ -25,7 +25,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::SolverOptions;
-use super::predict::{Budget, PredictError, Predictor};
+use super::predict::{Budget, PredictError, Predictor, supported};
 use super::strategy::Strategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::Moments;
@@ -71,20 +71,14 @@ pub struct BudgetPoint {
     pub seconds_to_target: f64,
 }
 
-/// A predicted RMS whose standard error exceeds this fraction of it does not support a budget.
-/// The time to a target goes as R², so such a point's time is uncertain by more than ±50% at one
-/// SE, where the first-order (delta-method) SE no longer describes it — one SE low, R gives
-/// 1/0.75² = 1.8× the speed-up, one SE high 1/1.25² = 0.64× — and the fastest of many such points
-/// is picked mostly for its noise (the winner's curse). Measured on 30 paper runs of 2·10⁴
-/// iterations (docs/results.md §10): without the guard, 2 of 30 headlined 200–750× ± 1,000–4,800
-/// where the rest cluster at 19 ± 8.
-pub const SUPPORT_RELATIVE_SE: f64 = 0.25;
+/// The support limit, defined with the predictions it applies to (re-exported for the plan's users).
+pub use super::predict::SUPPORT_RELATIVE_SE;
 
 impl BudgetPoint {
     /// Whether the run's noise supports this prediction: its RMS has a standard error of at most
     /// [`SUPPORT_RELATIVE_SE`] of itself (a point without an SE is not supported).
     pub fn supported(&self) -> bool {
-        self.rms_percent_stderr.is_some_and(|se| se <= SUPPORT_RELATIVE_SE * self.rms_percent)
+        supported(self.rms_percent, self.rms_percent_stderr)
     }
 }
 

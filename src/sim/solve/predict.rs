@@ -14,6 +14,13 @@
 //! as many iterations as the run had would give at the new budget. Strategies whose weights
 //! depend on N_F and N_B (`correlation_aware`) cannot be predicted at another budget: their row
 //! says so.
+//!
+//! The row recommended at another budget is chosen, by the same guard as a job's result, among the
+//! rows whose prediction the run supports ([`supported`]: the predicted RMS known within
+//! [`SUPPORT_RELATIVE_SE`] of itself). Far from the measured budget a predicted variance can come
+//! out near zero, and the lowest of several rows would be chosen for its noise: measured on 30
+//! paper runs (docs/results.md §10), one recommended switch on 13.4 ± 4.4% that delivers 20.3%.
+//! The other rows stay in the table, listed in [`Prediction::unsupported`].
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -41,6 +48,23 @@ pub struct Budget {
     pub light_paths: u64,
     /// N_B: camera paths per iteration.
     pub camera_paths: u64,
+}
+
+/// A predicted RMS whose standard error exceeds this fraction of it is not supported by the run:
+/// it is shown but not recommended, and a budget plan does not count it. A time to a target goes
+/// as R², so such a figure's time is uncertain by more than ±50% at one SE, where the first-order
+/// (delta-method or jackknife) SE no longer describes it — one SE low, R gives 1/0.75² = 1.8× the
+/// speed-up, one SE high 1/1.25² = 0.64× — and the lowest of several such figures is picked mostly
+/// for its noise (the winner's curse). Measured on 30 paper runs of 2·10⁴ iterations
+/// (docs/results.md §10): without the limit, 2 of 30 budget plans headlined 200–750× ±
+/// 1,000–4,800 where the rest cluster at 19 ± 8, and one prediction at (10⁷, 1000) recommended
+/// switch on 13.4 ± 4.4% where it delivers 20.3%.
+pub const SUPPORT_RELATIVE_SE: f64 = 0.25;
+
+/// Whether a predicted RMS `rms` (in %) with standard error `stderr` is supported by the run: the
+/// SE is at most [`SUPPORT_RELATIVE_SE`] of the RMS (a figure without an SE is not supported).
+pub fn supported(rms: f64, stderr: Option<f64>) -> bool {
+    stderr.is_some_and(|se| se <= SUPPORT_RELATIVE_SE * rms)
 }
 
 /// Why no prediction can be made.
@@ -80,6 +104,59 @@ pub struct Prediction {
     pub weights: Vec<WeightRow>,
     /// Why there are no re-fitted weights, if there are none.
     pub solve_error: Option<String>,
+    /// The rows with a figure that this run does not support at the new budget (their RMS SE
+    /// above `support_relative_se` of the RMS): shown in the table, never recommended. Empty at
+    /// the measured budget, where nothing is extrapolated.
+    #[serde(default)]
+    pub unsupported: Vec<Strategy>,
+    /// The fraction of its RMS that a row's RMS SE may reach for the row to be supported
+    /// (`SUPPORT_RELATIVE_SE`).
+    #[serde(default = "support_limit")]
+    pub support_relative_se: f64,
+}
+
+fn support_limit() -> f64 {
+    SUPPORT_RELATIVE_SE
+}
+
+/// The rows a recommendation at `to` may choose from, and the strategies left out: at the
+/// measured budget every row; at another, the rows whose figure the run supports ([`supported`]).
+/// Rows without a figure (an error, or no RMS) are kept: the guard already passes them by.
+fn recommendable(rows: &[NoiseRow], from: Budget, to: Budget) -> (Vec<NoiseRow>, Vec<Strategy>) {
+    if from == to {
+        return (rows.to_vec(), Vec::new());
+    }
+    let (mut kept, mut left) = (Vec::new(), Vec::new());
+    for row in rows {
+        match row.rms_percent {
+            Some(rms) if row.error.is_none() && rms.is_finite() && !supported(rms, row.rms_percent_stderr) => {
+                left.push(row.strategy)
+            }
+            _ => kept.push(row.clone()),
+        }
+    }
+    (kept, left)
+}
+
+/// " — not considered …" for a recommendation's reason when `left` were left out of `rows`.
+fn left_out_note(rows: &[NoiseRow], left: &[Strategy]) -> String {
+    if left.is_empty() {
+        return String::new();
+    }
+    let named: Vec<String> = left
+        .iter()
+        .filter_map(|s| rows.iter().find(|r| r.strategy == *s))
+        .map(|r| match (r.rms_percent, r.rms_percent_stderr) {
+            (Some(v), Some(se)) => format!("{} ({v:.1} ± {se:.1}%)", r.strategy),
+            (Some(v), None) => format!("{} ({v:.1}%, no SE)", r.strategy),
+            _ => r.strategy.to_string(),
+        })
+        .collect();
+    format!(
+        "; not considered, their predictions not supported by this run (SE above {:.0}% of the RMS): {}",
+        SUPPORT_RELATIVE_SE * 100.0,
+        named.join(", ")
+    )
 }
 
 /// Second-order and component sums of a set of iterations, as doubles.
@@ -270,7 +347,17 @@ impl Predictor {
             let used = (0..self.test.len()).map(|i| (self.fold_index[i], &self.test[i]));
             used.filter_map(|(f, t)| t.strategy_sums(p.index(), from, to).map(|s| (f, s))).collect()
         };
-        let choice = recommend(&rows, &fitted, &path_sums);
+        let (eligible, unsupported) = recommendable(&rows, from, to);
+        let mut choice = recommend(&eligible, &fitted, &path_sums);
+        let mut note = left_out_note(&rows, &unsupported);
+        if choice.recommended.is_err() && !unsupported.is_empty() {
+            // Nothing supported is recommendable: choose among all rows, and say so.
+            choice = recommend(&rows, &fitted, &path_sums);
+            note = format!(
+                "; no recommendable row's prediction is supported by this run (every RMS SE above {:.0}% of the RMS): a longer run is needed to act on it",
+                SUPPORT_RELATIVE_SE * 100.0
+            );
+        }
         let (mut recommended, mut weights, mut solve_error) = (None, Vec::new(), None);
         match &choice.recommended {
             Ok(r) => {
@@ -282,7 +369,7 @@ impl Predictor {
                         .find(|x| x.strategy == r.strategy)
                         .map(|x| x.heuristics.clone())
                         .unwrap_or_default(),
-                    reason: r.reason.clone(),
+                    reason: format!("{}{note}", r.reason),
                 });
                 if let Some(fit) = r.fit() {
                     weights = weight_rows(grid, fit, r.weight_stderr().as_deref());
@@ -299,6 +386,8 @@ impl Predictor {
             recommended,
             weights,
             solve_error,
+            unsupported,
+            support_relative_se: SUPPORT_RELATIVE_SE,
         }
     }
 }
@@ -346,3 +435,6 @@ fn path_row(
         ..NoiseRow::from_sums(name, m, s1, s2, None)
     }
 }
+
+#[cfg(test)]
+mod tests;
