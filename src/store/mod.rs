@@ -104,6 +104,21 @@ struct Health {
     page_limit_generation: AtomicU64,
 }
 
+impl Health {
+    /// Sets `max_page_count` on `conn` if a fault test asked for a limit (production pays one
+    /// atomic load).
+    async fn apply_page_limit(&self, conn: &mut sqlx::SqliteConnection) -> Result<(), sqlx::Error> {
+        if self.page_limit_generation.load(Ordering::SeqCst) != 0 {
+            let limit = match self.page_limit.load(Ordering::SeqCst) {
+                0 => u64::from(u32::MAX - 1),
+                n => n,
+            };
+            sqlx::query(sqlx::AssertSqlSafe(format!("PRAGMA max_page_count = {limit}"))).execute(&mut *conn).await?;
+        }
+        Ok(())
+    }
+}
+
 /// A handle to the database; cheap to clone (it wraps the connection pool's `Arc`).
 #[derive(Clone, Debug)]
 pub struct Store {
@@ -125,23 +140,22 @@ impl Store {
             .busy_timeout(Duration::from_secs(10));
         let path = Arc::new(options.get_filename().to_path_buf());
         let health = Arc::new(Health::default());
-        let hook = health.clone();
+        let (on_connect, on_acquire) = (health.clone(), health.clone());
+        // The fault tests' page limit goes on every connection: `before_acquire` runs only for
+        // connections taken from the idle queue, `after_connect` for the ones the pool opens (a
+        // readiness probe on a fresh connection once saw no limit and reported a full database
+        // ready).
         let pool = SqlitePoolOptions::new()
             .max_connections(4)
             .acquire_timeout(Duration::from_secs(30))
+            .after_connect(move |conn, _| {
+                let health = on_connect.clone();
+                Box::pin(async move { health.apply_page_limit(conn).await })
+            })
             .before_acquire(move |conn, _| {
-                let health = hook.clone();
+                let health = on_acquire.clone();
                 Box::pin(async move {
-                    // Only ever set by fault tests; production pays one atomic load.
-                    if health.page_limit_generation.load(Ordering::SeqCst) != 0 {
-                        let limit = match health.page_limit.load(Ordering::SeqCst) {
-                            0 => u64::from(u32::MAX - 1),
-                            n => n,
-                        };
-                        sqlx::query(sqlx::AssertSqlSafe(format!("PRAGMA max_page_count = {limit}")))
-                            .execute(&mut *conn)
-                            .await?;
-                    }
+                    health.apply_page_limit(conn).await?;
                     Ok(true)
                 })
             })
@@ -261,6 +275,28 @@ mod tests {
             request_hash: None,
             now: 0,
         }
+    }
+
+    /// The CI failure this replaced: `/readyz` reported a database at its page limit ready,
+    /// because its probe ran on a connection the pool had opened after the limit was set, which
+    /// `before_acquire` never sees. Every connection, old or new, must carry the limit.
+    #[tokio::test]
+    async fn the_page_limit_reaches_connections_opened_after_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&format!("sqlite://{}", dir.path().join("t.db").display())).await.unwrap();
+        let limit = store.page_count().await.unwrap() + 7;
+        store.limit_pages(Some(limit));
+        // The pool holds one connection from the migrations; holding four opens three more.
+        let mut held = Vec::new();
+        for _ in 0..4 {
+            held.push(store.pool.acquire().await.unwrap());
+        }
+        for conn in &mut held {
+            let n: i64 = sqlx::query_scalar("PRAGMA max_page_count").fetch_one(&mut **conn).await.unwrap();
+            assert_eq!(n as u64, limit);
+        }
+        drop(held);
+        assert!(store.ready().await.unwrap_err().contains("less than 1 MiB of room"));
     }
 
     /// The CI failure this replaced: a write that fits in pages a deletion freed succeeded on a
