@@ -145,6 +145,25 @@ async fn predicted_axes_share_one_run_and_match_the_cli() {
     for (p, n) in sweep["points"].as_array().unwrap().iter().zip([300_000, 1_000_000, 3_000_000]) {
         assert_eq!(p["figures"]["source"], "predicted");
         assert_eq!(p["figures"]["budget"]["light_paths"], n);
+        // The rows the run does not support at another budget are listed (and never recommended).
+        let listed: Vec<&str> =
+            p["figures"]["unsupported"].as_array().unwrap().iter().map(|s| s.as_str().unwrap()).collect();
+        let over: Vec<&str> = p["figures"]["noise_table"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["error"].is_null() && r["rms_percent"].is_f64())
+            .filter(|r| {
+                let limit = optimis::sim::solve::predict::SUPPORT_RELATIVE_SE * r["rms_percent"].as_f64().unwrap();
+                r["rms_percent_stderr"].as_f64().is_none_or(|se| se > limit)
+            })
+            .map(|r| r["strategy"].as_str().unwrap())
+            .collect();
+        // At the run's own budget nothing is extrapolated: a measured figure is not left out.
+        let expected = if n == 1_000_000 { Vec::new() } else { over };
+        eprintln!("N_F = {n}: unsupported {listed:?}");
+        assert_eq!(listed, expected, "at N_F = {n}");
+        assert!(!listed.contains(&p["figures"]["recommended"]["strategy"].as_str().unwrap()));
     }
     // More light paths per iteration: less noise for plane 3 (its variance has a 1/N_F part).
     let plane3 = |i: usize| {

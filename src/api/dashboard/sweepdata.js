@@ -48,8 +48,9 @@ const strategiesOf = (points) => strategiesIn(points.map((p) => p.figures?.noise
  * RMS % of every strategy against axis `a`, the other axes at the value indices `fixed` (grid of
  * several axes only). x is the field's value when the axis is numeric, else the value's index
  * (`labels` names them). Per strategy: y (null where missing or not positive: the y axis is
- * logarithmic), its standard error `err` (null for the in-sample optimal and other rows without one), and
- * `outside`: 'all', 'some' or '' of the points where the row does not keep the fixed weights.
+ * logarithmic, and for a predicted figure the run does not support), its standard error `err` (null for
+ * the in-sample optimal and other rows without one), `outside`: 'all', 'some' or '' of the points where
+ * the row does not keep the fixed weights, and `hidden`: how many unsupported predicted figures were left out.
  */
 export function rmsAgainst(sweep, a, fixed) {
   const { spec } = sweep;
@@ -63,11 +64,14 @@ export function rmsAgainst(sweep, a, fixed) {
     .sort((m, n) => m.x - n.x);
   const series = strategiesOf(sweep.points).map((strategy) => {
     const rows = chosen.map(({ point }) => point.figures?.noise_table.find((r) => r.strategy === strategy) ?? null);
-    const y = rows.map((r) => (r && r.rms_percent > 0 ? r.rms_percent : null));
+    // A predicted figure its run does not support (RMS SE above the support limit) is not drawn.
+    const unsupported = chosen.map(({ point }) => (point.figures?.unsupported ?? []).includes(strategy));
+    const y = rows.map((r, i) => (r && r.rms_percent > 0 && !unsupported[i] ? r.rms_percent : null));
     const err = rows.map((r, i) => (y[i] === null ? null : r.rms_percent_stderr ?? null));
     const outside = rows.filter((r, i) => y[i] !== null).map((r) => r.respects_fixed === false);
     const all = outside.length > 0 && outside.every(Boolean);
-    return { strategy, y, err, outside: all ? 'all' : outside.some(Boolean) ? 'some' : '' };
+    const hidden = rows.filter((r, i) => r && r.rms_percent > 0 && unsupported[i]).length;
+    return { strategy, y, err, outside: all ? 'all' : outside.some(Boolean) ? 'some' : '', hidden };
   });
   return {
     x: chosen.map((c) => c.x),

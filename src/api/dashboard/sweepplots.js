@@ -77,6 +77,10 @@ function drawRms(slot, note, data, field, sweep) {
     "Dashed: strategies outside the solver's fixed weights, shown for comparison."];
   if (hasSelectors(sweep.spec)) parts.push('The other axes are at the values selected above.');
   if (predicted) parts.push('Some points are predicted from one run with noise components.');
+  const hidden = data.series.reduce((n, s) => n + s.hidden, 0);
+  if (hidden > 0) {
+    parts.push(`${hidden} predicted ${hidden === 1 ? 'figure is' : 'figures are'} not drawn: the run does not support them (their RMS standard error is above the prediction's support limit).`);
+  }
   if (figures < data.points.length) parts.push(`${data.points.length - figures} of ${data.points.length} points have no figures yet.`);
   showMessage(note, parts.join(' '));
 }

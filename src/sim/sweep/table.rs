@@ -49,6 +49,11 @@ pub struct PointFigures {
     pub weights: Vec<WeightRow>,
     /// Why there are no figures or no weights, if so.
     pub error: Option<String>,
+    /// The rows of a predicted point whose figure its run does not support (RMS SE above
+    /// `solve::predict::SUPPORT_RELATIVE_SE` of the RMS): never recommended, and not drawn by the
+    /// dashboard. Empty for a measured point.
+    #[serde(default)]
+    pub unsupported: Vec<Strategy>,
 }
 
 /// The figures of a measured point from its run's report.
@@ -62,6 +67,7 @@ pub fn figures_of_report(report: &RunReport, budget: Budget, partial: bool) -> P
         recommended: report.recommended.clone(),
         weights: report.weights.clone(),
         error: report.solve_error.clone(),
+        unsupported: Vec::new(),
     }
 }
 
@@ -76,6 +82,7 @@ pub fn figures_of_prediction(p: &Prediction, partial: bool) -> PointFigures {
         recommended: p.recommended.clone(),
         weights: p.weights.clone(),
         error: p.solve_error.clone(),
+        unsupported: p.unsupported.clone(),
     }
 }
 
@@ -113,6 +120,7 @@ pub fn point_figures(
                 recommended: None,
                 weights: Vec::new(),
                 error: Some(e.to_string()),
+                unsupported: Vec::new(),
             },
             _ => figures_of_report(report, measured, partial),
         };
