@@ -35,7 +35,7 @@ import { checkDownloads } from './downloads.mjs';
 import {
   checkCompare, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
 } from './research.mjs';
-import { checkCsv, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
+import { checkCsv, checkPredictedSweep, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
 
 const OVERALL_TIMEOUT_MS = 240_000;
 
@@ -85,6 +85,7 @@ async function run(browser) {
   await screenshot(page, 'sweep.png');
   await checkCsv(page, sweep);
   await checkSweepLinks(page, sweep);
+  await checkPredictedSweep(page);
   await checkSweepCancel(page);
   await sleep(500); // let late console messages arrive
   assertNoProblems();
