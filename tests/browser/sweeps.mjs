@@ -49,11 +49,7 @@ export async function checkPredictedSweep(page) {
   check(created.status === 201, `POST /v1/sweeps creates a predicted sweep (${created.status})`);
   const id = created.json.id;
   await page.goto(`${base}/#/sweeps/${id}`);
-  await waitFor('the predicted sweep to succeed', async () => {
-    const badge = await page.locator('[data-ref="state"] .badge').textContent().catch(() => '');
-    if (badge === 'failed' || badge === 'cancelled') throw new Error(`the sweep ended ${badge}`);
-    return badge === 'succeeded';
-  }, 120_000);
+  await sweepSucceeds(page, 'the predicted sweep', 120_000);
   const sweep = (await callApi(`/v1/sweeps/${id}`)).json;
   const hidden = unsupportedFigures(sweep);
   check(sweep.points.every((p) => p.figures.source === 'predicted') && hidden > 0,
@@ -83,6 +79,15 @@ function expectedW1Bars(sweep) {
   }).reduce((a, b) => a + b, 0);
 }
 
+/** Waits until the open sweep page's state badge reads succeeded (throws if it ends otherwise). */
+async function sweepSucceeds(page, what, timeout) {
+  await waitFor(`${what} to succeed`, async () => {
+    const badge = await page.locator('[data-ref="state"] .badge').textContent().catch(() => '');
+    if (badge === 'failed' || badge === 'cancelled') throw new Error(`${what} ended ${badge}`);
+    return badge === 'succeeded';
+  }, timeout);
+}
+
 /** The sweep list (from the header) leads to a sweep created through the API; its page follows it to the end. */
 export async function openSweep(page) {
   const created = await callApi('/v1/sweeps', { method: 'POST', body: SWEEP });
@@ -96,11 +101,7 @@ export async function openSweep(page) {
   await row.getByRole('link', { name: `#${id}` }).click();
   await waitFor('the sweep page', () => page.locator('h1', { hasText: `Sweep ${id}` }).isVisible());
   check(new URL(page.url()).hash === `#/sweeps/${id}`, `the list links to the sweep page #/sweeps/${id}`);
-  await waitFor('the sweep to succeed', async () => {
-    const badge = await page.locator('[data-ref="state"] .badge').textContent().catch(() => '');
-    if (badge === 'failed' || badge === 'cancelled') throw new Error(`the sweep ended ${badge}`);
-    return badge === 'succeeded';
-  }, 180_000);
+  await sweepSucceeds(page, 'the sweep', 180_000);
   const sweep = (await callApi(`/v1/sweeps/${id}`)).json;
   check(sweep.state === 'succeeded' && sweep.points.every((p) => p.figures && !p.figures.partial),
     'the API agrees: the sweep succeeded and every point has final figures');
