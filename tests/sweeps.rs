@@ -193,7 +193,22 @@ async fn predicted_axes_share_one_run_and_match_the_cli() {
             assert!(z.abs() < 4.0, "{strategy} at {}: predicted {a}, measured {b}, z = {z:.2}", p["values"]);
         }
     }
+    // The table flags the same figures: `supported` is false exactly for the predicted rows a
+    // point lists, and true for every measured row (in the JSON and in the CSV's column).
+    let table = server.get_json(&format!("/v1/sweeps/{id}/table")).await;
+    let points = sweep["points"].as_array().unwrap();
+    let mut flagged = 0;
+    for row in table["rows"].as_array().unwrap() {
+        let listed = &points[row["point"].as_u64().unwrap() as usize]["figures"]["unsupported"];
+        let unsupported = row["source"] == "predicted" && listed.as_array().unwrap().contains(&row["strategy"]);
+        assert_eq!(row["supported"], !unsupported, "{row}");
+        flagged += usize::from(unsupported);
+    }
+    assert!(flagged > 0, "the 400-iteration run leaves some predicted figures unsupported");
     let csv = server.get(&format!("/v1/sweeps/{id}/table?format=csv")).await.text();
+    let column = csv.lines().next().unwrap().split(',').position(|c| c == "supported").unwrap();
+    let falses = csv.lines().skip(1).filter(|l| l.split(',').nth(column) == Some("false")).count();
+    assert_eq!(falses, flagged, "the CSV's supported column");
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("p.json"), doc.to_string()).unwrap();
     optimis(&["sweep", "--spec", "p.json", "--csv", "p.csv"], dir.path(), &[]);

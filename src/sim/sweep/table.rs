@@ -188,6 +188,17 @@ pub struct SweepRow {
     pub respects_fixed: bool,
     /// Whether this is the strategy whose weights the point recommends.
     pub recommended: bool,
+    /// False for a predicted figure its run does not support (listed in the point's
+    /// `unsupported`: RMS SE above `solve::predict::SUPPORT_RELATIVE_SE` of the RMS); always true
+    /// for a measured one. A reader plotting the table leaves the unsupported figures out, as the
+    /// dashboard does.
+    #[serde(default = "supported_by_default")]
+    pub supported: bool,
+}
+
+/// Tables written before the column existed held no unsupported rows' flag: a row was drawn.
+fn supported_by_default() -> bool {
+    true
 }
 
 /// The table of a sweep: one row per point (with figures) and strategy.
@@ -203,7 +214,7 @@ pub struct SweepTable {
 
 /// Columns every table has after the swept fields (a swept `light_paths` or `camera_paths` is
 /// this column, not a second one).
-const COLUMNS: [&str; 12] = [
+const COLUMNS: [&str; 13] = [
     "source",
     "light_paths",
     "camera_paths",
@@ -216,6 +227,7 @@ const COLUMNS: [&str; 12] = [
     "rms_percent_stderr",
     "respects_fixed",
     "recommended",
+    "supported",
 ];
 
 impl SweepTable {
@@ -245,6 +257,7 @@ impl SweepTable {
                     rms_percent_stderr: r.rms_percent_stderr,
                     respects_fixed: r.respects_fixed,
                     recommended: Some(r.strategy) == chosen,
+                    supported: !f.unsupported.contains(&r.strategy),
                 });
             }
         }
@@ -273,6 +286,7 @@ impl SweepTable {
                 number(r.rms_percent_stderr),
                 r.respects_fixed.to_string(),
                 r.recommended.to_string(),
+                r.supported.to_string(),
             ]);
             csv.row(cells);
         }

@@ -188,7 +188,8 @@ def sweep_table_frame(table: Mapping[str, Any]) -> pd.DataFrame:
     e.g. ``merge_radius``, ``scene.l3``; a field that is already a column, such as ``light_paths``,
     is not repeated), then ``source``, ``light_paths``, ``camera_paths``, ``iterations``,
     ``partial``, ``strategy``, ``luminance``, ``luminance_stderr``, ``rms_percent``,
-    ``rms_percent_stderr``, ``respects_fixed`` and ``recommended``.
+    ``rms_percent_stderr``, ``respects_fixed``, ``recommended`` and ``supported`` (false for a
+    predicted figure its run does not support).
     """
     rows = list(table.get("rows") or [])
     own = [c for c in _columns(rows) if c not in ("point", "values")]
