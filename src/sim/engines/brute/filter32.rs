@@ -139,6 +139,15 @@ impl Filter32 {
         }
     }
 
+    /// Whether the filter can pass fewer paths than all: not when C_μ is below −1.3, which every
+    /// path's Q₃₂ exceeds (|u₃₂| ≤ 1 + β with β ≤ 0.13 for e ≤ 0.03), nor when C_μ = −∞ (e > 0.03).
+    /// Then the near filters do not matter either: every path is a candidate. (A wide lobe, or a
+    /// pixel close to plane 2, reaches the pixel from anywhere.) Only the block loop's speed
+    /// depends on this, never its results.
+    pub(super) fn screens(&self) -> bool {
+        self.c_mu >= -1.3
+    }
+
     /// One path from its [`Filter32::inputs`]: the near-filter cells of its f32 start and plane-2
     /// hit, and whether it is a candidate without them (it may reach the pixel, or it is steeper
     /// than [`TAN_MAX`]). Branch-free, so that the block loop vectorises.

@@ -87,6 +87,18 @@ struct Block {
     /// [`CANDIDATE`] if the f32 filter passes the path without the near filters (pixel cone, or
     /// too steep to bound), else 0.
     candidate: [u32; BLOCK],
+    /// Every path in f64, for chunks whose f32 filter cannot screen ([`exact_block`]).
+    exact: ExactBlock,
+}
+
+/// The f64 values of a whole block's paths (those of [`ExactPath`], as arrays) and their exact
+/// flags.
+struct ExactBlock {
+    x3: [[f64; BLOCK]; 2],
+    x2: [[f64; BLOCK]; 2],
+    /// sin² θ, cos φ, sin φ.
+    dir: [[f64; BLOCK]; 3],
+    flags: [u32; BLOCK],
 }
 
 /// Everything the loop reads, fixed for the chunk.
@@ -99,6 +111,10 @@ struct Chunk<'a> {
     near2: NearFilter,
     /// The block loop's conservative f32 filter.
     filter: Filter32,
+    /// Whether the f32 filter is used at all: not when its cone test passes every path (see
+    /// [`Filter32::screens`]), where computing each path in f32 and then again in f64, one at a
+    /// time, would cost more than computing every path in f64, a vector at a time ([`exact_block`]).
+    screen: bool,
 }
 
 impl<'a> Chunk<'a> {
@@ -112,13 +128,15 @@ impl<'a> Chunk<'a> {
         let reach3 = 2.0 * scene.illumination.outer_radius();
         let reach2 = 2.0 * (scene.illumination.outer_radius() + scene.l3 * 2f64.powi(26));
         let cone = PixelCone::new(scene.lobe.beta, scene.l2, radius);
+        let filter = Filter32::new(config, cameras, &cone);
         Chunk {
             config,
             cameras,
             cone,
             near3: NearFilter::new(cameras.paths.iter().filter_map(|p| p.x3), radius, reach3),
             near2: NearFilter::new(cameras.paths.iter().map(|p| p.x2), radius, reach2),
-            filter: Filter32::new(config, cameras, &cone),
+            screen: filter.screens(),
+            filter,
         }
     }
 }
@@ -211,6 +229,21 @@ fn trace_blocks<const AVX2: bool>(
         remaining -= n;
 
         fill(b.bits.as_flattened_mut());
+        if !setup.screen {
+            let mut flagged = exact_block(setup, b);
+            if n < BLOCK {
+                flagged &= (1 << n) - 1;
+            }
+            let e = &b.exact;
+            while flagged != 0 {
+                let i = flagged.trailing_zeros() as usize;
+                flagged &= flagged - 1;
+                scratch.set_light_half(i);
+                let (x3, x2) = ([e.x3[0][i], e.x3[1][i]], [e.x2[0][i], e.x2[1][i]]);
+                trace_flagged(setup, e.flags[i], x3, x2, [e.dir[0][i], e.dir[1][i], e.dir[2][i]], rng, scratch);
+            }
+            continue;
+        }
         filter_block(setup, b);
 
         // Camera vertices nearby? Then the few candidates, in path order.
@@ -264,6 +297,36 @@ fn filter_block(setup: &Chunk, b: &mut Block) {
     }
 }
 
+/// Every path of the block in f64, a vector at a time, by [`ExactPath`]'s expressions (so the same
+/// bits), with its exact flags; returns the mask of the flagged paths (bit i for path i). For
+/// chunks whose f32 filter would pass every path ([`Chunk::screen`] false).
+#[inline(always)]
+fn exact_block(setup: &Chunk, b: &mut Block) -> u64 {
+    let scene = &setup.config.scene;
+    let (l2, l3) = (scene.l2, scene.l3);
+    let e = &mut b.exact;
+    scene.illumination.sample_block(&b.bits[0], &b.bits[2], &mut e.x3);
+    for i in 0..BLOCK {
+        let sin2 = unit52(b.bits[1][i]);
+        let cos2 = 1.0 - sin2;
+        let tan = (sin2 / cos2).sqrt();
+        let (sin_phi, cos_phi) = sincos_turn(b.bits[2][i] as u32);
+        let lateral = l3 * tan;
+        let (x, y) = (lateral.mul_add(cos_phi, e.x3[0][i]), lateral.mul_add(sin_phi, e.x3[1][i]));
+        [e.x2[0][i], e.x2[1][i]] = [x, y];
+        [e.dir[0][i], e.dir[1][i], e.dir[2][i]] = [sin2, cos_phi, sin_phi];
+        let reach = setup.cone.may_reach_polar(x, y, cos_phi, sin_phi, tan, cos2, l2);
+        e.flags[i] = (u32::from(reach) * MAY_REACH_PIXEL)
+            | (setup.near3.holds(setup.near3.cell(e.x3[0][i], e.x3[1][i])) * NEAR_PLANE3)
+            | (setup.near2.holds(setup.near2.cell(x, y)) * NEAR_PLANE2);
+    }
+    let mut mask = 0;
+    for (i, &flags) in e.flags.iter().enumerate() {
+        mask |= u64::from(flags != 0) << i;
+    }
+    mask
+}
+
 impl Block {
     fn new() -> Self {
         Self {
@@ -275,6 +338,12 @@ impl Block {
             azimuths: [[0; BLOCK]; 2],
             cells: [[0; BLOCK]; 2],
             candidate: [0; BLOCK],
+            exact: ExactBlock {
+                x3: [[0.0; BLOCK]; 2],
+                x2: [[0.0; BLOCK]; 2],
+                dir: [[0.0; BLOCK]; 3],
+                flags: [0; BLOCK],
+            },
         }
     }
 }

@@ -282,10 +282,13 @@ fn f32_filter_is_conservative_at_the_edges() {
 
 /// The block loop gives exactly the tally of the plain exact loop (every path computed in f64,
 /// tested exactly, and traced if flagged — the brute force before the f32 filter), in both
-/// builds: the filter only changes which paths are looked at.
+/// builds and in both modes (the f32 screen, and every path in f64 where the screen would pass
+/// them all): the filter only changes which paths are looked at.
 #[test]
 fn block_loop_matches_the_exact_loop() {
+    let mut modes = Vec::new();
     for (k, config) in filter_configs().iter().enumerate() {
+        modes.push(Chunk::new(config, &CameraSet::generate(config, 3, 2)).screen);
         let mut scratch = ChunkScratch::new(config.cells.len());
         let cameras = CameraSet::generate(config, 3, 2);
         for chunk in 0..config.chunks() {
@@ -315,6 +318,8 @@ fn block_loop_matches_the_exact_loop() {
             }
         }
     }
+    // The wide lobe and the close plane 2 take the f64 mode; the others screen in f32.
+    assert_eq!(modes, [true, true, true, false, false, true]);
 }
 
 /// [`NearFilter32`] holds every query within its error band, at the worst place: a vertex set so
