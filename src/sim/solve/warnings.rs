@@ -143,10 +143,20 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
         && let Some(se) = g.stderr
         && g.value + 2.0 * se < 1.0
     {
+        let versus_rms = table.rows.iter().find(|x| x.strategy == g.versus).and_then(|x| x.rms_percent);
         let stacked = table.free_stacked.as_ref().map_or_else(String::new, |f| {
             let se = f.rms_stderr.map_or_else(String::new, |s| format!(" ± {s:.1}"));
+            // The stacked optimum contains the heuristic, but its cross-fitted figure can still be
+            // higher where the run is too short to fit its extra terms: then say so, rather than
+            // let a reader take the stacked row for the better choice.
+            let short = match versus_rms {
+                Some(v) if f.rms_percent > v => {
+                    format!(", not better than {} alone ({v:.1}%) with this run's data", g.versus)
+                }
+                _ => String::new(),
+            };
             format!(
-                "; with the fixed weights freed, the stacked optimum (which contains {}) reaches {:.1}%{se} (cross-fitted, λ = {})",
+                "; with the fixed weights freed, the stacked optimum (which contains {}) reaches {:.1}%{se} (cross-fitted, λ = {}){short}",
                 g.versus, f.rms_percent, f.cross_fit.lambda
             )
         });
