@@ -308,6 +308,13 @@ fn a_short_run_does_not_offer_the_free_stacked_optimum_as_the_better_choice() {
     let w = warnings.iter().find(|w| w.code == WarningCode::FixedWeightsCost).expect("the cost is warned about");
     let expected = format!("not better than {} alone ({heuristic:.1}%) with this run's data", cost.versus);
     assert!(w.message.contains(&expected), "{}", w.message);
+    // The guard kept a per-path row because the best fitted row is noisier (variance ratio below
+    // 1), and the reason says so rather than "within noise".
+    let guard = table.guard.expect("the guard's comparison");
+    let reason = &table.recommended.as_ref().unwrap().reason;
+    assert!(guard.value < 1.0, "{guard:?}");
+    let expected = format!("the best fitted row, {} (", guard.strategy);
+    assert!(reason.contains(&expected) && reason.contains(&format!("is noisier than {}", guard.versus)), "{reason}");
 }
 
 /// Moments of disjoint pieces of one configuration (three ranges of one seed, two of another),

@@ -142,10 +142,16 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
                     let by = ratio.map_or_else(String::new, |(g, se)| {
                         format!(" (variance ratio {g:.3} ± {})", se.map_or("?".to_string(), |s| format!("{s:.3}")))
                     });
+                    // A ratio below 1 is a fitted row noisier than the per-path one (a short run,
+                    // where the fit's own noise dominates): "within noise" would understate that.
+                    let relation = match ratio {
+                        Some((g, _)) if g < 1.0 => "is noisier than",
+                        _ => "is within noise of",
+                    };
                     Ok((
                         p,
                         format!(
-                            "no fitted row beats it beyond {GUARD_SE} standard errors (one-sided 95%): the best, {f} ({:.1}%), is within noise of {p} ({:.1}%){by}",
+                            "no fitted row beats it beyond {GUARD_SE} standard errors (one-sided 95%): the best fitted row, {f} ({:.1}%), {relation} {p} ({:.1}%){by}",
                             rms(f),
                             rms(p)
                         ),
