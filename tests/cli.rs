@@ -161,6 +161,40 @@ fn a_reader_that_leaves_early_is_not_an_error() {
     }
 }
 
+/// `--out` and the CSV flags write *to* a pipe or a device, and through a symbolic link, instead
+/// of renaming a new file over them (which, run as root, replaced /dev/null by a regular file).
+/// The pipe is a FIFO in a temporary directory, read by a thread; the link keeps being a link.
+#[test]
+fn outputs_write_through_pipes_and_links_without_replacing_them() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("moments.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs").success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap())
+    };
+    let run = ["run", "--preset", "paper-table1", "--iterations", "2", "--quiet"];
+    ok(optimis(dir.path(), &[&run[..], &["--out", "moments.fifo"]].concat(), &[]));
+    // Before joining: a FIFO replaced by a file would leave the reader waiting for a writer.
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO is still a FIFO");
+    let piped: Value = serde_json::from_slice(&reader.join().unwrap()).expect("the document came through the pipe");
+    assert!(piped["moments"].is_object(), "a moments document");
+
+    std::fs::write(dir.path().join("real.csv"), "old").unwrap();
+    std::os::unix::fs::symlink("real.csv", dir.path().join("link.csv")).unwrap();
+    ok(optimis(dir.path(), &[&run[..], &["--csv", "link.csv"]].concat(), &[]));
+    assert!(dir.path().join("link.csv").is_symlink(), "the link is still a link");
+    let csv = std::fs::read_to_string(dir.path().join("real.csv")).unwrap();
+    assert!(csv.starts_with("strategy,"), "the file behind the link has the table: {csv}");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
 /// Issue 11, item 1 on the command line: a poisoned document made `report` and `merge` loop
 /// forever. Now they fail at once, naming the file and the sum. (The hang guard is the CI timeout
 /// of the whole suite: a loop would never return.)

@@ -164,11 +164,21 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
 /// crashed run) never sees a partial file. The temporary name holds the process id: the tasks of a
 /// job array write the same `sweep.json` at once, and a shared temporary file would be renamed
 /// away under another task.
+///
+/// Only a regular file (or a new one) is replaced that way. A device, a pipe or a socket
+/// (`--out /dev/null`, `--out /dev/stdout`) is written to: a rename would replace the device node
+/// itself — run as root, `--out /dev/null` turned /dev/null into a regular file. A symbolic link
+/// to a file keeps being a link: the file it points to is replaced.
 pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     let fail = |source| CliError::Write { path: path.to_path_buf(), source };
-    let tmp = path.with_extension(format!("partial-{}", std::process::id()));
+    let target = match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() && !m.is_dir() => return std::fs::write(path, bytes).map_err(fail),
+        Ok(_) if path.is_symlink() => std::fs::canonicalize(path).map_err(fail)?,
+        _ => path.to_path_buf(),
+    };
+    let tmp = target.with_extension(format!("partial-{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(fail)?;
-    std::fs::rename(&tmp, path).map_err(fail)
+    std::fs::rename(&tmp, &target).map_err(fail)
 }
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
