@@ -317,6 +317,22 @@ fn a_short_run_does_not_offer_the_free_stacked_optimum_as_the_better_choice() {
     assert!(reason.contains(&expected) && reason.contains(&format!("is noisier than {}", guard.versus)), "{reason}");
 }
 
+/// Three paper iterations leave most fits singular; each row's error says what the data do not
+/// determine — never "the weights of cells []" (a null direction spread thinly over many cells, or
+/// along the stacked heuristics' coefficients, named no cell).
+#[test]
+fn singular_fits_name_what_is_undetermined() {
+    let job = job(json!({ "preset": "paper-table1", "iterations": 3, "seed": 1 }));
+    let config = &job.config();
+    let moments = pool(2).install(|| run(config, 1, 0..3));
+    let table = noise_table(&moments, config.cells(), &job.spec().solver);
+    let errors: Vec<&String> = table.rows.iter().filter_map(|r| r.error.as_ref()).collect();
+    assert!(errors.iter().any(|e| e.contains("singular")), "{errors:?}");
+    for e in errors {
+        assert!(!e.contains("cells []"), "{e}");
+    }
+}
+
 /// Moments of disjoint pieces of one configuration (three ranges of one seed, two of another),
 /// computed once for the property test.
 fn pieces() -> &'static (Vec<Moments>, Moments) {

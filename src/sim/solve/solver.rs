@@ -132,9 +132,11 @@ pub enum SolveError {
     #[error("no merge events: every contribution is zero, there is nothing to weight")]
     NoSignal,
     /// The normal equations are rank-deficient: the data do not determine the listed cells'
-    /// weights (`rank` of `dimension` free weights).
+    /// weights, or the stacked heuristics' coefficients β (`rank` of `dimension` free weights).
     #[error(
-        "the weight system is singular (rank {rank} of {dimension}): the data do not determine the weights of cells {cells:?}; add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
+        "the weight system is singular (rank {rank} of {dimension}): the data do not determine {}; {}",
+        undetermined(.cells, *.heuristic_terms),
+        remedy(.cells)
     )]
     Singular {
         /// Free weights in the system.
@@ -143,6 +145,9 @@ pub enum SolveError {
         rank: usize,
         /// The cells α whose weights are undetermined.
         cells: Vec<usize>,
+        /// How many stacked heuristics' coefficients β take part in the undetermined directions
+        /// (then their per-iteration values are collinear with each other or with the table's).
+        heuristic_terms: usize,
     },
     /// A heuristic that cannot be stacked: its weights break the fixed weights, or the moments'
     /// format has no column for it.
@@ -389,16 +394,43 @@ fn penalty_laplacian(grid: &CellGrid) -> DMatrix<f64> {
     l
 }
 
+/// What a singular system leaves undetermined, for [`SolveError::Singular`]'s message: the cells,
+/// the heuristics' coefficients, or both (never an empty list of cells).
+fn undetermined(cells: &[usize], heuristic_terms: usize) -> String {
+    let betas = match heuristic_terms {
+        0 => None,
+        1 => Some("the coefficient β of one stacked heuristic".to_string()),
+        n => Some(format!("the coefficients β of {n} stacked heuristics")),
+    };
+    match (cells.is_empty(), betas) {
+        (false, None) => format!("the weights of cells {cells:?}"),
+        (false, Some(b)) => format!("the weights of cells {cells:?} and {b}"),
+        (true, Some(b)) => b,
+        (true, None) => "the weights (no single cell: a combination of them)".to_string(),
+    }
+}
+
+/// What resolves a singular system: the penalty, a fixed weight or coarser cells act on the
+/// cells; only more data determine the heuristics' coefficients.
+fn remedy(cells: &[usize]) -> &'static str {
+    if cells.is_empty() {
+        "run more iterations"
+    } else {
+        "add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
+    }
+}
+
 /// Solves H z = g for symmetric positive definite H by Jacobi-scaled Cholesky, or reports the
 /// cells spanning its null space (`column_cells`: the cell of each column, `usize::MAX` for β).
 fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, column_cells: &[usize]) -> Result<DVector<f64>, SolveError> {
     let n = h.nrows();
     let max_diag = h.diagonal().iter().copied().fold(0.0, f64::max);
-    let singular = |rank: usize, cells: Vec<usize>| {
-        let mut cells: Vec<usize> = cells.into_iter().filter(|&c| c != usize::MAX).collect();
+    let singular = |rank: usize, columns: Vec<usize>| {
+        let heuristic_terms = columns.iter().filter(|&&c| c == usize::MAX).count();
+        let mut cells: Vec<usize> = columns.into_iter().filter(|&c| c != usize::MAX).collect();
         cells.sort_unstable();
         cells.dedup();
-        SolveError::Singular { dimension: n, rank, cells }
+        SolveError::Singular { dimension: n, rank, cells, heuristic_terms }
     };
     // A free weight no sample and no penalty touches is undetermined outright.
     let dead: Vec<usize> =
@@ -418,7 +450,7 @@ fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, column_cells: &[usize]) -> Result
     // Name the cells of the (numerical) null space.
     let eig = SymmetricEigen::new(scaled);
     let max_eig = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
-    let mut cells = Vec::new();
+    let mut columns = Vec::new();
     let mut rank = 0;
     for (i, &lam) in eig.eigenvalues.iter().enumerate() {
         if lam > max_eig * PIVOT_TOLERANCE {
@@ -426,9 +458,12 @@ fn solve_spd(h: DMatrix<f64>, g: DVector<f64>, column_cells: &[usize]) -> Result
             continue;
         }
         let v = eig.eigenvectors.column(i);
-        cells.extend((0..n).filter(|&j| v[j].abs() > 0.1).map(|j| column_cells[j]));
+        columns.extend((0..n).filter(|&j| v[j].abs() > 0.1));
     }
-    Err(singular(rank, cells))
+    // Each column once (it may take part in several null directions), then its cell or β.
+    columns.sort_unstable();
+    columns.dedup();
+    Err(singular(rank, columns.into_iter().map(|j| column_cells[j]).collect()))
 }
 
 /// Gives every `Empty` cell the weights of its nearest fitted cell (breadth-first over the grid's

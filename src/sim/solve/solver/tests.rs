@@ -124,9 +124,11 @@ fn empty_cells_and_singular_systems_are_reported() {
     let stats = stats_from(&ys, vec![5, 5, 0]);
     let fixed = FixedWeights { w1: Some(0.0), ..Default::default() };
     match fit(&stats, &grid, &fixed, 0.0, &[]) {
-        Err(SolveError::Singular { cells, rank, dimension }) => {
-            assert_eq!(cells, vec![0, 1]);
-            assert_eq!((rank, dimension), (1, 2));
+        Err(e @ SolveError::Singular { .. }) => {
+            let SolveError::Singular { ref cells, rank, dimension, heuristic_terms } = e else { unreachable!() };
+            assert_eq!(*cells, vec![0, 1]);
+            assert_eq!((rank, dimension, heuristic_terms), (1, 2, 0));
+            assert!(e.to_string().contains("the weights of cells [0, 1];"), "{e}");
         }
         other => panic!("expected a singular system, got {other:?}"),
     }
@@ -191,6 +193,24 @@ fn the_stacked_family_finds_a_heuristic_that_beats_every_table() {
     );
     assert_eq!(stackable(layout, &FixedWeights::default()).len(), 7);
     assert!(stackable(Layout::new(k, 2), &FixedWeights::default()).is_empty());
+}
+
+/// A singular system's message names what is undetermined — cells, stacked heuristics'
+/// coefficients, or a combination spread over many cells — and never an empty list of cells.
+#[test]
+fn the_singular_error_names_what_is_undetermined() {
+    let message = |cells: Vec<usize>, heuristic_terms| {
+        SolveError::Singular { dimension: 54, rank: 53, cells, heuristic_terms }.to_string()
+    };
+    assert!(message(vec![3, 7], 0).contains("do not determine the weights of cells [3, 7];"));
+    assert!(message(vec![3], 1).contains("the weights of cells [3] and the coefficient β of one stacked heuristic;"));
+    assert!(
+        message(vec![], 2).contains("do not determine the coefficients β of 2 stacked heuristics; run more iterations")
+    );
+    assert!(message(vec![3], 0).ends_with(
+        "add a gradient penalty (solver.lambda > 0), fix a weight, use coarser cells or run more iterations"
+    ));
+    assert!(message(vec![], 0).contains("do not determine the weights (no single cell: a combination of them);"));
 }
 
 /// The stacked optimum stacks the switch and the correlation-aware heuristics that keep the fixed
