@@ -331,6 +331,11 @@ fn singular_fits_name_what_is_undetermined() {
     for e in errors {
         assert!(!e.contains("cells []"), "{e}");
     }
+    // The in-sample optimum cannot be held against a cross-fitted one: a warning says so.
+    assert!(table.rows.iter().any(|r| r.strategy.name() == "optimal_holdout" && r.error.is_some()));
+    let warned = warnings(&moments, &table);
+    let w = warned.iter().find(|w| w.code == WarningCode::InSampleOptimistic).expect("an in-sample warning");
+    assert!(w.message.contains("cannot be checked out of sample"), "{}", w.message);
 }
 
 /// Moments of disjoint pieces of one configuration (three ranges of one seed, two of another),

@@ -257,7 +257,21 @@ fn in_sample_gap(rows: &[NoiseRow]) -> Option<Warning> {
     let find = |s: Strategy| rows.iter().find(|r| r.strategy == s);
     let (inner, honest) = (find(Strategy::Optimal)?, find(Strategy::OptimalHoldout)?);
     let (l_in, rms_in) = (inner.luminance?, inner.rms_percent?);
-    let (l_cf, se_cf, rms_cf) = (honest.luminance?, honest.luminance_stderr?, honest.rms_percent?);
+    let Some((l_cf, se_cf, rms_cf)) =
+        honest.luminance.zip(honest.luminance_stderr).zip(honest.rms_percent).map(|((l, se), r)| (l, se, r))
+    else {
+        // Nothing to hold the in-sample figures against (the cross-fitted fit failed, e.g. on a
+        // few iterations): they are the fit's own noise as much as the weights' quality.
+        let why = honest.error.as_deref().unwrap_or("it has no figures");
+        return Some(Warning {
+            code: WarningCode::InSampleOptimistic,
+            message: format!(
+                "the in-sample optimal row (RMS {rms_in:.1}%) cannot be checked out of sample — optimal_holdout could not be computed ({why}): its figures measure the fit's own noise as much as the weights; do not use them"
+            ),
+            strategy: Some(Strategy::Optimal),
+            cells: Vec::new(),
+        });
+    };
     let z = (l_in - l_cf) / se_cf;
     let far = rms_in < (1.0 - IN_SAMPLE_RMS_GAP) * rms_cf || z.abs() > 2.0;
     far.then(|| Warning {
