@@ -91,8 +91,8 @@ struct Block {
     exact: ExactBlock,
 }
 
-/// The f64 values of a whole block's paths (those of [`ExactPath`], as arrays) and their exact
-/// flags.
+/// A whole block's paths in f64 (the fields of [`ExactPath`] that the merges read, as arrays, so
+/// that the loop filling them vectorises) and their exact flags.
 struct ExactBlock {
     x3: [[f64; BLOCK]; 2],
     x2: [[f64; BLOCK]; 2],
@@ -228,18 +228,18 @@ fn trace_blocks<const AVX2: bool>(
         let n = remaining.min(BLOCK);
         remaining -= n;
 
+        // The block's paths in use (a chunk's last block may be partial).
+        let in_use = if n < BLOCK { (1 << n) - 1 } else { u64::MAX };
+
         fill(b.bits.as_flattened_mut());
         if !setup.screen {
-            let mut flagged = exact_block(setup, b);
-            if n < BLOCK {
-                flagged &= (1 << n) - 1;
-            }
-            let e = &b.exact;
+            let mut flagged = exact_block(setup, b) & in_use;
             while flagged != 0 {
                 let i = flagged.trailing_zeros() as usize;
                 flagged &= flagged - 1;
-                scratch.set_light_half(i);
+                let e = &b.exact;
                 let (x3, x2) = ([e.x3[0][i], e.x3[1][i]], [e.x2[0][i], e.x2[1][i]]);
+                scratch.set_light_half(i);
                 trace_flagged(setup, e.flags[i], x3, x2, [e.dir[0][i], e.dir[1][i], e.dir[2][i]], rng, scratch);
             }
             continue;
@@ -252,9 +252,7 @@ fn trace_blocks<const AVX2: bool>(
         let mut candidates = if AVX2 { unsafe { candidates_avx2(filter, b) } } else { candidates(filter, b) };
         #[cfg(not(target_arch = "x86_64"))]
         let mut candidates = candidates(filter, b);
-        if n < BLOCK {
-            candidates &= (1 << n) - 1;
-        }
+        candidates &= in_use;
         while candidates != 0 {
             let i = candidates.trailing_zeros() as usize;
             candidates &= candidates - 1;
@@ -262,7 +260,7 @@ fn trace_blocks<const AVX2: bool>(
             let flags = path.flags(setup);
             if flags != 0 {
                 // Noise components: light path k is in half k mod 2 (chunks and blocks have even
-                // lengths, so i's parity is the path's), N_F/2 paths each.
+                // lengths, so i's parity is the path's), N_F/2 paths each (in both modes).
                 scratch.set_light_half(i);
                 trace_flagged(setup, flags, path.x3, path.x2, [path.sin2, path.cos_phi, path.sin_phi], rng, scratch);
             }
@@ -297,28 +295,19 @@ fn filter_block(setup: &Chunk, b: &mut Block) {
     }
 }
 
-/// Every path of the block in f64, a vector at a time, by [`ExactPath`]'s expressions (so the same
-/// bits), with its exact flags; returns the mask of the flagged paths (bit i for path i). For
-/// chunks whose f32 filter would pass every path ([`Chunk::screen`] false).
+/// Every path of the block in f64 ([`ExactPath`], its starts drawn for the whole block at once)
+/// with its exact flags; returns the mask of the flagged paths (bit i for path i). For chunks
+/// whose f32 filter would pass every path ([`Chunk::screen`] false).
 #[inline(always)]
 fn exact_block(setup: &Chunk, b: &mut Block) -> u64 {
     let scene = &setup.config.scene;
-    let (l2, l3) = (scene.l2, scene.l3);
     let e = &mut b.exact;
     scene.illumination.sample_block(&b.bits[0], &b.bits[2], &mut e.x3);
     for i in 0..BLOCK {
-        let sin2 = unit52(b.bits[1][i]);
-        let cos2 = 1.0 - sin2;
-        let tan = (sin2 / cos2).sqrt();
-        let (sin_phi, cos_phi) = sincos_turn(b.bits[2][i] as u32);
-        let lateral = l3 * tan;
-        let (x, y) = (lateral.mul_add(cos_phi, e.x3[0][i]), lateral.mul_add(sin_phi, e.x3[1][i]));
-        [e.x2[0][i], e.x2[1][i]] = [x, y];
-        [e.dir[0][i], e.dir[1][i], e.dir[2][i]] = [sin2, cos_phi, sin_phi];
-        let reach = setup.cone.may_reach_polar(x, y, cos_phi, sin_phi, tan, cos2, l2);
-        e.flags[i] = (u32::from(reach) * MAY_REACH_PIXEL)
-            | (setup.near3.holds(setup.near3.cell(e.x3[0][i], e.x3[1][i])) * NEAR_PLANE3)
-            | (setup.near2.holds(setup.near2.cell(x, y)) * NEAR_PLANE2);
+        let p = ExactPath::from_start(scene, [e.x3[0][i], e.x3[1][i]], b.bits[1][i], b.bits[2][i]);
+        e.flags[i] = p.flags(setup);
+        [e.x2[0][i], e.x2[1][i]] = p.x2;
+        [e.dir[0][i], e.dir[1][i], e.dir[2][i]] = [p.sin2, p.cos_phi, p.sin_phi];
     }
     let mut mask = 0;
     for (i, &flags) in e.flags.iter().enumerate() {
@@ -377,11 +366,17 @@ impl ExactPath {
     fn new(scene: &Scene, bits: [u64; 3]) -> Self {
         let mut start = [[0.0; 1]; 2];
         scene.illumination.sample_block(&[bits[0]], &[bits[2]], &mut start);
-        let x3 = [start[0][0], start[1][0]];
-        let sin2 = unit52(bits[1]);
+        Self::from_start(scene, [start[0][0], start[1][0]], bits[1], bits[2])
+    }
+
+    /// The path from its start `x3` (drawn from the ring word and the azimuth word's high half),
+    /// its direction word `dir_bits` (sin² θ) and its azimuth word (low half: φ).
+    #[inline(always)]
+    fn from_start(scene: &Scene, x3: [f64; 2], dir_bits: u64, azimuth_bits: u64) -> Self {
+        let sin2 = unit52(dir_bits);
         let cos2 = 1.0 - sin2;
         let tan = (sin2 / cos2).sqrt();
-        let (sin_phi, cos_phi) = sincos_turn(bits[2] as u32);
+        let (sin_phi, cos_phi) = sincos_turn(azimuth_bits as u32);
         let lateral = scene.l3 * tan;
         let x2 = [lateral.mul_add(cos_phi, x3[0]), lateral.mul_add(sin_phi, x3[1])];
         Self { x3, x2, sin2, cos_phi, sin_phi, tan, cos2 }
