@@ -22,7 +22,7 @@ use std::sync::atomic::AtomicBool;
 use optimis::sim::checks::quadrature::reference_luminance;
 use optimis::sim::model::config::SimConfig;
 use optimis::sim::runner::{run, run_iterations};
-use optimis::sim::solve::noise::noise_table;
+use optimis::sim::solve::noise::{NoiseTable, noise_table};
 use optimis::sim::solve::solver::fit;
 use optimis::sim::solve::warnings::{WarningCode, warnings};
 use optimis::sim::solve::ystats::YStats;
@@ -290,16 +290,22 @@ fn recommended_weights_are_the_guarded_honest_best_within_the_fixed_weights() {
     assert_eq!(tails.len(), 2, "one tail cell per r2 band");
 }
 
+/// The moments and noise table of the first `iterations` paper iterations of seed 1.
+fn short_paper_run(iterations: u64) -> (Moments, NoiseTable) {
+    let job = job(json!({ "preset": "paper-table1", "iterations": iterations, "seed": 1 }));
+    let config = &job.config();
+    let moments = pool(2).install(|| run(config, 1, 0..iterations));
+    let table = noise_table(&moments, config.cells(), &job.spec().solver);
+    (moments, table)
+}
+
 /// A run too short to fit the free stacked optimum (10 paper iterations, seed 1): the warning
 /// about the fixed weights' cost still names the heuristic that is less noisy, and says that the
 /// stacked optimum it quotes is not better than that heuristic with these data (its cross-fitted
 /// RMS is several times higher), so that a reader does not take the stacked row for the fix.
 #[test]
 fn a_short_run_does_not_offer_the_free_stacked_optimum_as_the_better_choice() {
-    let job = job(json!({ "preset": "paper-table1", "iterations": 10, "seed": 1 }));
-    let config = &job.config();
-    let moments = pool(2).install(|| run(config, 1, 0..10));
-    let table = noise_table(&moments, config.cells(), &job.spec().solver);
+    let (moments, table) = short_paper_run(10);
     let cost = table.unconstrained.expect("a comparison outside the fixed weights");
     let free = table.free_stacked.as_ref().expect("a free stacked optimum");
     let heuristic = table.rows.iter().find(|r| r.strategy == cost.versus).unwrap().rms_percent.unwrap();
@@ -322,10 +328,7 @@ fn a_short_run_does_not_offer_the_free_stacked_optimum_as_the_better_choice() {
 /// along the stacked heuristics' coefficients, named no cell).
 #[test]
 fn singular_fits_name_what_is_undetermined() {
-    let job = job(json!({ "preset": "paper-table1", "iterations": 3, "seed": 1 }));
-    let config = &job.config();
-    let moments = pool(2).install(|| run(config, 1, 0..3));
-    let table = noise_table(&moments, config.cells(), &job.spec().solver);
+    let (moments, table) = short_paper_run(3);
     let errors: Vec<&String> = table.rows.iter().filter_map(|r| r.error.as_ref()).collect();
     assert!(errors.iter().any(|e| e.contains("singular")), "{errors:?}");
     for e in errors {

@@ -257,8 +257,7 @@ fn in_sample_gap(rows: &[NoiseRow]) -> Option<Warning> {
     let find = |s: Strategy| rows.iter().find(|r| r.strategy == s);
     let (inner, honest) = (find(Strategy::Optimal)?, find(Strategy::OptimalHoldout)?);
     let (l_in, rms_in) = (inner.luminance?, inner.rms_percent?);
-    let Some((l_cf, se_cf, rms_cf)) =
-        honest.luminance.zip(honest.luminance_stderr).zip(honest.rms_percent).map(|((l, se), r)| (l, se, r))
+    let (Some(l_cf), Some(se_cf), Some(rms_cf)) = (honest.luminance, honest.luminance_stderr, honest.rms_percent)
     else {
         // Nothing to hold the in-sample figures against (the cross-fitted fit failed, e.g. on a
         // few iterations): they are the fit's own noise as much as the weights' quality.
