@@ -113,11 +113,11 @@
 use std::f64::consts::PI;
 
 pub use super::quadrature::MAX_KERNEL_RATIO;
-use super::quadrature::{Budget, EVALUATION_BUDGET, ReferenceError, solve_monotone};
+use super::quadrature::{Budget, EVALUATION_BUDGET, ReferenceError, legendre_nodes, solve_monotone};
 use crate::sim::engines::strategies::{PathStrategy, Technique, strategy_weights};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::Lobe;
-use rules::{DiscRule, adaptive_gk, deflection, disc_fraction_inside, dot, gauss_legendre};
+use rules::{DiscRule, adaptive_gk, deflection, disc_fraction_inside, dot};
 
 /// One value per strategy of [`PathStrategy::ALL`], in its order.
 pub(super) type Values = [f64; PathStrategy::COUNT];
@@ -245,7 +245,7 @@ impl<'a> Setup<'a> {
             })
             .collect();
         let target = ((10.0 + kappa0.max(kappa1)) * beta).min(3.0);
-        let legendre = gauss_legendre(accuracy.order);
+        let legendre = legendre_nodes(accuracy.order);
         Ok(Self { config, accuracy, l2, l3, lobe: scene.lobe, radius, rings, disc0, disc1, target, legendre })
     }
 

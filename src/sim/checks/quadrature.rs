@@ -221,33 +221,36 @@ pub(super) fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, bu
     hi
 }
 
-/// Nodes and weights of 20-point Gauss–Legendre on [−1, 1] (Newton's method on P₂₀).
+/// Nodes and weights of 20-point Gauss–Legendre on [−1, 1].
 pub(super) fn legendre_20() -> &'static [(f64, f64)] {
     static RULE: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
-    RULE.get_or_init(|| {
-        let n = 20;
-        (0..n)
-            .map(|i| {
-                let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-                let mut dp = 0.0;
-                for _ in 0..100 {
-                    let (mut p0, mut p1) = (1.0, x);
-                    for k in 2..=n {
-                        let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                        p0 = p1;
-                        p1 = p2;
-                    }
-                    dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                    let dx = p1 / dp;
-                    x -= dx;
-                    if dx.abs() < 1e-16 {
-                        break;
-                    }
+    RULE.get_or_init(|| legendre_nodes(20))
+}
+
+/// Nodes and weights of n-point Gauss–Legendre on [−1, 1] (Newton's method on Pₙ): the
+/// reference's 20-point panels and the rules of [`super::expected`] both take theirs from here.
+pub(super) fn legendre_nodes(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
+            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            let mut dp = 0.0;
+            for _ in 0..100 {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    p0 = p1;
+                    p1 = p2;
                 }
-                (x, 2.0 / ((1.0 - x * x) * dp * dp))
-            })
-            .collect()
-    })
+                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+                let dx = p1 / dp;
+                x -= dx;
+                if dx.abs() < 1e-16 {
+                    break;
+                }
+            }
+            (x, 2.0 / ((1.0 - x * x) * dp * dp))
+        })
+        .collect()
 }
 
 /// ∫_a^b f by 20-point Gauss–Legendre.

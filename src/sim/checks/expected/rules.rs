@@ -1,6 +1,6 @@
 //! The rules of the expected-luminance quadrature ([`super`]): the product rules for averages over
-//! the merge disc, Gauss–Legendre nodes, the disc–ring overlap areas in closed form, the deflection
-//! angle, and the vector-valued adaptive Gauss–Kronrod over the outer panels.
+//! the merge disc, the disc–ring overlap areas in closed form, the deflection angle, and the
+//! vector-valued adaptive Gauss–Kronrod over the outer panels.
 
 use std::f64::consts::PI;
 
@@ -59,31 +59,6 @@ impl DiscRule {
         }
         Some(Self { centre: 1.0 / ((n + 1) * (n + 1)) as f64, points })
     }
-}
-
-/// Nodes and weights of n-point Gauss–Legendre on [−1, 1] (Newton's method on Pₙ).
-pub(super) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 0.0;
-            for _ in 0..100 {
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-16 {
-                    break;
-                }
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
 }
 
 #[inline(always)]
