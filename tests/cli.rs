@@ -165,7 +165,7 @@ fn a_reader_that_leaves_early_is_not_an_error() {
 /// of renaming a new file over them (which, run as root, replaced /dev/null by a regular file).
 /// The pipe is a FIFO in a temporary directory, read by a thread; the link keeps being a link.
 #[test]
-fn outputs_write_through_pipes_and_links_without_replacing_them() {
+fn outputs_write_through_pipes_and_links_without_replacing_them_and_failures_leave_no_litter() {
     use std::os::unix::fs::FileTypeExt;
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("moments.fifo");
@@ -187,6 +187,12 @@ fn outputs_write_through_pipes_and_links_without_replacing_them() {
     assert!(dir.path().join("link.csv").is_symlink(), "the link is still a link");
     let csv = std::fs::read_to_string(dir.path().join("real.csv")).unwrap();
     assert!(csv.starts_with("strategy,"), "the file behind the link has the table: {csv}");
+    // A write that fails (a directory cannot be replaced by a file) says so and leaves no
+    // temporary file behind.
+    std::fs::create_dir(dir.path().join("taken.csv")).unwrap();
+    let failed = optimis(dir.path(), &[&run[..], &["--csv", "taken.csv"]].concat(), &[]);
+    assert!(!failed.status.success(), "writing over a directory must fail");
+    assert!(String::from_utf8_lossy(&failed.stderr).contains("taken.csv"), "the error names the file");
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .filter_map(|e| e.ok()?.file_name().into_string().ok())

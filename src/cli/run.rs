@@ -160,7 +160,7 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
     Ok(spec.validate()?)
 }
 
-/// Writes `bytes` to `path`, through a temporary file and a rename so that a reader (or a
+/// Writes `bytes` to `path`, through a synced temporary file and a rename so that a reader (or a
 /// crashed run) never sees a partial file. The temporary name holds the process id: the tasks of a
 /// job array write the same `sweep.json` at once, and a shared temporary file would be renamed
 /// away under another task.
@@ -177,8 +177,16 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
         _ => path.to_path_buf(),
     };
     let tmp = target.with_extension(format!("partial-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(fail)?;
-    std::fs::rename(&tmp, &target).map_err(fail)
+    // Synced before the rename: after a crash or a power cut the name holds the old document or
+    // the new one, never an empty file (a `--resume` reads it back).
+    let written = std::fs::File::create(&tmp)
+        .and_then(|mut file| file.write_all(bytes).and_then(|()| file.sync_all()))
+        .and_then(|()| std::fs::rename(&tmp, &target));
+    if written.is_err() {
+        // Best effort: a temporary file left behind is only litter, the error is what counts.
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(fail)
 }
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
