@@ -3,9 +3,9 @@
 //! (docs/model.md §4, §5, §8, §9), kernel averages included. [`super::quadrature`] gives the
 //! R → 0 limit that all strategies share (§11); at a finite R their expectations differ from it,
 //! and from each other, so a Monte-Carlo mean is judged against this module's value, not the limit.
-//! Nothing here is used to compute a result, and nothing is shared with the sampling: the weights
-//! come from [`strategy_weights`], the one function the engines call, so every strategy of
-//! [`PathStrategy::ALL`] is covered, including strategies added to it later.
+//! Nothing here is used to compute a result, and nothing is shared with the sampling but the
+//! weights: they come from [`PathWeights`], what the engines' [`strategy_weights`] computes, so
+//! every strategy of [`PathStrategy::ALL`] is covered, including strategies added to it later.
 //!
 //! # Derivation
 //!
@@ -114,7 +114,7 @@ use std::f64::consts::PI;
 
 pub use super::quadrature::MAX_KERNEL_RATIO;
 use super::quadrature::{Budget, EVALUATION_BUDGET, ReferenceError, legendre_nodes, solve_monotone};
-use crate::sim::engines::strategies::{PathStrategy, Technique, strategy_weights};
+use crate::sim::engines::strategies::{PathStrategy, PathWeights, Technique, light_start, strategy_weights};
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::Lobe;
 use rules::{DiscRule, adaptive_gk, deflection, disc_fraction_inside, dot};
@@ -416,13 +416,16 @@ impl<'a> Setup<'a> {
                 *a += scale * w;
             }
         };
+        // One join path, weighed by every technique and light start that reaches it.
+        let path = PathWeights::new(config, x2, x3);
         if outer.light > 0.0 {
             let scale = jacobian * outer.light;
-            add(scale * plane2, &strategy_weights(config, Technique::Plane2, x2, x3, x3));
-            add(scale * plane1, &strategy_weights(config, Technique::Plane1, x2, x3, x3));
+            let start = light_start(config, x3);
+            add(scale * plane2, &path.of(Technique::Plane2, start));
+            add(scale * plane1, &path.of(Technique::Plane1, start));
         }
         for &(share, start) in &outer.rings {
-            add(jacobian * share * plane3, &strategy_weights(config, Technique::Plane3, x2, x3, start));
+            add(jacobian * share * plane3, &path.of(Technique::Plane3, light_start(config, start)));
         }
     }
 }

@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 
 use crate::sim::math::plane::radius;
 use crate::sim::model::config::SimConfig;
-use crate::sim::model::heuristics::{JoinGeometry, Sharing, balance, correlation_aware, power};
+use crate::sim::model::heuristics::{JoinGeometry, Sharing, VertexDensities, balance, correlation_aware, power};
 
 /// The strategies whose weights are functions of the whole join path, tallied per iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -185,34 +185,66 @@ pub fn strategy_weights_with(
     x3: [f64; 2],
     light_start: f64,
 ) -> [f64; PathStrategy::COUNT] {
-    let scene = &config.scene;
-    let plane = technique.index();
-    let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
-    let inside = radius(x3) <= scene.illumination.switch_radius();
-    let switch = match plane {
-        1 if inside => 1.0,
-        2 if !inside => 1.0,
-        _ => 0.0,
-    };
-    let geometry = JoinGeometry::new(scene, x2, x3);
-    let p = geometry.technique_densities(scene);
-    let area = PI * config.merge_radius * config.merge_radius;
-    let sharing = Sharing::new(&geometry.vertex_densities(scene), light_start, area);
-    let (nf, nb) = (config.light_paths as f64, config.camera_paths as f64);
-    let correlated = correlation_aware(p, &sharing, nf, nb);
-    // The w0 = 0 variants: the same heuristics with technique 0 removed (p₀ = 0), i.e. renormalised
-    // over planes 2 and 3 — what the paper's fixed weights allow.
-    let p23 = [0.0, p[1], p[2]];
-    [
-        one_hot(0),
-        one_hot(1),
-        one_hot(2),
-        switch,
-        balance(p)[plane],
-        power(p)[plane],
-        correlated[plane],
-        balance(p23)[plane],
-        power(p23)[plane],
-        correlation_aware(p23, &sharing, nf, nb)[plane],
-    ]
+    PathWeights::new(config, x2, x3).of(technique, light_start)
+}
+
+/// What every strategy's weights on one join path (x2, x3) share, whichever technique merged it
+/// and wherever its light path started: the geometry's densities (an angle, an `exp`) and the
+/// switch's side. The expected-luminance quadrature weighs one join path by all three techniques
+/// and several light starts, so it computes these once; the engines weigh a merge by one.
+#[derive(Debug, Clone, Copy)]
+pub struct PathWeights<'a> {
+    config: &'a SimConfig,
+    inside: bool,
+    densities: [f64; 3],
+    vertices: VertexDensities,
+}
+
+impl<'a> PathWeights<'a> {
+    /// The shared part of the weights of the join path (x2, x3).
+    #[inline]
+    pub fn new(config: &'a SimConfig, x2: [f64; 2], x3: [f64; 2]) -> Self {
+        let scene = &config.scene;
+        let geometry = JoinGeometry::new(scene, x2, x3);
+        Self {
+            config,
+            inside: radius(x3) <= scene.illumination.switch_radius(),
+            densities: geometry.technique_densities(scene),
+            vertices: geometry.vertex_densities(scene),
+        }
+    }
+
+    /// Every per-path strategy's weight of a merge by `technique` on this join path, whose light
+    /// path starts where its density is `light_start` (see [`light_start`]).
+    #[inline]
+    pub fn of(&self, technique: Technique, light_start: f64) -> [f64; PathStrategy::COUNT] {
+        let config = self.config;
+        let plane = technique.index();
+        let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
+        let switch = match plane {
+            1 if self.inside => 1.0,
+            2 if !self.inside => 1.0,
+            _ => 0.0,
+        };
+        let p = self.densities;
+        let area = PI * config.merge_radius * config.merge_radius;
+        let sharing = Sharing::new(&self.vertices, light_start, area);
+        let (nf, nb) = (config.light_paths as f64, config.camera_paths as f64);
+        let correlated = correlation_aware(p, &sharing, nf, nb);
+        // The w0 = 0 variants: the same heuristics with technique 0 removed (p₀ = 0), i.e.
+        // renormalised over planes 2 and 3 — what the paper's fixed weights allow.
+        let p23 = [0.0, p[1], p[2]];
+        [
+            one_hot(0),
+            one_hot(1),
+            one_hot(2),
+            switch,
+            balance(p)[plane],
+            power(p)[plane],
+            correlated[plane],
+            balance(p23)[plane],
+            power(p23)[plane],
+            correlation_aware(p23, &sharing, nf, nb)[plane],
+        ]
+    }
 }
