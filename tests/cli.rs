@@ -187,6 +187,23 @@ fn outputs_write_through_pipes_and_links_without_replacing_them_and_failures_lea
     assert!(dir.path().join("link.csv").is_symlink(), "the link is still a link");
     let csv = std::fs::read_to_string(dir.path().join("real.csv")).unwrap();
     assert!(csv.starts_with("strategy,"), "the file behind the link has the table: {csv}");
+    // `--out /dev/stdout` with the output redirected to a file: the document goes through the
+    // stream, followed by the report (a rename would replace the file and lose the report).
+    let redirected = dir.path().join("stdout.txt");
+    let status = Command::new(env!("CARGO_BIN_EXE_optimis"))
+        .current_dir(dir.path())
+        .args(run)
+        .args(["--out", "/dev/stdout"])
+        .stdout(std::fs::File::create(&redirected).unwrap())
+        .status()
+        .expect("optimis runs");
+    assert!(status.success());
+    let both = std::fs::read_to_string(&redirected).unwrap();
+    let mut values = serde_json::Deserializer::from_str(&both).into_iter::<Value>();
+    let document = values.next().expect("a document").expect("the document comes first, whole");
+    let document_end = values.byte_offset();
+    assert!(document["moments"].is_object());
+    assert!(both[document_end..].contains("strategy"), "the report follows the document: {}", &both[document_end..]);
     // A write that fails (a directory cannot be replaced by a file) says so and leaves no
     // temporary file behind.
     std::fs::create_dir(dir.path().join("taken.csv")).unwrap();

@@ -168,9 +168,14 @@ fn job_from_args(args: &RunArgs) -> Result<ValidJob, CliError> {
 /// Only a regular file (or a new one) is replaced that way. A device, a pipe or a socket
 /// (`--out /dev/null`, `--out /dev/stdout`) is written to: a rename would replace the device node
 /// itself — run as root, `--out /dev/null` turned /dev/null into a regular file. A symbolic link
-/// to a file keeps being a link: the file it points to is replaced.
+/// to a file keeps being a link: the file it points to is replaced. A path that names this
+/// process's own standard output or error (`--out /dev/stdout > file`) is written through that
+/// stream: replaced by a rename, the file would lose everything else the run prints there.
 pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     let fail = |source| CliError::Write { path: path.to_path_buf(), source };
+    if let Some(mut stream) = own_stream(path) {
+        return stream.write_all(bytes).and_then(|()| stream.flush()).map_err(fail);
+    }
     let target = match std::fs::metadata(path) {
         Ok(m) if !m.is_file() && !m.is_dir() => return std::fs::write(path, bytes).map_err(fail),
         Ok(_) if path.is_symlink() => std::fs::canonicalize(path).map_err(fail)?,
@@ -187,6 +192,31 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError
         let _ = std::fs::remove_file(&tmp);
     }
     written.map_err(fail)
+}
+
+/// This process's standard output or error if `path` is the same file (device and inode), by
+/// whatever name (`/dev/stdout`, `/proc/self/fd/1`, the redirected file's own path).
+#[cfg(unix)]
+fn own_stream(path: &Path) -> Option<Box<dyn Write>> {
+    use std::os::fd::AsFd;
+    use std::os::unix::fs::MetadataExt;
+    let target = std::fs::metadata(path).ok()?;
+    let same = |fd: std::os::fd::BorrowedFd<'_>| {
+        let stream = std::fs::File::from(fd.try_clone_to_owned().ok()?).metadata().ok()?;
+        Some((stream.dev(), stream.ino()) == (target.dev(), target.ino()))
+    };
+    if same(std::io::stdout().as_fd()) == Some(true) {
+        Some(Box::new(std::io::stdout().lock()))
+    } else if same(std::io::stderr().as_fd()) == Some(true) {
+        Some(Box::new(std::io::stderr().lock()))
+    } else {
+        None
+    }
+}
+
+#[cfg(not(unix))]
+fn own_stream(_: &Path) -> Option<Box<dyn Write>> {
+    None
 }
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
