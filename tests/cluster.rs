@@ -181,3 +181,161 @@ async fn a_restarted_server_adopts_the_running_tasks_and_a_cancel_stops_them() {
         .count();
     assert_eq!(cancelled, 2, "both tasks were stopped");
 }
+
+/// Issue 39, item 1: the cluster directory holds nothing that is run (the command goes to Slurm
+/// as `--wrap`), and a link planted where a task writes its document is replaced, not followed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nothing_in_the_cluster_directory_is_run_and_a_planted_link_is_not_followed() {
+    let server = start(1, optimis()).await;
+    let hold = server.dir.path().join("bin/state/hold");
+    std::fs::write(&hold, "").unwrap();
+    let mut spec = small_job(12, 8);
+    spec["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&spec).await;
+    until_a_task_is(&server, id, "running").await;
+    let cluster = server.dir.path().join("cluster");
+    let decoy = server.dir.path().join("decoy");
+    std::fs::write(&decoy, "not the server's to write").unwrap();
+    std::os::unix::fs::symlink(&decoy, cluster.join(format!("job-{id}/round-0/task-0.json"))).unwrap();
+    std::fs::remove_file(&hold).unwrap();
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    assert_eq!(std::fs::read_to_string(&decoy).unwrap(), "not the server's to write");
+    let mut plain = spec.clone();
+    plain.as_object_mut().unwrap().remove("execution");
+    assert_eq!(server.moments(id).await["moments"], uninterrupted_moments(&plain));
+    // No script in the directory: sbatch got the command itself.
+    let names: Vec<String> =
+        std::fs::read_dir(&cluster).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(!names.iter().any(|n| n.ends_with(".sh")), "{names:?}");
+    let argv = std::fs::read_to_string(server.dir.path().join("bin/state/argv")).unwrap();
+    let wrap = argv.lines().find(|l| l.starts_with("--wrap=")).expect("sbatch got --wrap");
+    assert!(wrap.starts_with(&format!("--wrap=exec {} cluster-task --cluster-dir ", optimis().display())), "{wrap}");
+    // The directory and every folder in it are the server's user's alone.
+    use std::os::unix::fs::PermissionsExt;
+    for folder in [cluster.clone(), cluster.join(format!("job-{id}")), cluster.join(format!("job-{id}/round-0"))] {
+        let mode = std::fs::metadata(&folder).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o700, "{}", folder.display());
+    }
+}
+
+/// Issue 39, item 8: a finished task's document that is corrupted while the server is down is
+/// run again from its shard at the next start, not fatal to the job.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_corrupted_document_of_a_finished_task_is_run_again_not_fatal() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut slurm = options(dir.path(), optimis(), 1);
+    slurm.missing_grace = Duration::from_millis(500);
+    let again = slurm.clone();
+    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let hold = server.dir.path().join("bin/state/hold");
+    std::fs::write(&hold, "").unwrap();
+    let mut spec = small_job(20, 11);
+    spec["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&spec).await;
+    until_a_task_is(&server, id, "running").await;
+    let dir = server.stop().await;
+    // The tasks finish while the server is down; then task 0's document is truncated.
+    std::fs::remove_file(dir.path().join("bin/state/hold")).unwrap();
+    let document = dir.path().join(format!("cluster/job-{id}/round-0/task-0.json"));
+    for _ in 0..600 {
+        let exits = std::fs::read_dir(dir.path().join("bin/state"))
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().path().extension() == Some("exit".as_ref()))
+            .count();
+        if exits == 2 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let bytes = std::fs::read(&document).unwrap();
+    std::fs::write(&document, &bytes[..bytes.len() / 2]).unwrap();
+    let server = TestServer::start_in(dir, move |c| c.slurm = Some(again)).await;
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    let mut plain = spec.clone();
+    plain.as_object_mut().unwrap().remove("execution");
+    assert_eq!(server.moments(id).await["moments"], uninterrupted_moments(&plain));
+    // Task 0 ran again (a resubmission of its own), task 1 did not.
+    let mut names: Vec<String> = std::fs::read_dir(server.dir.path().join("bin/state"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension() == Some("name".as_ref()))
+        .map(|p| std::fs::read_to_string(p).unwrap().trim().rsplit('-').next().unwrap().to_string())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["r0", "r0", "t0"]);
+}
+
+/// A tmpfs of `bytes` mounted on `at` (root only), unmounted when dropped.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(at: &Path, bytes: u64) -> Option<Self> {
+        std::fs::create_dir_all(at).unwrap();
+        let status = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={bytes},mode=0700"), "tmpfs"])
+            .arg(at)
+            .status()
+            .ok()?;
+        status.success().then(|| Self(at.to_path_buf()))
+    }
+
+    /// Fills it (a file `filler`) until the filesystem is full.
+    fn fill(&self) {
+        use std::io::Write;
+        let mut file = std::fs::File::create(self.0.join("filler")).unwrap();
+        while file.write_all(&[0u8; 4096]).is_ok() {}
+    }
+
+    fn free(&self) {
+        std::fs::remove_file(self.0.join("filler")).unwrap();
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg("-l").arg(&self.0).status();
+    }
+}
+
+/// Issue 39, item 9: a full cluster directory makes a job wait — the server for its files, the
+/// tasks for their documents — as a local job waits for its database; it then ends exact.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_cluster_directory_makes_the_job_wait_not_fail() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(disk) = Tmpfs::mount(&dir.path().join("cluster"), 8 << 20) else {
+        assert!(std::env::var_os("OPTIMIS_REQUIRE_MOUNT").is_none(), "cannot mount a tmpfs");
+        eprintln!("skipped: cannot mount a tmpfs here (needs root); the task's retries are unit-tested");
+        return;
+    };
+    let slurm = options(dir.path(), optimis(), 1);
+    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let hold = server.dir.path().join("bin/state/hold");
+    std::fs::write(&hold, "").unwrap();
+    // Full before the job: the server cannot write the tasks' specification, and waits.
+    disk.fill();
+    let mut spec = small_job(20, 12);
+    spec["execution"] = json!({ "tasks": 2 });
+    let id = server.submit(&spec).await;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let job = server.job(id).await;
+    assert_eq!(job["state"], "running", "{job}");
+    assert!(!server.dir.path().join("bin/state/argv").exists(), "nothing was submitted without its files");
+    disk.free();
+    until_a_task_is(&server, id, "running").await;
+    // Full again while the tasks run: they keep their iterations and wait to write them.
+    disk.fill();
+    std::fs::remove_file(&hold).unwrap();
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let job = server.job(id).await;
+    assert_eq!(job["state"], "running", "{job}");
+    disk.free();
+    let job = settle(&server, id).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    let mut plain = spec.clone();
+    plain.as_object_mut().unwrap().remove("execution");
+    assert_eq!(server.moments(id).await["moments"], uninterrupted_moments(&plain));
+    let submitted = std::fs::read_to_string(server.dir.path().join("bin/state/argv")).unwrap();
+    assert_eq!(submitted.lines().filter(|l| l.starts_with("--wrap=")).count(), 1, "one array, no resubmission");
+}

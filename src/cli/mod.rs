@@ -5,6 +5,8 @@
 
 mod bench;
 mod budget;
+#[cfg(feature = "server")]
+mod cluster_task;
 mod compare;
 mod documents;
 mod evaluate;
@@ -86,6 +88,10 @@ pub enum Command {
     /// Print the server's OpenAPI description (YAML).
     #[cfg(feature = "server")]
     Openapi,
+    /// One task of a job the server runs on Slurm (`serve --executor slurm` submits it).
+    #[cfg(feature = "server")]
+    #[command(hide = true)]
+    ClusterTask(cluster_task::ClusterTaskArgs),
 }
 
 /// Everything the command line can fail with.
@@ -231,6 +237,8 @@ pub fn main() -> ExitCode {
         Command::Serve(args) => serve::serve_command(*args),
         #[cfg(feature = "server")]
         Command::Wait(args) => wait::wait(args),
+        #[cfg(feature = "server")]
+        Command::ClusterTask(args) => cluster_task::cluster_task(args),
         #[cfg(feature = "server")]
         Command::Openapi => {
             use std::io::Write;

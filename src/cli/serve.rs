@@ -143,7 +143,8 @@ pub struct ClusterArgs {
     #[arg(long, value_enum, default_value = "local")]
     pub executor: ExecutorName,
     /// With --executor slurm: a directory the server and the nodes share (task specifications,
-    /// documents and logs); created if missing; others must not be able to write to it.
+    /// documents and logs); created (mode 0700) if missing; it must be this user's, and neither it
+    /// nor a parent writable by anyone else (a sticky parent such as /tmp excepted).
     #[arg(long, value_name = "DIR", required_if_eq("executor", "slurm"))]
     pub cluster_dir: Option<PathBuf>,
     /// The optimis binary the tasks run, as a path on the nodes (default: this server's own).

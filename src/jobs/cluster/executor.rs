@@ -22,6 +22,7 @@ use std::time::{Duration, Instant};
 
 use super::files::{ClusterDir, JobDir, Record, Round};
 use super::options::SlurmOptions;
+use super::private::FileError;
 use super::slurm::{QueueEntry, Slurm, SlurmError};
 use super::tracking::{Tracking, round_spec};
 use crate::jobs::executor::{Executor, OnBatch, Segment, SegmentError};
@@ -59,14 +60,13 @@ impl SlurmExecutor {
         Ok(Self { options, dir, slurm, metrics, tracking: Mutex::default(), counts: Mutex::default() })
     }
 
-    /// The tasks of round `r` for `spec`: its options and the task command.
+    /// The tasks of round `r`: its options and the task command.
     fn submit_round(&self, dir: &JobDir, r: usize, round: &Round) -> Result<String, SlurmError> {
         let mut options = self.options.common_sbatch_options();
         options.push(format!("--job-name={}", dir.round_name(r)));
         options.push(format!("--array=0-{}", round.tasks - 1));
         options.push(format!("--output={}", path(&dir.log(r, "%a"))));
-        let shards = ["--shard-count".to_string(), round.tasks.to_string()];
-        self.slurm.submit(&options, &path(&self.dir.script()), &self.task_command(dir, r, "{shard}", &shards))
+        self.slurm.submit(&options, &self.task_command(dir, r, round, None))
     }
 
     /// Task `k` of round `r` again, on its own (same shard: the same iterations).
@@ -74,24 +74,33 @@ impl SlurmExecutor {
         let mut options = self.options.common_sbatch_options();
         options.push(format!("--job-name={}", dir.task_name(r, k)));
         options.push(format!("--output={}", path(&dir.log(r, &k.to_string()))));
-        let shard = ["--shard".to_string(), format!("{k}/{}", round.tasks)];
-        self.slurm.submit(&options, &path(&self.dir.script()), &self.task_command(dir, r, &k.to_string(), &shard))
+        self.slurm.submit(&options, &self.task_command(dir, r, round, Some(k)))
     }
 
-    /// `optimis run` for a task: the round's spec, its shard, a document written every few
-    /// seconds and resumed from if a retry finds one.
-    fn task_command(&self, dir: &JobDir, r: usize, k: &str, shard: &[String]) -> Vec<String> {
-        let mut argv = vec![path(&self.options.binary), "run".into(), "--spec".into(), path(&dir.spec(r))];
-        argv.extend(shard.iter().cloned());
-        argv.extend([
+    /// `optimis cluster-task` for task `k` of round `r` (none: each task of the array, by its
+    /// `SLURM_ARRAY_TASK_ID`): it reads the round's spec, writes its document every few seconds
+    /// and resumes from one a retry finds. Given to Slurm as argv (`sbatch --wrap`), so that no
+    /// script in the shared directory is ever run.
+    fn task_command(&self, dir: &JobDir, r: usize, round: &Round, k: Option<u64>) -> Vec<String> {
+        let mut argv = vec![
+            path(&self.options.binary),
+            "cluster-task".into(),
+            "--cluster-dir".into(),
+            path(self.dir.path()),
+            "--job".into(),
+            dir.id().to_string(),
+            "--round".into(),
+            r.to_string(),
+            "--tasks".into(),
+            round.tasks.to_string(),
             "--threads".into(),
             self.options.cpus_per_task.to_string(),
-            "--out".into(),
-            path(&dir.document(r, k)),
             "--checkpoint-seconds".into(),
             self.options.task_checkpoint_seconds.to_string(),
-            "--resume".into(),
-        ]);
+        ];
+        if let Some(k) = k {
+            argv.extend(["--task".into(), k.to_string()]);
+        }
         argv
     }
 
@@ -163,16 +172,13 @@ impl SlurmExecutor {
             };
             let text =
                 serde_json::to_vec_pretty(&round_spec(spec, round.first, round.iterations)).expect("a spec serialises");
-            std::fs::create_dir_all(dir.round_dir(r))
-                .and_then(|()| super::files::write_atomically(&dir.spec(r), &text))
-                .map_err(|e| {
-                    SegmentError::Failed(format!(
-                        "cannot write the tasks' specification under {}: {e}",
-                        dir.dir.display()
-                    ))
-                })?;
             t.record.rounds.push(round);
-            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+            let written = dir.write_spec(r, &text).and_then(|()| dir.save_record(&t.record));
+            if let Err(e) = written {
+                // Not planned until both are stored: the next look tries again.
+                t.record.rounds.pop();
+                return wait_or_fail(segment.id, e, "the tasks' specification").map(|()| false);
+            }
             t.add_tasks(spec);
         }
         let queue = match self.slurm.queue(&dir.prefix) {
@@ -203,8 +209,17 @@ impl SlurmExecutor {
             // The intent first (a restart adopts or repeats it); `submit_pending` submits it, with
             // the same retry of transient sbatch errors as a round's.
             t.record.rounds[r].resubmits.entry(k).or_default().push(None);
+            if let Err(e) = dir.save_record(&t.record) {
+                // Not recorded, not submitted: judged again at the next look.
+                if let Some(ids) = t.record.rounds[r].resubmits.get_mut(&k) {
+                    ids.pop();
+                    if ids.is_empty() {
+                        t.record.rounds[r].resubmits.remove(&k);
+                    }
+                }
+                return wait_or_fail(segment.id, e, "the job's record").map(|()| changed);
+            }
             t.tasks[i].missing_since = None;
-            dir.save_record(&t.record).map_err(SegmentError::Failed)?;
         }
         self.submit_pending(segment.id, dir, t, queue.as_ref())?;
         Ok(changed)
@@ -215,7 +230,7 @@ impl SlurmExecutor {
     /// it under its name, then it is adopted.
     fn submit_pending(
         &self,
-        id: i64,
+        job: i64,
         dir: &JobDir,
         t: &mut Tracking,
         queue: Option<&HashMap<String, QueueEntry>>,
@@ -231,15 +246,18 @@ impl SlurmExecutor {
                     None => match self.submit_round(dir, r, &t.record.rounds[r]) {
                         Ok(array) => array,
                         Err(e) if e.is_transient() => {
-                            tracing::warn!(job = id, round = r, error = %e, "sbatch: retrying at the next look");
+                            tracing::warn!(job, round = r, error = %e, "sbatch: retrying at the next look");
                             continue;
                         }
                         Err(e) => return Err(self.refused(e)),
                     },
                 };
-                tracing::info!(job = id, round = r, array = %array, tasks = t.record.rounds[r].tasks, "array submitted");
+                tracing::info!(job, round = r, array = %array, tasks = t.record.rounds[r].tasks, "array submitted");
                 t.record.rounds[r].array = Some(array);
-                dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+                // Unsaved, the id is still known here; a restart would adopt the array by its name.
+                if let Err(e) = dir.save_record(&t.record) {
+                    return wait_or_fail(job, e, "the job's record");
+                }
             }
             let waiting: Vec<u64> = t.record.rounds[r]
                 .resubmits
@@ -259,7 +277,9 @@ impl SlurmExecutor {
                 if let Some(last) = t.record.rounds[r].resubmits.get_mut(&k).and_then(|v| v.last_mut()) {
                     *last = Some(id);
                 }
-                dir.save_record(&t.record).map_err(SegmentError::Failed)?;
+                if let Err(e) = dir.save_record(&t.record) {
+                    return wait_or_fail(job, e, "the job's record");
+                }
             }
         }
         Ok(())
@@ -279,6 +299,18 @@ impl SlurmExecutor {
             std::thread::sleep(Duration::from_millis(50));
         }
         segment.stop.load(Ordering::SeqCst)
+    }
+}
+
+/// A file of the cluster directory that could not be written: on a full disk or quota the job
+/// waits (the next look tries again), as a local job waits for its database; anything else fails
+/// it, naming the file.
+fn wait_or_fail(job: i64, e: FileError, what: &str) -> Result<(), SegmentError> {
+    if e.is_full() {
+        tracing::warn!(job, error = %e, "the cluster directory is full; {what} is written again at the next look");
+        Ok(())
+    } else {
+        Err(SegmentError::Failed(format!("cannot write {what}: {e}")))
     }
 }
 
@@ -333,7 +365,7 @@ impl Executor for SlurmExecutor {
         self.cancel(id);
         let dir = self.dir.job(id);
         if let Err(e) = dir.remove() {
-            tracing::warn!(job = id, dir = %dir.dir.display(), error = %e, "could not remove the job's cluster files");
+            tracing::warn!(job = id, dir = %dir.path().display(), error = %e, "could not remove the job's cluster files");
         }
     }
 }

@@ -9,6 +9,8 @@
 //! * [`executor`] — the executor: rounds submitted, tasks followed, failures retried, merges;
 //! * [`tracking`] — one job's tasks between two looks: documents read, states judged;
 //! * [`files`] — the cluster directory: the job's record, specifications, documents, logs;
+//! * [`private`] — a directory only this user can change, used without following links;
+//! * [`task`] — one task on a node (`optimis cluster-task`): its shard run, its document written;
 //! * [`slurm`] — sbatch, squeue and scancel: argv, timeouts, parsing;
 //! * [`command`] — external commands with a deadline and bounded output;
 //! * [`options`] — the executor's settings, validated at start-up.
@@ -17,7 +19,9 @@ pub mod command;
 pub mod executor;
 pub mod files;
 pub mod options;
+pub mod private;
 pub mod slurm;
+pub mod task;
 pub mod tracking;
 
 pub use executor::SlurmExecutor;

@@ -92,13 +92,14 @@ impl Slurm {
         Ok(version.trim().to_string())
     }
 
-    /// Submits `script` with `options` (sbatch's, before the script) and `args` (the script's):
-    /// the job id `sbatch --parsable` prints.
-    pub fn submit(&self, options: &[String], script: &str, args: &[String]) -> Result<String, SlurmError> {
+    /// Submits the command `command` (argv) with `options` (sbatch's): the job id `sbatch
+    /// --parsable` prints. The command goes to Slurm as `--wrap`, each argument quoted for the
+    /// shell Slurm wraps it in: Slurm keeps the script it makes in its own spool, so that no file
+    /// another user could replace is ever run.
+    pub fn submit(&self, options: &[String], command: &[String]) -> Result<String, SlurmError> {
         let mut argv = vec!["--parsable".to_string()];
         argv.extend(options.iter().cloned());
-        argv.push(script.to_string());
-        argv.extend(args.iter().cloned());
+        argv.push(format!("--wrap=exec {}", shell_words(command)));
         parse_submission(&run(&self.program("sbatch"), &argv, self.timeout)?)
     }
 
@@ -122,6 +123,15 @@ impl Slurm {
         }
         Ok(())
     }
+}
+
+/// `argv` as one POSIX shell command line: each argument as it is if it holds only characters the
+/// shell gives no meaning, else in single quotes (a quote inside as `'\''`).
+pub fn shell_words(argv: &[String]) -> String {
+    let plain = |a: &str| !a.is_empty() && a.bytes().all(|b| b.is_ascii_alphanumeric() || b"/._-=:,+@%".contains(&b));
+    let quoted: Vec<String> =
+        argv.iter().map(|a| if plain(a) { a.clone() } else { format!("'{}'", a.replace('\'', "'\\''")) }).collect();
+    quoted.join(" ")
 }
 
 /// The job id of `sbatch --parsable`'s answer: `ID` or `ID;CLUSTER`, digits only.
@@ -229,5 +239,16 @@ garbage line
                     .into(),
         });
         assert!(!permanent.is_transient());
+    }
+
+    #[test]
+    fn commands_are_quoted_for_the_shell_slurm_wraps_them_in() {
+        let argv: Vec<String> =
+            ["/opt/optimis", "--cluster-dir", "/a b/it's $HOME;`x`", "", "--job", "3"].map(String::from).into();
+        let line = shell_words(&argv);
+        assert_eq!(line, r#"/opt/optimis --cluster-dir '/a b/it'\''s $HOME;`x`' '' --job 3"#);
+        // What sh makes of it is the argv, word for word.
+        let out = std::process::Command::new("sh").arg("-c").arg(format!("printf '%s\\n' {line}")).output().unwrap();
+        assert_eq!(String::from_utf8(out.stdout).unwrap(), format!("{}\n", argv.join("\n")));
     }
 }

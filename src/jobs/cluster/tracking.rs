@@ -6,7 +6,8 @@ use std::collections::HashMap;
 use std::ops::Range;
 use std::time::{Instant, SystemTime};
 
-use super::files::{JobDir, MAX_TASK_DOCUMENT, Record, Round, read_bounded};
+use super::files::{JobDir, MAX_TASK_DOCUMENT, Record, Round, document_name};
+use super::private::PrivateDir;
 use super::slurm::{QueueEntry, is_active};
 use crate::jobs::executor::{ExecutionView, TaskView};
 use crate::sim::document::MomentsDocument;
@@ -113,19 +114,31 @@ impl Tracking {
     }
 
     /// Reads every incomplete task's document if it changed; true if any brought iterations.
-    /// A document that does not verify, or holds iterations outside its task, is logged and
-    /// ignored (the task then counts as missing once it leaves the queue).
+    /// A document is checked as any document from outside is (its checksum and consistency, its
+    /// sums bounded), and must be this user's own regular file in the job's checked folders
+    /// (never a link) holding only its task's iterations; one that is not is logged and ignored
+    /// (the task then counts as missing once it leaves the queue, and runs again).
     pub fn read_documents(&mut self, dir: &JobDir, job: &ValidJob) -> Result<bool, MergeError> {
         let mut changed = false;
+        let mut rounds: HashMap<usize, Option<PrivateDir>> = HashMap::new();
         for task in self.tasks.iter_mut().filter(|t| !t.complete()) {
-            let path = dir.document(task.round, &task.k.to_string());
-            let Ok(meta) = std::fs::metadata(&path) else { continue };
-            let stamp = (meta.modified().unwrap_or(SystemTime::UNIX_EPOCH), meta.len());
+            let folder = rounds.entry(task.round).or_insert_with(|| match dir.round(task.round, false) {
+                Ok(folder) => Some(folder),
+                Err(e) if e.is_missing() => None,
+                Err(e) => {
+                    tracing::warn!(error = %e, "a round's folder is not used");
+                    None
+                }
+            });
+            let Some(folder) = folder else { continue };
+            let name = document_name(task.k);
+            let Ok(stamp) = folder.stamp(&name) else { continue };
             if task.stamp == Some(stamp) {
                 continue;
             }
             task.stamp = Some(stamp);
-            let checked = read_bounded(&path, MAX_TASK_DOCUMENT)
+            let checked = folder
+                .read(&name, MAX_TASK_DOCUMENT)
                 .map_err(|e| e.to_string())
                 .and_then(|bytes| MomentsDocument::from_json(&bytes).map_err(|e| e.to_string()))
                 .and_then(|doc| {
@@ -133,6 +146,7 @@ impl Tracking {
                     if doc.fingerprint != job.config().fingerprint() || !doc.coverage.is_within(&own) {
                         return Err("its configuration or iterations are not the task's".to_string());
                     }
+                    doc.moments.check_bounded().map_err(|e| e.to_string())?;
                     Ok(doc.moments)
                 });
             match checked {
@@ -147,7 +161,8 @@ impl Tracking {
                     }
                 }
                 Ok(_) => {}
-                Err(e) => tracing::warn!(document = %path.display(), error = %e, "a task's document is ignored"),
+                Err(e) => tracing::warn!(document = %folder.path().join(&name).display(), error = %e,
+                    "a task's document is ignored"),
             }
         }
         Ok(changed)
@@ -295,17 +310,13 @@ mod tests {
     fn documents_are_verified_merged_exactly_and_foreign_ones_ignored() {
         let job = job(3);
         let tmp = tempfile::tempdir().unwrap();
-        let dir = ClusterDir::open(tmp.path()).unwrap().job(1);
+        let dir = ClusterDir::open(&tmp.path().join("cluster")).unwrap().job(1);
         let mut t = Tracking::new(job.spec(), record());
-        std::fs::create_dir_all(dir.round_dir(0)).unwrap();
+        let round = dir.round(0, true).unwrap();
         let write = |k: u64, seed: u64, range: Range<u64>| {
             let other = super::super::tracking::tests::job(seed);
             let moments = run(other.config(), seed, range);
-            std::fs::write(
-                dir.document(0, &k.to_string()),
-                MomentsDocument::new(other.spec().clone(), moments).to_json(),
-            )
-            .unwrap();
+            round.write(&document_name(k), &MomentsDocument::new(other.spec().clone(), moments).to_json()).unwrap();
         };
         write(0, 3, 0..2);
         write(1, 3, 2..3); // partial
