@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import http.server
 import json
 import math
@@ -9,17 +10,23 @@ import socket
 import threading
 import time
 import uuid
-from typing import Any, Dict, Iterator, List
+from typing import Any, Callable, Dict, Iterator, List, Tuple, Type
+
+import requests
 
 import pandas as pd
 import pytest
+import urllib3
 
 from optimis_client import (
     ApiError,
     Client,
     JobFailed,
     OptimisError,
+    RequestTimeout,
+    ResponseTooLarge,
     ServerUnreachable,
+    UnexpectedRedirect,
     WaitTimeout,
     noise_table_frame,
 )
@@ -374,3 +381,229 @@ def test_retries_429(busy: int, retries: int, succeeds: bool) -> None:
     finally:
         stub.shutdown()
         stub.server_close()
+
+
+# -- transport bounds, against loopback stand-ins -----------------------------------------------
+
+MIB = 1024 * 1024
+
+
+@contextlib.contextmanager
+def stand_in(handler: Type[http.server.BaseHTTPRequestHandler]) -> Iterator[str]:
+    """A stand-in HTTP server on an ephemeral loopback port answering with `handler`; yields its URL."""
+    stub = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=stub.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{stub.server_address[1]}"
+    finally:
+        stub.shutdown()
+        stub.server_close()
+
+
+class _Quiet(http.server.BaseHTTPRequestHandler):
+    """A handler that logs nothing."""
+
+    def log_message(self, *args: Any) -> None:
+        """Quiet."""
+
+
+class _Trickle(_Quiet):
+    """Answers a GET one byte every half second — in its headers, or in a body of 1,000 declared
+    bytes — and gives up (closing the connection) after 12 s; answers /readyz at once."""
+
+    where = "body"
+
+    def do_GET(self) -> None:  # noqa: N802 (the handler's API)
+        if self.path == "/readyz":
+            self.send_response(200)
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
+        if self.where == "headers":
+            self.wfile.write(b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nX-Slow: ")
+        else:
+            self.send_response(200)
+            self.send_header("Content-Type", "application/json")
+            self.send_header("Content-Length", "1000")
+            self.end_headers()
+        give_up = time.monotonic() + 12
+        try:
+            while time.monotonic() < give_up:
+                self.wfile.write(b" " if self.where == "body" else b"a")
+                time.sleep(0.5)
+        except OSError:
+            pass  # the client hung up
+        self.close_connection = True
+
+
+@pytest.mark.parametrize("where, own_session", [("body", False), ("headers", False), ("body", True)])
+def test_timeout_bounds_the_whole_call(where: str, own_session: bool) -> None:
+    """`timeout` bounds a whole call, not each socket read: a stand-in trickling its answer a byte
+    every 0.5 s (which no per-read timeout of 1.5 s would ever stop) is given up after 1.5 s."""
+    if own_session and not hasattr(urllib3.HTTPResponse, "shutdown"):
+        pytest.skip("urllib3 < 2.3 cannot end a body that ends with the connection's close (see Client)")
+    handler = type("Handler", (_Trickle,), {"where": where})
+    with stand_in(handler) as url:
+        session = requests.Session() if own_session else None
+        client = Client(url, token="", timeout=1.5, session=session)
+        started = time.monotonic()
+        with pytest.raises(RequestTimeout) as caught:
+            client.references()
+        elapsed = time.monotonic() - started
+        assert client.ready()  # the client is still usable
+        client.close()
+    assert 1.4 <= elapsed < 10, f"the call took {elapsed:.1f} s"
+    err = caught.value
+    assert isinstance(err, TimeoutError) and isinstance(err, ServerUnreachable) and isinstance(err, OptimisError)
+    assert err.seconds == 1.5 and err.method == "GET" and err.request_url == url + "/v1/references"
+    assert "1.5 s" in str(err) and url + "/v1/references" in str(err) and "timeout" in str(err)
+
+
+class _Big(_Quiet):
+    """Answers a GET with `{"references": []}` padded with spaces to `size` bytes, in chunks of
+    1 MiB: framed by `Content-Length` (declaring `declared` bytes: more than it sends, to stand for
+    a huge answer), chunked, or ended by closing the connection. Never more than 16 MiB."""
+
+    framing = "length"
+    size = 16 * MIB
+    declared = 300 * MIB
+
+    def do_GET(self) -> None:  # noqa: N802 (the handler's API)
+        if self.framing == "chunked":
+            self.protocol_version = "HTTP/1.1"
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        if self.framing == "length":
+            self.send_header("Content-Length", str(self.declared))
+        elif self.framing == "chunked":
+            self.send_header("Transfer-Encoding", "chunked")
+        self.end_headers()
+        body = b'{"references": []}'.ljust(self.size)
+        try:
+            for start in range(0, len(body), MIB):
+                chunk = body[start:start + MIB]
+                if self.framing == "chunked":
+                    chunk = b"%x\r\n%s\r\n" % (len(chunk), chunk)
+                self.wfile.write(chunk)
+            if self.framing == "chunked":
+                self.wfile.write(b"0\r\n\r\n")
+        except OSError:
+            pass  # the client hung up
+        self.close_connection = True
+
+
+@pytest.mark.parametrize("framing", ["length", "chunked", "close"])
+def test_max_response_bytes(framing: str) -> None:
+    """An answer larger than max_response_bytes is refused — from its Content-Length before any of
+    it is read, else while it streams (chunked, or ended by the connection's close) — naming the
+    bound and how to raise it; raised, the same answer is read."""
+    handler = type("Handler", (_Big,), {"framing": framing})
+    with stand_in(handler) as url:
+        client = Client(url, token="", max_response_bytes=MIB)
+        assert client.max_response_bytes == MIB
+        with pytest.raises(ResponseTooLarge) as caught:
+            client.references()
+        err = caught.value
+        assert isinstance(err, OptimisError)
+        assert err.limit == MIB and err.method == "GET" and err.url == url + "/v1/references"
+        assert "max_response_bytes" in str(err) and f"{MIB:,}" in str(err)
+        if framing == "length":
+            assert err.size == 300 * MIB and f"{300 * MIB:,}" in str(err)
+        else:
+            assert err.size is None
+        if framing != "length":  # (that one declares more than it sends)
+            client.max_response_bytes = 16 * MIB
+            assert client.references() == []
+        client.close()
+
+
+class _Recorder(_Quiet):
+    """Records every request it gets (method, path, Authorization) and answers 200 with JSON."""
+
+    seen: List[Tuple[str, str, Any]] = []
+
+    def _answer(self) -> None:
+        type(self).seen.append((self.command, self.path, self.headers.get("Authorization")))
+        self.rfile.read(int(self.headers.get("Content-Length") or 0))
+        body = json.dumps({"id": 1, "state": "queued", "references": []}).encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    do_GET = do_POST = do_DELETE = _answer  # noqa: N815 (the handler's API)
+
+
+class _Redirect(_Quiet):
+    """Answers every request with `status` and `Location: target` + the request's path."""
+
+    status = 307
+    target = ""
+
+    def _answer(self) -> None:
+        self.rfile.read(int(self.headers.get("Content-Length") or 0))
+        self.send_response(self.status)
+        self.send_header("Location", self.target + self.path)
+        self.send_header("Content-Length", "0")
+        self.end_headers()
+
+    do_GET = do_POST = do_DELETE = _answer  # noqa: N815 (the handler's API)
+
+
+CALLS: Dict[str, Tuple[str, Callable[[Client], Any]]] = {
+    "POST": ("/v1/jobs", lambda client: client.submit(FAST)),
+    "GET": ("/v1/jobs/1", lambda client: client.job(1)),
+    "DELETE": ("/v1/jobs/1", lambda client: client.delete(1)),
+}
+
+
+@pytest.mark.parametrize(
+    "method, status",
+    [("POST", 307), ("POST", 308), ("POST", 303), ("POST", 302), ("GET", 301), ("GET", 302), ("DELETE", 307)],
+)
+def test_redirect_not_followed(method: str, status: int) -> None:
+    """A redirect is never followed: the request (and its token) is not re-sent to the Location —
+    a second stand-in there receives nothing — and the error names the status and the Location."""
+    seen: List[Tuple[str, str, Any]] = []
+    with stand_in(type("Recorder", (_Recorder,), {"seen": seen})) as elsewhere:
+        redirect = type("Redirect", (_Redirect,), {"status": status, "target": elsewhere})
+        with stand_in(redirect) as url:
+            path, call = CALLS[method]
+            with Client(url, token="secret-token") as client:
+                with pytest.raises(UnexpectedRedirect) as caught:
+                    call(client)
+    assert seen == []
+    err = caught.value
+    assert isinstance(err, OptimisError)
+    assert err.status == status and err.location == elsewhere + path
+    assert err.method == method and err.url == url + path
+    assert str(status) in str(err) and elsewhere + path in str(err)
+    assert "secret-token" not in str(err)
+
+
+class _HugeRedirect(_Quiet):
+    """Answers 302 with a Location and a body declared 300 MiB long, of which it sends nothing."""
+
+    def do_GET(self) -> None:  # noqa: N802 (the handler's API)
+        self.send_response(302)
+        self.send_header("Location", "http://127.0.0.1:9/elsewhere")
+        self.send_header("Content-Length", str(300 * MIB))
+        self.end_headers()
+        time.sleep(5)
+        self.close_connection = True
+
+
+def test_redirect_body_not_read() -> None:
+    """A redirect is refused as its headers arrive, its body unread (requests reads a redirect's
+    whole body even when told not to follow it): no wait for the 300 MiB it announces."""
+    with stand_in(_HugeRedirect) as url:
+        client = Client(url, token="", timeout=3)
+        started = time.monotonic()
+        with pytest.raises(UnexpectedRedirect) as caught:
+            client.references()
+        elapsed = time.monotonic() - started
+        client.close()
+    assert elapsed < 2, f"the call took {elapsed:.1f} s"
+    assert caught.value.status == 302 and caught.value.location == "http://127.0.0.1:9/elsewhere"

@@ -11,12 +11,24 @@ DataFrames::
     print(client.noise_table(job["id"]))
 
 Errors: every exception is an :class:`OptimisError` — :class:`ApiError` (the server's problem
-document), :class:`ServerUnreachable`, :class:`JobFailed` (:class:`SweepFailed`) and
-:class:`WaitTimeout` (a :class:`TimeoutError`).
+document), :class:`ServerUnreachable` (:class:`RequestTimeout`, a :class:`TimeoutError`, when a
+request took longer than the client's ``timeout``), :class:`ResponseTooLarge` (an answer over
+``max_response_bytes``), :class:`UnexpectedRedirect` (redirects are never followed),
+:class:`JobFailed` (:class:`SweepFailed`) and :class:`WaitTimeout` (a :class:`TimeoutError`).
 """
 
-from ._client import DEFAULT_URL, FINAL_STATES, MAX_WAIT_SECONDS, Client
-from ._errors import ApiError, JobFailed, OptimisError, ServerUnreachable, SweepFailed, WaitTimeout
+from ._client import DEFAULT_MAX_RESPONSE_BYTES, DEFAULT_URL, FINAL_STATES, MAX_WAIT_SECONDS, Client
+from ._errors import (
+    ApiError,
+    JobFailed,
+    OptimisError,
+    RequestTimeout,
+    ResponseTooLarge,
+    ServerUnreachable,
+    SweepFailed,
+    UnexpectedRedirect,
+    WaitTimeout,
+)
 from ._frames import (
     compare_frame,
     history_frame,
@@ -29,6 +41,7 @@ from ._frames import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "DEFAULT_MAX_RESPONSE_BYTES",
     "DEFAULT_URL",
     "FINAL_STATES",
     "MAX_WAIT_SECONDS",
@@ -36,8 +49,11 @@ __all__ = [
     "Client",
     "JobFailed",
     "OptimisError",
+    "RequestTimeout",
+    "ResponseTooLarge",
     "ServerUnreachable",
     "SweepFailed",
+    "UnexpectedRedirect",
     "WaitTimeout",
     "compare_frame",
     "history_frame",

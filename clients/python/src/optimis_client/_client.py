@@ -8,12 +8,24 @@ import os
 import time
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
+from urllib.parse import urljoin
 
 import pandas as pd
 import requests
 
-from ._errors import ApiError, JobFailed, OptimisError, ServerUnreachable, SweepFailed, WaitTimeout
+from ._errors import (
+    ApiError,
+    JobFailed,
+    OptimisError,
+    RequestTimeout,
+    ResponseTooLarge,
+    ServerUnreachable,
+    SweepFailed,
+    UnexpectedRedirect,
+    WaitTimeout,
+)
 from ._frames import compare_frame, history_frame, noise_table_frame, sweep_table_frame, weights_frame
+from ._transport import Deadline, WatchedAdapter
 
 #: A JSON object as the server sends it.
 Json = Dict[str, Any]
@@ -30,9 +42,16 @@ MAX_WAIT_SECONDS = 60
 #: Seconds one long-poll of :meth:`Client.wait` lasts by default.
 DEFAULT_POLL_SECONDS = 30
 
+#: The largest answer a client reads by default (``max_response_bytes``): 64 MiB, twice the largest
+#: moments document a server accepts by default (``--document-limit``, 32 MiB).
+DEFAULT_MAX_RESPONSE_BYTES = 64 * 1024 * 1024
+
 # Merges and studies may pull documents from peers and merge megabytes: the server gives a study
 # 180 s by default (--study-deadline).
 _DOCUMENT_TIMEOUT = 200.0
+
+# Bytes of an answer read at a time.
+_CHUNK_BYTES = 64 * 1024
 
 
 def _normalise_url(base_url: str) -> str:
@@ -45,12 +64,8 @@ def _normalise_url(base_url: str) -> str:
     return url
 
 
-def _reason(err: requests.RequestException, timeout: float) -> str:
+def _reason(err: requests.RequestException) -> str:
     """A short account of a transport failure (requests' own messages run to several lines)."""
-    if isinstance(err, requests.ConnectTimeout):
-        return f"the connection timed out after {timeout:g} s"
-    if isinstance(err, requests.ReadTimeout):
-        return f"no answer within {timeout:g} s"
     text = str(err)
     for needle, reason in (
         ("Connection refused", "connection refused"),
@@ -134,10 +149,20 @@ class Client:
 
     ``base_url`` is the server's address (``http://`` is assumed when it names no scheme);
     ``token`` the bearer token the server requires (default: the ``OPTIMIS_TOKEN`` environment
-    variable; ``""`` sends none); ``timeout`` the seconds one request may take (a long-poll gets
-    its waiting time on top). Answers 429 and 503 are retried after their ``Retry-After``, at most
+    variable; ``""`` sends none); ``timeout`` the seconds one request may take in all —
+    connecting, sending it and reading its whole answer, not each socket read — else
+    :class:`RequestTimeout` (a long-poll gets its waiting time on top; a retry is a new request).
+    ``max_response_bytes`` bounds the answer read into memory (default 64 MiB; a larger one raises
+    :class:`ResponseTooLarge`). Redirects are never followed: a 3xx answer raises
+    :class:`UnexpectedRedirect`, and nothing (neither the body nor the token) is sent to its
+    ``Location``. Answers 429 and 503 are retried after their ``Retry-After``, at most
     ``max_retries`` times and while ``retry_deadline`` seconds have not passed; any other 4xx/5xx
     raises :class:`ApiError`, and no answer at all :class:`ServerUnreachable`.
+
+    A ``session`` of your own keeps its adapters: reading its answers' bodies is bounded by
+    ``timeout`` all the same (with urllib3 2.3 or later; an older one cannot end a body that
+    ends with the connection's close, other than between chunks of 64 KiB), but connecting,
+    sending and waiting for the headers only by requests' timeouts of each socket operation.
 
     Usable as a context manager (the connection pool is closed on exit)::
 
@@ -154,6 +179,7 @@ class Client:
         *,
         max_retries: int = 5,
         retry_deadline: float = 120.0,
+        max_response_bytes: int = DEFAULT_MAX_RESPONSE_BYTES,
         session: Optional[requests.Session] = None,
     ) -> None:
         """Connect to the server at `base_url` (nothing is sent until the first call)."""
@@ -161,11 +187,18 @@ class Client:
         self.timeout = float(timeout)
         self.max_retries = int(max_retries)
         self.retry_deadline = float(retry_deadline)
+        #: The largest answer read into memory, in bytes (raise it for larger documents).
+        self.max_response_bytes = int(max_response_bytes)
         #: Jobs asked for per page by :meth:`jobs` (the server allows at most 500).
         self.page_size = 500
         if token is None:
             token = os.environ.get("OPTIMIS_TOKEN")
-        self._session = session if session is not None else requests.Session()
+        if session is None:
+            session = requests.Session()
+            # Connections whose every socket operation the deadline of a request can end.
+            session.mount("http://", WatchedAdapter())
+            session.mount("https://", WatchedAdapter())
+        self._session = session
         self._session.headers["Accept"] = "application/json"
         if token:
             self._session.headers["Authorization"] = f"Bearer {token}"
@@ -198,39 +231,105 @@ class Client:
         headers: Optional[Mapping[str, str]] = None,
         timeout: Optional[float] = None,
     ) -> requests.Response:
-        """Send one request to `path` (``/v1/…``) and return the answer (any status below 400).
+        """Send one request to `path` (``/v1/…``) and return the answer (any status below 400),
+        its body read (``content``, ``text``, ``json()``).
 
-        Retries 429 and 503 after their ``Retry-After`` (bounded by ``max_retries`` and
-        ``retry_deadline``); raises :class:`ApiError` for any other 4xx/5xx and
-        :class:`ServerUnreachable` when the server does not answer. The routes without a method of
-        their own (``/solve``, ``/evaluate``, the named solves, CSV with ``format=csv``) are
-        reachable through this.
+        `timeout` (default: the client's) bounds the whole request: connecting, sending it and
+        reading the entire answer, else :class:`RequestTimeout`. An answer larger than
+        ``max_response_bytes`` raises :class:`ResponseTooLarge`, a redirect
+        :class:`UnexpectedRedirect` (it is not followed). Retries 429 and 503 after their
+        ``Retry-After`` (bounded by ``max_retries`` and ``retry_deadline``; each attempt has
+        `timeout`); raises :class:`ApiError` for any other 4xx/5xx and :class:`ServerUnreachable`
+        when the server does not answer. The routes without a method of their own (``/solve``,
+        ``/evaluate``, the named solves, CSV with ``format=csv``) are reachable through this.
         """
         url = self.base_url + path
         seconds = self.timeout if timeout is None else timeout
         started = time.monotonic()
         attempt = 0
         while True:
-            try:
-                response = self._session.request(
-                    method, url, params=params, json=json, headers=dict(headers or {}), timeout=seconds
-                )
-            except requests.exceptions.SSLError as err:
-                raise OptimisError(f"{method} {url}: TLS failed: {err}") from err
-            except (requests.ConnectionError, requests.Timeout) as err:
-                raise ServerUnreachable(self.base_url, _reason(err, seconds)) from err
-            except requests.RequestException as err:
-                raise OptimisError(f"{method} {url}: {err}") from err
+            with Deadline(seconds) as deadline:
+                response = self._open(method, url, deadline, params=params, json=json, headers=dict(headers or {}))
+                self._read(method, url, response, deadline)
             if response.status_code in (429, 503) and attempt < self.max_retries:
                 pause = _retry_after(response.headers.get("Retry-After"), attempt)
                 if time.monotonic() - started + pause <= self.retry_deadline:
-                    response.close()
                     attempt += 1
                     time.sleep(pause)
                     continue
             if response.status_code >= 400:
                 raise _api_error(method, url, response)
             return response
+
+    def _open(self, method: str, url: str, deadline: Deadline, **kwargs: Any) -> requests.Response:
+        """Send a request under `deadline`; its answer, once its headers arrived (the body unread).
+
+        A redirect raises :class:`UnexpectedRedirect` as its headers arrive: requests is never let
+        follow one, nor read its body (which it does, unbounded, to prepare the next request
+        even when it does not follow it).
+        """
+
+        def arrived(response: requests.Response, *args: Any, **hook_kwargs: Any) -> None:
+            # A WatchedAdapter's socket is watched from the start; another adapter's from here.
+            deadline.watch_answer(response.raw)
+            if 300 <= response.status_code < 400:
+                response.close()
+                location = response.headers.get("Location")
+                target = urljoin(response.url or url, location) if location else None
+                raise UnexpectedRedirect(response.status_code, target, method, url)
+
+        theirs = self._session.hooks.get("response") or []
+        hooks = {"response": [arrived, *([theirs] if callable(theirs) else theirs)]}
+        # requests' timeouts of each socket operation, within the time left.
+        left = max(deadline.remaining(), 0.001)
+        try:
+            return self._session.request(
+                method, url, timeout=(left, left), stream=True, allow_redirects=False, hooks=hooks, **kwargs
+            )
+        except requests.RequestException as err:
+            raise self._failure(method, url, err, deadline) from err
+
+    def _read(self, method: str, url: str, response: requests.Response, deadline: Deadline) -> None:
+        """Read the answer's body into `response` before `deadline`, at most ``max_response_bytes``
+        of it: a larger ``Content-Length`` is refused before any of it is read, a body without
+        one (chunked, or ended by the connection's close) is stopped at the bound."""
+        limit = self.max_response_bytes
+        try:
+            declared = int(response.headers.get("Content-Length") or "-1")
+        except ValueError:
+            declared = -1  # urllib3 refuses it as it reads
+        try:
+            if declared > limit:
+                raise ResponseTooLarge(limit, declared, method, url)
+            chunks: List[bytes] = []
+            size = 0
+            for chunk in response.iter_content(_CHUNK_BYTES):
+                size += len(chunk)
+                if size > limit:
+                    raise ResponseTooLarge(limit, None, method, url)
+                if deadline.expired():
+                    raise RequestTimeout(self.base_url, method, url, deadline.seconds)
+                chunks.append(chunk)
+            # A body ended by the connection's close ends as well when the deadline shuts it down.
+            if deadline.passed:
+                raise RequestTimeout(self.base_url, method, url, deadline.seconds)
+            # requests' own copy of the body, which content, text and json() read.
+            response._content = b"".join(chunks)
+        except requests.RequestException as err:
+            raise self._failure(method, url, err, deadline) from err
+        finally:
+            # The connection goes back to the pool when the body was read whole, else is closed.
+            response.close()
+
+    def _failure(self, method: str, url: str, err: requests.RequestException, deadline: Deadline) -> OptimisError:
+        """The error of a request that failed in transport (under `deadline`)."""
+        if isinstance(err, requests.Timeout) or deadline.expired():
+            return RequestTimeout(self.base_url, method, url, deadline.seconds)
+        if isinstance(err, requests.exceptions.SSLError):
+            return OptimisError(f"{method} {url}: TLS failed: {err}")
+        if isinstance(err, requests.ConnectionError):
+            return ServerUnreachable(self.base_url, _reason(err))
+        return OptimisError(f"{method} {url}: {err}")
 
     def _json(self, method: str, path: str, **kwargs: Any) -> Json:
         """The JSON object a request answered with."""
@@ -558,10 +657,11 @@ class Client:
     def ready(self) -> bool:
         """Whether the server answers ``/readyz`` with 200 (it can store jobs); ``False`` on 503.
 
-        Raises :class:`ServerUnreachable` when it does not answer at all. Not retried.
+        Raises :class:`ServerUnreachable` when it does not answer at all (:class:`RequestTimeout`
+        when not within ``timeout``), :class:`UnexpectedRedirect` on a redirect. Not retried.
         """
-        try:
-            response = self._session.get(self.base_url + "/readyz", timeout=self.timeout)
-        except (requests.ConnectionError, requests.Timeout) as err:
-            raise ServerUnreachable(self.base_url, _reason(err, self.timeout)) from err
+        url = self.base_url + "/readyz"
+        with Deadline(self.timeout) as deadline:
+            response = self._open("GET", url, deadline)
+            self._read("GET", url, response, deadline)
         return response.status_code == 200

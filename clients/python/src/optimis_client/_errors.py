@@ -28,6 +28,82 @@ class ServerUnreachable(OptimisError, ConnectionError):
         return (type(self), (self.url, self.reason))
 
 
+class RequestTimeout(ServerUnreachable, TimeoutError):
+    """A request took longer than the client's ``timeout``, which bounds the whole request —
+    connecting, sending it and reading the entire answer — not each socket read.
+
+    A :class:`ServerUnreachable` (as a timeout always was) and a built-in :class:`TimeoutError`.
+    ``url`` is the server's base URL, ``method`` and ``request_url`` the request, ``seconds`` the
+    time it had (a long-poll's waiting time included).
+    """
+
+    def __init__(self, url: str, method: str, request_url: str, seconds: float) -> None:
+        """Build the error for the server at ``url`` and the request that ran out of time."""
+        self.url = url
+        self.method = method
+        self.request_url = request_url
+        self.seconds = seconds
+        self.reason = f"no complete answer within {seconds:g} s"
+        # Not ServerUnreachable's text: the server may well be running, only too slow.
+        super(ServerUnreachable, self).__init__(
+            f"{method} {request_url}: {self.reason} (the client's timeout bounds each request as a whole: "
+            "connecting, sending it and reading the entire answer; raise it with Client(timeout=...))"
+        )
+
+    def __reduce__(self) -> Any:
+        """Pickle by the constructor's arguments."""
+        return (type(self), (self.url, self.method, self.request_url, self.seconds))
+
+
+class ResponseTooLarge(OptimisError):
+    """An answer was larger than the client's ``max_response_bytes``; it was not read further.
+
+    ``limit`` is the bound, ``size`` the size the answer declared (its ``Content-Length``) or
+    ``None`` when it was stopped while streaming, ``method`` and ``url`` the request.
+    """
+
+    def __init__(self, limit: int, size: Optional[int], method: str, url: str) -> None:
+        """Build the error for the request `method` `url` and the bound `limit` it exceeded."""
+        self.limit = limit
+        self.size = size
+        self.method = method
+        self.url = url
+        told = f"it declares {size:,} bytes" if size is not None else "it was read up to the bound, no further"
+        super().__init__(
+            f"{method} {url}: the answer is larger than the client's max_response_bytes of {limit:,} bytes "
+            f"({told}); raise the bound with Client(max_response_bytes=...) or client.max_response_bytes = ..."
+        )
+
+    def __reduce__(self) -> Any:
+        """Pickle by the constructor's arguments."""
+        return (type(self), (self.limit, self.size, self.method, self.url))
+
+
+class UnexpectedRedirect(OptimisError):
+    """The server answered with a redirect (3xx), which the client never follows: the request —
+    its body and its token — was not sent anywhere else.
+
+    ``status`` is the HTTP status, ``location`` the absolute URL the ``Location`` header names (or
+    ``None``), ``method`` and ``url`` the request.
+    """
+
+    def __init__(self, status: int, location: Optional[str], method: str, url: str) -> None:
+        """Build the error for the request `method` `url` answered `status` towards `location`."""
+        self.status = status
+        self.location = location
+        self.method = method
+        self.url = url
+        towards = f"a redirect to {location}" if location else "a redirect without a Location"
+        super().__init__(
+            f"{method} {url}: the server answered {status}, {towards}; the client follows no redirect "
+            "(nothing was sent there): give the Client the server's own address"
+        )
+
+    def __reduce__(self) -> Any:
+        """Pickle by the constructor's arguments."""
+        return (type(self), (self.status, self.location, self.method, self.url))
+
+
 class ApiError(OptimisError):
     """The server answered 4xx or 5xx: an RFC 9457 problem document.
 
