@@ -25,6 +25,7 @@ mod readme;
 mod recommendation;
 mod references;
 mod shards;
+mod shares;
 mod simulation;
 mod slow_clients;
 mod sweeps;

@@ -8,12 +8,11 @@
 //! means is checked by the handlers (422). [`DocumentBody`] hands the bytes of a moments document
 //! to the job layer, which parses them straight into typed values on its request pool. A document
 //! body is read against a byte budget shared by all document requests
-//! ([`super::AppState::document_memory`]), taken as its bytes arrive — so a client trickling a
-//! body holds only what it sent — and only once it is whole does the request take one of the few
-//! processing slots ([`super::AppState::documents`]): a slot is never held while waiting for a
-//! client's bytes.
-
-use std::time::Duration;
+//! ([`super::AppState::document_memory`]) and its client's share of it
+//! ([`super::AppState::document_shares`]), taken as its bytes arrive — so a client trickling a
+//! body holds only what it sent, and no client more than one document's worth. The job layer
+//! takes one of its few processing slots only while it parses or merges, never while it waits
+//! for a client's bytes or a peer's.
 
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, QueryRejection};
@@ -22,18 +21,15 @@ use axum::http::StatusCode;
 use axum::http::request::Parts;
 use futures_util::StreamExt;
 use serde_json::Value;
-use tokio::sync::OwnedSemaphorePermit;
+use tokio::sync::{OwnedSemaphorePermit, TryAcquireError};
 
 use super::AppState;
 use super::error::ApiError;
+use crate::jobs::shares::{ClientKey, Share};
 
 /// Bodies up to this size are parsed on the worker that read them (microseconds); larger ones on
 /// the blocking pool.
 const INLINE_PARSE_LIMIT: usize = 64 << 10;
-
-/// How long a document request, its body read, waits for a free processing slot before it is
-/// told to retry.
-const DOCUMENT_SLOT_WAIT: Duration = Duration::from_secs(10);
 
 /// Reads the whole body within `timeout`, honouring the route's size limit.
 async fn read_body(req: Request, state: &AppState) -> Result<Bytes, ApiError> {
@@ -83,24 +79,32 @@ impl FromRequest<AppState> for JsonBody {
     }
 }
 
-/// The bytes of a moments document (merges and studies), read under the document size limit and
-/// the shared byte budget, then given one of the few processing slots.
+/// The bytes of a moments document (merges and studies), read under the document size limit,
+/// the shared byte budget and the client's share of it.
 pub struct DocumentBody {
     pub bytes: Bytes,
-    /// Held until the handler has finished with the document.
-    pub _slot: OwnedSemaphorePermit,
+    /// Whose request it is (for the shares of what its handling pulls or computes).
+    pub client: ClientKey,
     /// The body's share of the byte budget, held as long as its bytes are.
     pub _memory: Vec<OwnedSemaphorePermit>,
+    /// Its client's share of that budget, held as long.
+    pub _share: Share,
 }
 
 /// Reads a document body chunk by chunk within the body timeout and the document size limit,
-/// taking the byte budget for each chunk as it arrives.
-async fn read_document(req: Request, state: &AppState) -> Result<(Bytes, Vec<OwnedSemaphorePermit>), ApiError> {
+/// taking the byte budget for each chunk as it arrives — first from the client's share (one
+/// document limit: a client that holds more is refused at once, so that five stalled uploads of
+/// one client cannot hold what every other client needs), then from the server's budget (when it
+/// is spent by other clients' bodies, 429 at once: waiting would let the body timeout blame the
+/// client that waited).
+async fn read_document(req: Request, state: &AppState) -> Result<DocumentBody, ApiError> {
     let (timeout, limit) = (state.body_timeout, state.document_bytes);
+    let client = req.extensions().get::<ClientKey>().copied().unwrap_or_default();
     let read = async {
         let mut body = req.into_body().into_data_stream();
         let mut bytes = Vec::new();
         let mut memory = Vec::new();
+        let mut share = state.document_shares.open(client);
         while let Some(chunk) = body.next().await {
             let chunk =
                 chunk.map_err(|e| ApiError::MalformedJson(format!("the request body could not be read: {e}")))?;
@@ -109,44 +113,51 @@ async fn read_document(req: Request, state: &AppState) -> Result<(Bytes, Vec<Own
                     "the request body is too large: more than {limit} bytes (--document-limit)"
                 )));
             }
+            if !share.grow(chunk.len()) {
+                return Err(ApiError::TooManyRequests {
+                    detail: format!(
+                        "{client} is already sending {} bytes of other documents, its share of what this server \
+                         reads at once (one --document-limit); send one document at a time",
+                        state.document_shares.held_by(client)
+                    ),
+                    retry_after_seconds: 5,
+                });
+            }
             let n = u32::try_from(chunk.len()).expect("a chunk is at most the document limit");
-            memory.push(
-                state
-                    .document_memory
-                    .clone()
-                    .acquire_many_owned(n)
-                    .await
-                    .map_err(|_| ApiError::Unavailable("the server is shutting down".into()))?,
-            );
+            match state.document_memory.clone().try_acquire_many_owned(n) {
+                Ok(permit) => memory.push(permit),
+                Err(TryAcquireError::NoPermits) => {
+                    return Err(ApiError::TooManyRequests {
+                        detail: "the server is reading as many documents of other clients as it holds at once; retry"
+                            .into(),
+                        retry_after_seconds: 5,
+                    });
+                }
+                Err(TryAcquireError::Closed) => {
+                    return Err(ApiError::Unavailable("the server is shutting down".into()));
+                }
+            }
             bytes.extend_from_slice(&chunk);
         }
-        Ok((Bytes::from(bytes), memory))
+        Ok(DocumentBody { bytes: Bytes::from(bytes), client, _memory: memory, _share: share })
     };
-    let (bytes, memory) = tokio::time::timeout(timeout, read).await.map_err(|_| {
+    let body = tokio::time::timeout(timeout, read).await.map_err(|_| {
         ApiError::RequestTimeout(format!(
             "the request body did not arrive within {} s (--body-timeout)",
             timeout.as_secs_f64()
         ))
     })??;
-    if bytes.iter().all(u8::is_ascii_whitespace) {
+    if body.bytes.iter().all(u8::is_ascii_whitespace) {
         return Err(ApiError::MalformedJson("the request body is empty; expected a JSON object".into()));
     }
-    Ok((bytes, memory))
+    Ok(body)
 }
 
 impl FromRequest<AppState> for DocumentBody {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
-        let (bytes, memory) = read_document(req, state).await?;
-        let slot = tokio::time::timeout(DOCUMENT_SLOT_WAIT, state.documents.clone().acquire_owned())
-            .await
-            .map_err(|_| ApiError::TooManyRequests {
-                detail: "the server is busy with other documents (--max-document-requests); retry".into(),
-                retry_after_seconds: 5,
-            })?
-            .map_err(|_| ApiError::Unavailable("the server is shutting down".into()))?;
-        Ok(DocumentBody { bytes, _slot: slot, _memory: memory })
+        read_document(req, state).await
     }
 }
 

@@ -75,12 +75,11 @@ pub struct AppState {
     pub guard: Guard,
     /// The whole request body must arrive within this.
     pub body_timeout: Duration,
-    /// Document requests (merges, studies) processed at once, their bodies read: each holds its
-    /// parsed document and its share of the heavy work.
-    pub documents: Arc<tokio::sync::Semaphore>,
     /// Bytes of document bodies held at once, taken as they arrive (`extract`):
-    /// [`DOCUMENT_MEMORY_BODIES`] times the document limit.
+    /// `--max-document-requests` + [`DOCUMENT_MEMORY_BODIES`] times the document limit.
     pub document_memory: Arc<tokio::sync::Semaphore>,
+    /// Each client's share of `document_memory`: one document limit.
+    pub document_shares: Arc<crate::jobs::shares::Shares>,
     /// The document routes' body limit, bytes.
     pub document_bytes: usize,
 }
@@ -208,7 +207,7 @@ pub fn router(services: Services, limits: &HttpLimits, token: Option<BearerToken
         streams: auth::StreamSlots::new(limits.max_event_streams),
         guard,
         body_timeout: limits.body_timeout,
-        documents: Arc::new(tokio::sync::Semaphore::new(limits.max_document_requests)),
+        document_shares: crate::jobs::shares::Shares::new(limits.document_bytes),
         document_memory: Arc::new(tokio::sync::Semaphore::new(
             (limits.max_document_requests + DOCUMENT_MEMORY_BODIES).saturating_mul(limits.document_bytes),
         )),

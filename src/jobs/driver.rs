@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 use super::checkpoint::{checkpoint_of, decode_checkpoint};
 use super::error::JobError;
 use super::executor::{ExecutionView, Segment, SegmentError};
+use super::references::scene_reference_until;
 use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
 use super::state::{ActiveJob, Inner, StopReason};
 use crate::sim::runner::{BatchMoments, RunError};
@@ -68,7 +69,25 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     if !persist(inner, job, "mark the job running", || rt.block_on(inner.mark_running(job)))? {
         return stopped(inner, job);
     }
-    let reference = job.view.borrow().reference_luminance;
+    // The scene's R → 0 reference: computed here, on the job's own thread, when the submission
+    // did not find it cached (a request never waits for a quadrature); stopped with the job.
+    let mut reference = job.view.borrow().reference_luminance;
+    if reference.is_none() {
+        match scene_reference_until(&config.scene, &job.stop) {
+            Err(_) => return stopped(inner, job),
+            Ok(None) => {}
+            Ok(value) => {
+                reference = value;
+                if !persist(inner, job, "store the reference luminance", || {
+                    rt.block_on(inner.store.set_reference(job.id, value, now_ms()))?;
+                    Ok(())
+                })? {
+                    return stopped(inner, job);
+                }
+                job.view.send_modify(|r| r.reference_luminance = value);
+            }
+        }
+    }
     let mut checkpointed = moments.iterations();
     let start = job.start;
     loop {

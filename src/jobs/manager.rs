@@ -40,7 +40,7 @@ use super::compute::Pools;
 use super::error::JobError;
 use super::executor::Executor;
 use super::policy::{RunPolicy, check_budget, check_iteration_work, range_len, refuse_shard_extension, target_total};
-use super::references::scene_reference;
+use super::references::cached_scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row, rfc3339};
 use super::scheduler::scheduler;
 use super::state::{ActiveJob, Inner, StopReason};
@@ -151,15 +151,18 @@ impl JobManager {
         let policy = self.inner.policy.clone();
         let executor = self.inner.executor.clone();
         let hash_body = idempotency_key.is_some();
-        // Validation, the reference quadrature and the expected work of an iteration: CPU work,
-        // each bounded, on the request pool.
+        // Validation and the expected work of an iteration: CPU work, each bounded to
+        // milliseconds, on the request pool. The scene's reference quadrature (up to seconds) is
+        // not computed here: a submission takes it from the cache, or its job's run computes it
+        // on the job's own thread (`driver`), so that abandoned submissions of hard scenes cannot
+        // hold the request pool.
         let (job, reference, request_hash) = self
             .compute(move || -> Result<_, JobError> {
                 let job = parse_job_spec(&document)?.validate()?;
                 executor.admit(job.spec())?;
                 check_budget(&policy, job.spec(), range_len(job.spec()))?;
                 check_iteration_work(&policy, &job)?;
-                let reference = scene_reference(&job.config().scene);
+                let reference = cached_scene_reference(&job.config().scene).flatten();
                 let hash = hash_body.then(|| sha256_hex(document.to_string().as_bytes()));
                 Ok((job, reference, hash))
             })
@@ -174,6 +177,11 @@ impl JobManager {
             now: now_ms(),
         };
         let _guard = self.inner.lifecycle.lock().await;
+        // Nothing is acknowledged once the server is stopping (the shutdown took the lock to
+        // set its flag, or sets it before the next transition).
+        if self.is_shutting_down() {
+            return Err(JobError::ShuttingDown);
+        }
         match self.inner.store.insert_job(&new).await? {
             Inserted::Created(row) => {
                 let resource = resource_from_row(&row)?;
@@ -384,7 +392,12 @@ impl JobManager {
     /// Interrupted jobs stay `queued` in the database and resume when a server starts again;
     /// cancelled ones end cancelled.
     pub async fn shutdown(&self) {
-        self.inner.shutdown.send_replace(true);
+        {
+            // Under the lifecycle lock: a submission either committed before (and is recovered
+            // at the next start) or sees the flag and is refused — none is acknowledged after.
+            let _guard = self.inner.lifecycle.lock().await;
+            self.inner.shutdown.send_replace(true);
+        }
         let jobs: Vec<Arc<ActiveJob>> = self.inner.active.lock().expect("active map").values().cloned().collect();
         for job in jobs {
             job.request_stop(StopReason::Shutdown);

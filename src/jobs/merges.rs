@@ -9,6 +9,8 @@
 //! write: no other transition waits for its computation. Everything a merge computes goes into a
 //! copy of the target's statistics, so a refused merge changes nothing.
 
+use std::time::Duration;
+
 use futures_util::stream::{self, StreamExt, TryStreamExt};
 use serde::Deserialize;
 use serde_json::Value;
@@ -17,10 +19,11 @@ use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
 use super::documents::JobResult;
 use super::error::JobError;
 use super::lineage::{MergeProvenance, SourceRecord};
-use super::peers::CONCURRENT_PULLS;
+use super::peers::PULLS_PER_CLIENT;
 use super::policy::check_budget;
 use super::references::scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
+use super::shares::ClientKey;
 use super::statistics::Statistics;
 use crate::sim::configuration::explained;
 use crate::sim::document::{DocumentError, DocumentSignature, MomentsDocument, merged_spec, parse_json};
@@ -171,14 +174,35 @@ pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
     Ok(StudyBody { sources, solver: raw.solver })
 }
 
+/// How long a merge or a study waits for a processing slot before it is told to retry.
+const PROCESSING_WAIT: Duration = Duration::from_secs(10);
+
 impl Statistics {
-    /// The verified document of a source (pulled from its peer if it names one).
-    async fn fetch(&self, source: Source) -> Result<MomentsDocument, JobError> {
+    /// One of the few processing slots (`--max-document-requests`), for parsing or merging: 429
+    /// after [`PROCESSING_WAIT`].
+    async fn processing_slot(&self) -> Result<tokio::sync::SemaphorePermit<'_>, JobError> {
+        match tokio::time::timeout(PROCESSING_WAIT, self.processing.acquire()).await {
+            Ok(permit) => permit.map_err(|_| JobError::ShuttingDown),
+            Err(_) => Err(JobError::Busy {
+                detail: "the server is busy with other documents (--max-document-requests); retry".into(),
+                retry_after_seconds: 5,
+            }),
+        }
+    }
+
+    /// Light work on parsed documents, under a processing slot.
+    async fn process<T: Send + 'static>(&self, f: impl FnOnce() -> T + Send + 'static) -> Result<T, JobError> {
+        let _slot = self.processing_slot().await?;
+        self.jobs.compute(f).await
+    }
+
+    /// The verified document of a source (pulled from its peer for `client` if it names one).
+    async fn fetch(&self, source: Source, client: ClientKey) -> Result<MomentsDocument, JobError> {
         let (doc, field) = match source {
             Source::Document { doc, field } => (*doc, field),
             Source::Peer { url, field } => {
-                let bytes = self.peers.pull(&url, &field).await?;
-                let doc = self.jobs.compute(move || MomentsDocument::from_json(&bytes)).await?;
+                let bytes = self.peers.pull(&url, &field, client).await?;
+                let doc = self.process(move || MomentsDocument::from_json(&bytes)).await?;
                 let doc = doc.map_err(|e| JobError::Peer {
                     field: field.clone(),
                     message: format!("the peer {url} sent an unusable document: {e}"),
@@ -208,11 +232,11 @@ impl Statistics {
     /// a finished job's statistics and recomputes its results. Refused, with nothing changed, if
     /// the job is active or taking another merge, the configuration differs, any iteration would be
     /// counted twice, a sum would overflow, or the result exceeds the server's job budget.
-    pub async fn merge_into(&self, id: i64, body: bytes::Bytes) -> Result<JobResult, JobError> {
-        let source = self.jobs.compute(move || parse_merge_body(&body)).await??;
+    pub async fn merge_into(&self, id: i64, body: bytes::Bytes, client: ClientKey) -> Result<JobResult, JobError> {
+        let source = self.process(move || parse_merge_body(&body)).await??;
         self.check_peers(std::slice::from_ref(&source))?;
         let from = source.label();
-        let doc = self.fetch(source).await?;
+        let doc = self.fetch(source, client).await?;
         // Reserve the job: a short critical section (state checks only).
         let (row, _reservation) = {
             let _guard = self.jobs.transition().await;
@@ -236,6 +260,7 @@ impl Statistics {
         // statistics.
         let checkpoint = self.jobs.store().load_checkpoint(id).await?;
         let policy = self.jobs.policy().clone();
+        let _slot = self.processing_slot().await?;
         let (checkpoint, spec, provenance) = self
             .jobs
             .compute_heavy(move |_| -> Result<(Checkpoint, String, String), JobError> {
@@ -271,19 +296,20 @@ impl Statistics {
 
     /// Creates a finished job from several moments documents or peer jobs (a study, its body as
     /// bytes): their statistics merged, their results computed. `solver` optionally patches the
-    /// solver options of the first source's spec. Peers are pulled at most
-    /// [`CONCURRENT_PULLS`] at a time and each document is merged as it arrives (exact sums: the
-    /// order does not change a bit), so memory holds a few documents, not all of them.
-    pub async fn create_study(&self, body: bytes::Bytes) -> Result<JobResource, JobError> {
+    /// solver options of the first source's spec. Peers are pulled at most [`PULLS_PER_CLIENT`]
+    /// at a time (`client`'s share of the pulls) and each document is merged as it arrives (exact
+    /// sums: the order does not change a bit), so memory holds a few documents, not all of them.
+    /// A processing slot is held only while a document is parsed or merged.
+    pub async fn create_study(&self, body: bytes::Bytes, client: ClientKey) -> Result<JobResource, JobError> {
         if self.jobs.is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
-        let StudyBody { sources, solver } = self.jobs.compute(move || parse_study_body(&body)).await??;
+        let StudyBody { sources, solver } = self.process(move || parse_study_body(&body)).await??;
         self.check_peers(&sources)?;
         let labels: Vec<String> = sources.iter().map(Source::label).collect();
         let arrivals = stream::iter(sources.into_iter().enumerate())
-            .map(|(i, source)| async move { self.fetch(source).await.map(|doc| (i, doc)) })
-            .buffer_unordered(CONCURRENT_PULLS);
+            .map(|(i, source)| async move { self.fetch(source, client).await.map(|doc| (i, doc)) })
+            .buffer_unordered(PULLS_PER_CLIENT);
         let gather = async {
             let mut first: Option<(usize, JobSpec)> = None;
             // The spec of the first document to arrive: what a refused merge names differences
@@ -304,13 +330,12 @@ impl Statistics {
                     }
                     Some(mut acc) => {
                         let into = arrived.clone().unwrap_or_else(|| doc.spec.clone());
-                        self.jobs
-                            .compute(move || {
-                                acc.merge(&doc.moments).map_err(|e| explained(e, &doc.spec, &into))?;
-                                Ok::<_, crate::sim::stats::moments::MergeError>(acc)
-                            })
-                            .await?
-                            .map_err(DocumentError::from)?
+                        self.process(move || {
+                            acc.merge(&doc.moments).map_err(|e| explained(e, &doc.spec, &into))?;
+                            Ok::<_, crate::sim::stats::moments::MergeError>(acc)
+                        })
+                        .await?
+                        .map_err(DocumentError::from)?
                     }
                 });
             }
@@ -332,6 +357,7 @@ impl Statistics {
             return Err(SpecError::new("sources", "must list at least one source").into());
         };
         let policy = self.jobs.policy().clone();
+        let _slot = self.processing_slot().await?;
         let (new, checkpoint) = self
             .jobs
             .compute_heavy(move |_| -> Result<(NewJob, Checkpoint), JobError> {

@@ -27,6 +27,7 @@
 //! * [`peers`] — moments documents pulled from allowed peer servers, for merges; [`peer_tls`] —
 //!   how https peers' certificates are verified (roots, and `--peer-ca` pins);
 //! * [`signing`] — provenance: this server's signature on exports, the keys merges require;
+//! * [`shares`] — who a request comes from, and each client's share of a shared budget;
 //! * [`resource`], [`documents`] — what the API shows of a job; [`lineage`] — where a merged
 //!   job's statistics come from; [`error`] — what job operations
 //!   fail with.
@@ -50,6 +51,7 @@ pub mod references;
 pub mod resource;
 pub mod scheduler;
 pub mod services;
+pub mod shares;
 pub mod signing;
 pub mod solves;
 pub mod state;

@@ -13,9 +13,11 @@
 //! * a 2xx body is read up to the document limit (`--document-limit`), an error body up to
 //!   [`ERROR_BODY_LIMIT`] bytes and never echoed (a peer's error text could hold anything, and
 //!   echoing it would make this server an oracle for what sits at a URL);
-//! * at most [`CONCURRENT_PULLS`] pulls at once, server-wide, so that memory stays below that many
-//!   document limits; a pull waits at most [`PULL_WAIT`] for its turn (then 429), and a study's
-//!   pulls together at most its deadline (`--study-deadline`).
+//! * at most [`PULLS_PER_CLIENT`] pulls in flight for one client (its studies' slow peers delay
+//!   only its own requests) and [`CONCURRENT_PULLS`] server-wide, so that memory stays below that
+//!   many document limits; a pull waits at most [`PULL_WAIT`] for its turn (then 429), and a
+//!   study's pulls together at most its deadline (`--study-deadline`). A pull waiting on its peer
+//!   holds a connection and nothing else: no processing slot, no other client's turn.
 //!
 //! https peers are verified against the system's roots plus any `--peer-ca` certificates, each of
 //! which is also pinned (`peer_tls`; rustls with the ring provider).
@@ -32,6 +34,7 @@ use rustls::pki_types::pem::PemObject;
 
 use super::error::JobError;
 use super::peer_tls::client_config;
+use super::shares::{ClientKey, Shares};
 
 /// Time to establish a connection to a peer.
 pub const PEER_CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
@@ -41,8 +44,10 @@ pub const PEER_READ_TIMEOUT: Duration = Duration::from_secs(30);
 pub const PEER_DEADLINE: Duration = Duration::from_secs(120);
 /// Bytes of a peer's error answer that are read (and discarded) before the connection is dropped.
 pub const ERROR_BODY_LIMIT: usize = 4096;
-/// Pulls in flight at once, over all requests.
-pub const CONCURRENT_PULLS: usize = 4;
+/// Pulls in flight at once, over all requests and clients.
+pub const CONCURRENT_PULLS: usize = 16;
+/// Pulls in flight at once for one client (and the most one study runs at once).
+pub const PULLS_PER_CLIENT: usize = 4;
 /// Longest a pull waits for one of the [`CONCURRENT_PULLS`] before its request is answered 429.
 pub const PULL_WAIT: Duration = Duration::from_secs(30);
 
@@ -181,7 +186,10 @@ pub struct Peers {
     client: reqwest::Client,
     /// Largest document accepted (the server's `--document-limit`).
     document_limit: usize,
+    /// Connections to peers, server-wide.
     pulls: Semaphore,
+    /// Pulls in flight per client.
+    client_pulls: Arc<Shares>,
 }
 
 impl std::fmt::Debug for Peers {
@@ -221,7 +229,13 @@ impl Peers {
         let tls = client_config(extra).map_err(|e| PeerConfigError::Client(e.to_string()))?;
         builder = builder.tls_backend_preconfigured(tls);
         let client = builder.build().map_err(|e| PeerConfigError::Client(e.to_string()))?;
-        Ok(Self { allowed, client, document_limit, pulls: Semaphore::new(CONCURRENT_PULLS) })
+        Ok(Self {
+            allowed,
+            client,
+            document_limit,
+            pulls: Semaphore::new(CONCURRENT_PULLS),
+            client_pulls: Shares::new(PULLS_PER_CLIENT),
+        })
     }
 
     /// No peers (every pull refused).
@@ -254,17 +268,26 @@ impl Peers {
         }
     }
 
-    /// Fetches the moments document of the job at `url` on an allowed peer (unparsed bytes).
-    pub async fn pull(&self, url: &str, field: &str) -> Result<Vec<u8>, JobError> {
+    /// Fetches the moments document of the job at `url` on an allowed peer for `client`'s request
+    /// (unparsed bytes).
+    pub async fn pull(&self, url: &str, field: &str, client: ClientKey) -> Result<Vec<u8>, JobError> {
         let (target, peer) = self.resolve(url, field)?;
-        let _permit = match tokio::time::timeout(PULL_WAIT, self.pulls.acquire()).await {
-            Ok(permit) => permit.map_err(|_| JobError::ShuttingDown)?,
-            Err(_) => {
-                return Err(JobError::Busy {
-                    detail: format!("{field}: {CONCURRENT_PULLS} other pulls from peers are in flight; retry"),
-                    retry_after_seconds: 10,
-                });
+        let busy = |detail: String| JobError::Busy { detail, retry_after_seconds: 10 };
+        // The client's own turn first: its other pulls (a slow peer's among them) delay only it.
+        let mut turn = self.client_pulls.open(client);
+        let started = tokio::time::Instant::now();
+        while !turn.grow(1) {
+            if started.elapsed() >= PULL_WAIT {
+                return Err(busy(format!(
+                    "{field}: {client} already has {PULLS_PER_CLIENT} pulls from peers in flight; retry"
+                )));
             }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        let left = PULL_WAIT.saturating_sub(started.elapsed());
+        let _permit = match tokio::time::timeout(left, self.pulls.acquire()).await {
+            Ok(permit) => permit.map_err(|_| JobError::ShuttingDown)?,
+            Err(_) => return Err(busy(format!("{field}: {CONCURRENT_PULLS} pulls from peers are in flight; retry"))),
         };
         let peer_error = |message: String| JobError::Peer { field: field.to_string(), message };
         let fetch = async {

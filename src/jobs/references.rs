@@ -5,9 +5,10 @@
 //! request pool's blocking threads, never on a tokio worker.
 
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use crate::sim::checks::quadrature::reference_luminance;
+use crate::sim::checks::quadrature::{ReferenceError, reference_luminance, reference_luminance_until};
 use crate::sim::checks::references;
 use crate::sim::model::config::SimConfig;
 use crate::sim::model::scene::Scene;
@@ -74,6 +75,27 @@ pub fn scene_reference(scene: &Scene) -> Option<f64> {
     scene_cache().get_or_compute(scene_key(scene), || {
         reference_luminance(scene).inspect_err(|e| tracing::warn!(error = %e, "no reference luminance")).ok()
     })
+}
+
+/// The R → 0 reference luminance of a scene, from the cache or computed until `stop` is set (a
+/// job's own run computes its scene's reference, which a submission no longer waits for): none
+/// where the quadrature could not reach its tolerance, `Err(Stopped)` if stopped first (nothing
+/// is cached then).
+pub fn scene_reference_until(scene: &Scene, stop: &AtomicBool) -> Result<Option<f64>, ReferenceError> {
+    let key = scene_key(scene);
+    if let Some(hit) = scene_cache().get(&key) {
+        return Ok(hit);
+    }
+    let value = match reference_luminance_until(scene, stop) {
+        Err(ReferenceError::Stopped) => return Err(ReferenceError::Stopped),
+        Err(e) => {
+            tracing::warn!(error = %e, "no reference luminance");
+            None
+        }
+        Ok(value) => Some(value),
+    };
+    scene_cache().get_or_compute(key, || value);
+    Ok(value)
 }
 
 /// A scene's reference if the cache holds it (`Some(None)`: the quadrature gave up), without

@@ -26,9 +26,10 @@ pub struct Services {
 
 impl Services {
     /// The feature services on the lifecycle `jobs`: merges pull from `peers`, exports are signed
-    /// and merged documents checked with `provenance`.
-    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance) -> Self {
-        let statistics = Statistics::new(jobs.clone(), peers, provenance);
+    /// and merged documents checked with `provenance`, at most `documents` merges or studies
+    /// process documents at once.
+    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance, documents: usize) -> Self {
+        let statistics = Statistics::new(jobs.clone(), peers, provenance, documents);
         Self {
             solves: Solves::new(statistics.clone()),
             predictions: Predictions::new(statistics.clone()),

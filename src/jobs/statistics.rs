@@ -49,13 +49,22 @@ pub struct Statistics {
     pub(super) peers: Arc<Peers>,
     /// The signing key for exports and the keys merges require (`signing`).
     pub(super) provenance: Arc<Provenance>,
+    /// Merges and studies parsing or merging documents at once (`--max-document-requests`): each
+    /// holds parsed documents. Taken only for that, never while a request waits on a peer.
+    pub(super) processing: Arc<tokio::sync::Semaphore>,
 }
 
 impl Statistics {
     /// The statistics of `jobs`' jobs; merges pull from `peers`, exports are signed and merged
-    /// documents checked with `provenance`.
-    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance) -> Self {
-        Self { jobs, peers: Arc::new(peers), provenance: Arc::new(provenance) }
+    /// documents checked with `provenance`; at most `processing` merges or studies parse or merge
+    /// documents at once.
+    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance, processing: usize) -> Self {
+        Self {
+            jobs,
+            peers: Arc::new(peers),
+            provenance: Arc::new(provenance),
+            processing: Arc::new(tokio::sync::Semaphore::new(processing.max(1))),
+        }
     }
 
     /// The lifecycle these statistics belong to.

@@ -4,9 +4,11 @@
 //!
 //! * at most `max_connections` at once — beyond it the loop stops accepting (new connections wait
 //!   in the kernel's backlog and cost no file descriptor) until one closes;
-//! * at most `max_per_client` of them from one client address (`PerClient`): a further
-//!   connection from it is answered 429 and closed at once, so that one client holding half-open
-//!   connections cannot take the slots every other client needs;
+//! * at most `max_per_client` of them from one client (`PerClient`; an IPv4 address or an IPv6
+//!   /64, [`ClientKey`]): a further connection from it is answered 429 and closed at once, so that
+//!   one client holding half-open connections cannot take the slots every other client needs;
+//!   every request carries its client's key (a request extension), for the budgets the API
+//!   shares out per client;
 //! * a TLS handshake and the request head must arrive within `header_timeout` (hyper's
 //!   `header_read_timeout`, which also closes keep-alive connections idle for that long);
 //! * a response that cannot be sent for `send_timeout` — the client stopped reading it — closes
@@ -20,12 +22,12 @@
 use std::collections::HashMap;
 use std::future::Future;
 use std::io;
-use std::net::IpAddr;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
+use hyper::body::Incoming;
 use hyper::server::conn::http1;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::server::graceful::{GracefulShutdown, Watcher};
@@ -35,6 +37,8 @@ use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tokio::time::Sleep;
 use tokio_rustls::TlsAcceptor;
+
+use crate::jobs::shares::ClientKey;
 
 /// Longest wait for open connections to finish after a shutdown began.
 pub const GRACE: Duration = Duration::from_secs(10);
@@ -96,7 +100,8 @@ pub async fn serve(
             },
             _ = &mut shutdown => break,
         };
-        let Some(client) = clients.admit(peer.ip()) else {
+        let key = ClientKey::of(peer.ip());
+        let Some(client) = clients.admit(key) else {
             // Best effort, without waiting: the client learns why (a TLS client sees a closed
             // connection), and the slot is free again at once.
             let _ = stream.try_write(OVER_SHARE);
@@ -111,9 +116,9 @@ pub async fn serve(
             let _permit = (permit, client);
             let io = SendTimeout::new(stream, limits.send_timeout);
             match tls {
-                None => serve_connection(io, app, watcher, limits).await,
+                None => serve_connection(io, app, key, watcher, limits).await,
                 Some(acceptor) => match tokio::time::timeout(limits.header_timeout, acceptor.accept(io)).await {
-                    Ok(Ok(tls_stream)) => serve_connection(tls_stream, app, watcher, limits).await,
+                    Ok(Ok(tls_stream)) => serve_connection(tls_stream, app, key, watcher, limits).await,
                     Ok(Err(e)) => tracing::debug!(error = %e, "TLS handshake failed"),
                     Err(_) => tracing::debug!("TLS handshake timed out"),
                 },
@@ -130,24 +135,23 @@ pub async fn serve(
 const OVER_SHARE: &[u8] = b"HTTP/1.1 429 Too Many Requests\r\nRetry-After: 1\r\nConnection: close\r\n\
 Content-Type: text/plain\r\nContent-Length: 70\r\n\r\ntoo many connections from this address (--max-connections-per-client)\n";
 
-/// Connections open per client address.
+/// Connections open per client.
 struct PerClient {
     /// std Mutex: map operations only.
-    open: Mutex<HashMap<IpAddr, usize>>,
+    open: Mutex<HashMap<ClientKey, usize>>,
     limit: usize,
 }
 
 /// One admitted connection of a client; gives its place back when dropped.
 struct ClientSlot {
     clients: Arc<PerClient>,
-    ip: IpAddr,
+    ip: ClientKey,
 }
 
 impl PerClient {
-    /// A place for one more connection from `ip`, if it has fewer than its share open. IPv4 seen
-    /// as IPv6 (`::ffff:a.b.c.d`) counts as the IPv4 address.
-    fn admit(self: &Arc<Self>, ip: IpAddr) -> Option<ClientSlot> {
-        let ip = ip.to_canonical();
+    /// A place for one more connection from `ip`, if it has fewer than its share open (IPv4 seen
+    /// as IPv6 counts as the IPv4 address; IPv6 addresses of one /64 as one client).
+    fn admit(self: &Arc<Self>, ip: ClientKey) -> Option<ClientSlot> {
         let mut open = self.open.lock().expect("per-client counts");
         let n = open.entry(ip).or_insert(0);
         if *n >= self.limit {
@@ -170,10 +174,15 @@ impl Drop for ClientSlot {
     }
 }
 
-async fn serve_connection<I>(io: I, app: axum::Router, watcher: Watcher, limits: ConnectionLimits)
+async fn serve_connection<I>(io: I, app: axum::Router, client: ClientKey, watcher: Watcher, limits: ConnectionLimits)
 where
     I: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
+    // Every request of the connection says whose it is.
+    let app = tower::ServiceExt::map_request(app, move |mut request: axum::extract::Request<Incoming>| {
+        request.extensions_mut().insert(client);
+        request
+    });
     let service = TowerToHyperService::new(app);
     let mut builder = http1::Builder::new();
     builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).keep_alive(true);

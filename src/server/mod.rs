@@ -177,7 +177,7 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
         }
     };
     let jobs = JobManager::start(store, config.policy.clone(), executor, pools, metrics).await?;
-    let services = Services::new(jobs.clone(), peers, provenance);
+    let services = Services::new(jobs.clone(), peers, provenance, config.http.max_document_requests);
     let guard = Guard {
         loopback: bound.ip().is_loopback(),
         allowed_hosts: config.allowed_hosts.iter().map(|h| h.to_ascii_lowercase()).collect::<Vec<_>>().into(),

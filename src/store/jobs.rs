@@ -272,6 +272,17 @@ impl Store {
         Ok(done?.rows_affected() == 1)
     }
 
+    /// Sets a job's R → 0 reference luminance (computed by its run, not at its submission).
+    pub async fn set_reference(&self, id: i64, reference: Option<f64>, now: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query("UPDATE jobs SET reference_luminance = ?, updated_at = ? WHERE id = ?")
+            .bind(reference)
+            .bind(now)
+            .bind(id)
+            .execute(self.pool())
+            .await;
+        Ok(done?.rows_affected() == 1)
+    }
+
     /// Records that a cancel of the job was acknowledged (before the running job stops), so that
     /// no restart runs it again.
     pub async fn request_cancel(&self, id: i64, now: i64) -> Result<bool, StoreError> {

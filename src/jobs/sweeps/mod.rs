@@ -25,20 +25,15 @@ use utoipa::ToSchema;
 use super::checkpoint::spec_json;
 use super::error::JobError;
 use super::policy::{check_budget, check_iteration_work, range_len};
-use super::references::{cached_scene_reference, scene_reference};
+use super::references::cached_scene_reference;
 use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
 use super::statistics::Statistics;
 use super::toolbox::JobManager;
-use crate::sim::model::scene::Scene;
 use crate::sim::spec::SpecError;
 use crate::sim::sweep::{
     PointFigures, PointResults, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures,
 };
 use crate::store::{JobRow, NewJob, SweepRow};
-
-/// How long a sweep's creation may spend on reference quadratures; the runs of scenes not reached
-/// by then keep no R → 0 reference (an optional figure) rather than hold the heavy pool longer.
-const REFERENCE_DEADLINE: Duration = Duration::from_secs(10);
 
 /// Most sweeps' predicted figures kept in memory (beyond it the cache starts over).
 const MAX_CACHED_RUNS: usize = 1024;
@@ -183,26 +178,10 @@ impl Sweeps {
             })
             .await??;
         self.check_room_for(valid.len())?;
-        let scenes: Vec<Scene> = valid.iter().map(|job| job.config().scene.clone()).collect();
-        let references = self
-            .jobs
-            .compute_heavy(move |stop| {
-                let started = Instant::now();
-                let mut out = Vec::with_capacity(scenes.len());
-                for scene in &scenes {
-                    if stop.stopped() {
-                        return None;
-                    }
-                    // Past the deadline a run keeps no R → 0 reference (an optional figure)
-                    // unless its scene's is already known.
-                    out.push(cached_scene_reference(scene).unwrap_or_else(|| {
-                        (started.elapsed() < REFERENCE_DEADLINE).then(|| scene_reference(scene)).flatten()
-                    }));
-                }
-                Some(out)
-            })
-            .await?;
-        let references = references.ok_or(JobError::ShuttingDown)?;
+        // Each run's R → 0 reference from the cache, or computed by the run itself when it starts
+        // (`driver`): creating a sweep of many scenes costs no quadrature.
+        let references: Vec<Option<f64>> =
+            valid.iter().map(|job| cached_scene_reference(&job.config().scene).flatten()).collect();
         let new_jobs = valid
             .iter()
             .zip(references)

@@ -30,7 +30,7 @@
 //! outer bisection alone could otherwise visit 2⁴⁰ panels).
 
 use std::f64::consts::PI;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use nalgebra::Vector3;
 
@@ -73,29 +73,47 @@ pub enum ReferenceError {
         "the strategy's weights depend on where in its ring the light path starts, or on the scene's orientation, which the expected-luminance quadrature does not resolve"
     )]
     UnsupportedWeights,
+    /// The quadrature was told to stop before it ended (its job was cancelled, or the server is
+    /// stopping): there is no value, and nothing is wrong with the scene.
+    #[error("the reference quadrature was stopped before it ended")]
+    Stopped,
 }
 
 /// Counts evaluations against [`EVALUATION_BUDGET`]; once spent, every rule returns 0 at once and
 /// the caller reports [`ReferenceError::NotConverged`]. Shared with [`super::expected`].
 /// Atomic, so that the expected-luminance quadrature can evaluate its nodes on several threads.
-pub(super) struct Budget {
+/// A budget may also be stopped from outside (`stop`): it then counts as spent at once, so that
+/// a cancelled job or a stopping server does not wait for a quadrature it no longer needs.
+pub(super) struct Budget<'a> {
     used: AtomicU64,
     limit: u64,
+    stop: Option<&'a AtomicBool>,
 }
 
-impl Budget {
+impl Budget<'static> {
     pub(super) fn new(limit: u64) -> Self {
-        Self { used: AtomicU64::new(0), limit }
+        Self { used: AtomicU64::new(0), limit, stop: None }
+    }
+}
+
+impl<'a> Budget<'a> {
+    /// A budget that is spent once `stop` is set.
+    pub(super) fn stoppable(limit: u64, stop: &'a AtomicBool) -> Self {
+        Self { used: AtomicU64::new(0), limit, stop: Some(stop) }
     }
 
-    /// Charges `n` evaluations; false once the budget is spent.
+    fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.load(Ordering::Relaxed))
+    }
+
+    /// Charges `n` evaluations; false once the budget is spent (or stopped).
     pub(super) fn charge(&self, n: u64) -> bool {
         let before = self.used.fetch_add(n, Ordering::Relaxed);
-        before.saturating_add(n) <= self.limit
+        before.saturating_add(n) <= self.limit && !self.stopped()
     }
 
     pub(super) fn spent(&self) -> bool {
-        self.used.load(Ordering::Relaxed) > self.limit
+        self.used.load(Ordering::Relaxed) > self.limit || self.stopped()
     }
 
     /// Evaluations charged so far.
@@ -110,14 +128,24 @@ pub fn reference_luminance(scene: &Scene) -> Result<f64, ReferenceError> {
     reference_with_budget(scene, EVALUATION_BUDGET).map(|(value, _)| value)
 }
 
+/// The reference, or [`ReferenceError::Stopped`] as soon as `stop` is set (checked between
+/// evaluations: within milliseconds).
+pub fn reference_luminance_until(scene: &Scene, stop: &AtomicBool) -> Result<f64, ReferenceError> {
+    let result = reference_within(scene, &Budget::stoppable(EVALUATION_BUDGET, stop)).map(|(value, _)| value);
+    if stop.load(Ordering::Relaxed) { Err(ReferenceError::Stopped) } else { result }
+}
+
 /// The reference and the evaluations it used, within `limit` evaluations.
 pub fn reference_with_budget(scene: &Scene, limit: u64) -> Result<(f64, u64), ReferenceError> {
-    let budget = Budget::new(limit);
+    reference_within(scene, &Budget::new(limit))
+}
+
+fn reference_within(scene: &Scene, budget: &Budget<'_>) -> Result<(f64, u64), ReferenceError> {
     let ill = &scene.illumination;
     let mut total = 0.0;
     for ring in ill.rings() {
-        let f = |r: f64| r * kernel_within(scene, r, &budget);
-        total += ring.level * adaptive_gk_within(&f, ring.r_in, ring.r_out, TOLERANCE, &budget);
+        let f = |r: f64| r * kernel_within(scene, r, budget);
+        total += ring.level * adaptive_gk_within(&f, ring.r_in, ring.r_out, TOLERANCE, budget);
         if budget.spent() {
             return Err(ReferenceError::NotConverged);
         }
