@@ -30,7 +30,7 @@
 //!   the crate` — lists the crate modules the folder's files (subfolders included) may import
 //!   besides the folder's own files;
 //! * the core imports nothing outside `src/sim/`, and inside it imports point down the layers
-//!   math → model → engines → stats → solve → the root files (spec, configuration, document, runner, sweep) →
+//!   math → model → engines → stats → solve → the root files (spec, configuration, document, signature, runner, sweep) →
 //!   checks;
 //! * the top-level modules form no cycle (in particular `api` and `server` do not import each
 //!   other both ways);
@@ -52,7 +52,7 @@ const SIM_LAYERS: &[&[&str]] = &[
     &["engines"],
     &["stats"],
     &["solve"],
-    &["spec", "configuration", "document", "runner", "sweep", "mod"],
+    &["spec", "configuration", "document", "signature", "runner", "sweep", "mod"],
     &["checks"],
 ];
 

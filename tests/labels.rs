@@ -37,8 +37,8 @@ async fn jobs_are_named_labelled_and_found_by_label() {
     assert_eq!(
         *provenance,
         json!({ "sources": [
-                    { "from": format!("job {b}"), "seeds": [2], "iterations": 20 },
-                    { "from": "document", "seeds": [1], "iterations": 20 } ],
+                    { "from": format!("job {b}"), "seeds": [2], "iterations": 20, "computed_here": true },
+                    { "from": "document", "seeds": [1], "iterations": 20, "computed_here": false } ],
                 "seeds": [1, 2] })
     );
     assert!(server.job(c).await.get("provenance").is_none(), "a job that merged nothing has none");

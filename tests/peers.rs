@@ -405,6 +405,28 @@ async fn two_servers_with_signing_keys_exchange_a_verified_study_and_refuse_forg
         b.submit_and_wait(&json!({ "iterations": 6, "light_paths": 100_000, "camera_paths": 30, "seed": 6 })).await;
     let plain = b.merge(target, &unsigned).await;
     assert_eq!(plain.status, 200, "{}", plain.text());
+    // Issue 39, item 6: B signed whatever was merged into it, so an unsigned document sent to B
+    // came back signed and A took it. Now a job holding statistics no trusted key vouches for is
+    // exported unsigned, and A refuses it.
+    let laundered = b.moments(target).await;
+    assert!(laundered.get("signature").is_none(), "signed what it cannot vouch for: {}", laundered["signature"]);
+    let provenance = &b.job(target).await["provenance"]["sources"];
+    assert_eq!(provenance[1]["computed_here"], false);
+    assert!(provenance[1].get("signed_by").is_none(), "{provenance}");
+    let problem = assert_problem(a.study(&json!({ "sources": [laundered] })).await, 422);
+    assert!(problem["detail"].as_str().unwrap().contains("unsigned"), "{problem}");
+    // What B computed itself is signed as such; what A merged from B's signed export is signed as
+    // merged, naming B's key.
+    assert_eq!(exported["signature"]["attests"], json!({ "basis": "computed", "keys": [] }));
+    assert_eq!(a_export["signature"]["attests"], json!({ "basis": "merged", "keys": [b_key] }));
+    assert_eq!(a.job(merged).await["provenance"]["sources"][0]["signed_by"], b_key);
+    // B's own signed export merged back into B: B vouches for it (its own key).
+    let own =
+        b.submit_and_wait(&json!({ "iterations": 6, "light_paths": 100_000, "camera_paths": 30, "seed": 7 })).await;
+    let back = b.merge(own, &exported).await;
+    assert_eq!(back.status, 200, "{}", back.text());
+    let resigned = b.moments(own).await;
+    assert_eq!(resigned["signature"]["attests"], json!({ "basis": "merged", "keys": [b_key] }));
     for server in [a, b] {
         server.stop().await;
     }

@@ -103,20 +103,34 @@ pub(super) fn document_job(doc: &MomentsDocument, path: &std::path::Path) -> Res
 pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     let documents = args.documents.iter().map(read_document).collect::<Result<Vec<_>, _>>()?;
     #[cfg(feature = "server")]
-    let provenance = {
+    let (provenance, signers) = {
         use crate::jobs::signing::Provenance;
         let provenance =
             Provenance::load(args.signing_key.as_deref(), &args.trust).map_err(|e| CliError::Config(e.to_string()))?;
+        let mut signers = Vec::with_capacity(documents.len());
         for (doc, path) in documents.iter().zip(&args.documents) {
-            provenance.trust.check(doc, "").map_err(|e| CliError::Config(format!("{}: {e}", path.display())))?;
+            signers.push(provenance.vouch(doc, "").map_err(|e| CliError::Config(format!("{}: {e}", path.display())))?);
         }
-        provenance
+        (provenance, signers)
     };
     // The error names the input at fault (the first that conflicts with those before it).
     let merged = merge_documents_at(&documents)
         .map_err(|(i, source)| CliError::Document { path: args.documents[i].clone(), source })?;
     #[cfg(feature = "server")]
-    let merged = provenance.sign(merged);
+    let merged = {
+        use crate::sim::document::{Attestation, AttestationBasis};
+        // Signed as `merged` if a trusted key (or this one) signed every input; otherwise the
+        // key's holder vouches for files it could not check, and the signature says so.
+        let basis =
+            if signers.iter().all(Option::is_some) { AttestationBasis::Merged } else { AttestationBasis::Asserted };
+        let mut keys: Vec<String> = signers.into_iter().flatten().collect();
+        keys.sort_unstable();
+        keys.dedup();
+        if provenance.key.is_some() && basis == AttestationBasis::Asserted {
+            eprintln!("note: not every input carries a trusted signature; the output's signature says \"asserted\"");
+        }
+        provenance.sign(merged, Attestation { basis, keys })
+    };
     write_atomically(&args.out, &merged.to_json())?;
     eprintln!(
         "merged {} documents: {} iterations → {}",

@@ -5,6 +5,8 @@
 //! `Provenance` of `signing`, which is about whose key vouches for a document.)
 
 use serde::{Deserialize, Serialize};
+
+use crate::sim::document::{Attestation, AttestationBasis};
 use utoipa::ToSchema;
 
 /// Where a merged job's statistics come from: each source merged, in the order given (for a merge
@@ -28,16 +30,41 @@ pub struct SourceRecord {
     pub seeds: Vec<u64>,
     /// The iterations it brought.
     pub iterations: u64,
+    /// Whether this server computed them (the job's own iterations).
+    #[serde(default)]
+    pub computed_here: bool,
+    /// The key — one this server trusts, or its own — whose valid signature the source carried
+    /// when it was merged; none for an unsigned source or one no trusted key signed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub signed_by: Option<String>,
 }
 
 impl SourceRecord {
-    /// A source that brought the iterations of `coverage`.
-    pub fn new(from: impl Into<String>, coverage: &crate::sim::stats::coverage::Coverage) -> Self {
+    /// A source that brought the iterations of `coverage`, signed by `signed_by` (a trusted key).
+    pub fn new(
+        from: impl Into<String>,
+        coverage: &crate::sim::stats::coverage::Coverage,
+        signed_by: Option<String>,
+    ) -> Self {
         Self {
             from: from.into(),
             seeds: coverage.seeds().iter().map(|s| s.seed).collect(),
             iterations: u64::try_from(coverage.iterations()).unwrap_or(u64::MAX),
+            computed_here: false,
+            signed_by,
         }
+    }
+
+    /// Job `id`'s own iterations, computed by this server.
+    pub fn own(id: i64, coverage: &crate::sim::stats::coverage::Coverage) -> Self {
+        Self { computed_here: true, ..Self::new(format!("job {id}"), coverage, None) }
+    }
+
+    /// Whether this server can vouch for the source: it computed it, or a key it trusts signed
+    /// it. (A record stored before these fields existed vouches for the job's own iterations,
+    /// `job N`, only.)
+    fn vouched(&self) -> bool {
+        self.computed_here || self.signed_by.is_some() || self.from.starts_with("job ")
     }
 }
 
@@ -48,6 +75,20 @@ impl MergeProvenance {
         seeds.sort_unstable();
         seeds.dedup();
         Self { sources, seeds }
+    }
+
+    /// What this server's signature on the merged statistics may vouch for: merged from sources
+    /// it computed or trusted keys signed (those keys); none if any source is neither — such
+    /// statistics are exported unsigned, so that a signature never launders a document sent to
+    /// the server.
+    pub fn attestation(&self) -> Option<Attestation> {
+        if !self.sources.iter().all(SourceRecord::vouched) {
+            return None;
+        }
+        let mut keys: Vec<String> = self.sources.iter().filter_map(|s| s.signed_by.clone()).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        Some(Attestation { basis: AttestationBasis::Merged, keys })
     }
 
     /// As stored (JSON).

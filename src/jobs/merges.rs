@@ -196,8 +196,9 @@ impl Statistics {
         self.jobs.compute(f).await
     }
 
-    /// The verified document of a source (pulled from its peer for `client` if it names one).
-    async fn fetch(&self, source: Source, client: ClientKey) -> Result<MomentsDocument, JobError> {
+    /// The verified document of a source (pulled from its peer for `client` if it names one), and
+    /// the trusted key that signed it, if one did.
+    async fn fetch(&self, source: Source, client: ClientKey) -> Result<(MomentsDocument, Option<String>), JobError> {
         let (doc, field) = match source {
             Source::Document { doc, field } => (*doc, field),
             Source::Peer { url, field } => {
@@ -213,8 +214,8 @@ impl Statistics {
         // With --trust, only documents signed by a trusted key (checked after the checksum, which
         // the signature covers, was recomputed from the content).
         let at = field.strip_suffix(".from").or_else(|| field.strip_suffix("from")).unwrap_or(&field);
-        self.provenance.trust.check(&doc, at)?;
-        Ok(doc)
+        let signed_by = self.provenance.vouch(&doc, at)?;
+        Ok((doc, signed_by))
     }
 
     /// Checks, without a connection, that every peer source is allowed (so that a study with one
@@ -236,7 +237,7 @@ impl Statistics {
         let source = self.process(move || parse_merge_body(&body)).await??;
         self.check_peers(std::slice::from_ref(&source))?;
         let from = source.label();
-        let doc = self.fetch(source, client).await?;
+        let (doc, signed_by) = self.fetch(source, client).await?;
         // Reserve the job: a short critical section (state checks only).
         let (row, _reservation) = {
             let _guard = self.jobs.transition().await;
@@ -275,10 +276,10 @@ impl Statistics {
                     row.provenance.as_deref().and_then(|p| serde_json::from_str(p).ok());
                 let mut sources = match earlier {
                     Some(p) => p.sources,
-                    None if moments.iterations() > 0 => vec![SourceRecord::new(format!("job {id}"), &moments.coverage)],
+                    None if moments.iterations() > 0 => vec![SourceRecord::own(id, &moments.coverage)],
                     None => Vec::new(),
                 };
-                sources.push(SourceRecord::new(from, &doc.moments.coverage));
+                sources.push(SourceRecord::new(from, &doc.moments.coverage, signed_by));
                 moments.merge(&doc.moments).map_err(|e| DocumentError::from(explained(e, &doc.spec, &spec)))?;
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let spec = merged_spec(&spec, &moments);
@@ -308,7 +309,7 @@ impl Statistics {
         self.check_peers(&sources)?;
         let labels: Vec<String> = sources.iter().map(Source::label).collect();
         let arrivals = stream::iter(sources.into_iter().enumerate())
-            .map(|(i, source)| async move { self.fetch(source, client).await.map(|doc| (i, doc)) })
+            .map(|(i, source)| async move { self.fetch(source, client).await.map(|(doc, by)| (i, doc, by)) })
             .buffer_unordered(PULLS_PER_CLIENT);
         let gather = async {
             let mut first: Option<(usize, JobSpec)> = None;
@@ -318,8 +319,8 @@ impl Statistics {
             let mut total: Option<Moments> = None;
             let mut records: Vec<(usize, SourceRecord)> = Vec::new();
             let mut arrivals = std::pin::pin!(arrivals);
-            while let Some((i, doc)) = arrivals.try_next().await? {
-                records.push((i, SourceRecord::new(labels[i].clone(), &doc.moments.coverage)));
+            while let Some((i, doc, signed_by)) = arrivals.try_next().await? {
+                records.push((i, SourceRecord::new(labels[i].clone(), &doc.moments.coverage, signed_by)));
                 if first.as_ref().is_none_or(|(j, _)| i < *j) {
                     first = Some((i, doc.spec.clone()));
                 }

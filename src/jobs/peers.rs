@@ -164,12 +164,29 @@ pub fn check_owner_only(path: &Path) -> Result<(), PeerConfigError> {
     Ok(())
 }
 
+/// Largest key, token or certificate file read at start: far more than any PEM key or chain, and
+/// a bound for a path such as `/dev/zero` that would never end.
+pub const MAX_CONFIG_FILE: u64 = 1 << 20;
+
+/// Reads a configuration file (a key, a token, certificates) of at most [`MAX_CONFIG_FILE`] bytes.
+pub fn read_config_file(path: &Path) -> Result<Vec<u8>, std::io::Error> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?.take(MAX_CONFIG_FILE + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_CONFIG_FILE {
+        return Err(std::io::Error::other(format!(
+            "larger than {MAX_CONFIG_FILE} bytes: not a key, token or certificate file"
+        )));
+    }
+    Ok(bytes)
+}
+
 /// Reads a secret from a file that only its owner may read (a group- or world-readable secret is
 /// refused, as ssh does): the trimmed first line, at least 16 visible ASCII characters.
 pub fn read_secret(path: &Path) -> Result<String, PeerConfigError> {
     check_owner_only(path)?;
-    let text =
-        std::fs::read_to_string(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
+    let bytes = read_config_file(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
+    let text = String::from_utf8_lossy(&bytes);
     let token = text.trim().to_string();
     if token.len() < 16 || !token.chars().all(|c| c.is_ascii_graphic()) {
         return Err(PeerConfigError::Insecure(format!(
@@ -218,7 +235,7 @@ impl Peers {
         let mut extra = Vec::new();
         if let Some(path) = ca {
             let pem =
-                std::fs::read(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
+                read_config_file(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
             extra = CertificateDer::pem_slice_iter(&pem)
                 .collect::<Result<Vec<_>, _>>()
                 .map_err(|e| PeerConfigError::Ca { path: path.to_path_buf(), message: e.to_string() })?;

@@ -12,9 +12,13 @@
 //! openssl pkey -in signing.pem -pubout -out signing.pub.pem  # --trust signing.pub.pem
 //! ```
 //!
-//! The signature covers the document's checksum behind a domain tag
+//! The signature covers the document's checksum and what it attests behind a domain tag
 //! ([`MomentsDocument::signed_message`]); a reader recomputes the checksum from the content
-//! before it checks the signature, so the signature vouches for the content.
+//! before it checks the signature, so the signature vouches for the content. A server signs only
+//! what it can vouch for ([`Attestation`]): statistics it computed, or merged from sources each of
+//! which it computed or a trusted key signed ([`Provenance::vouch`] records which key at the
+//! merge); anything else is exported unsigned, so that a signing server cannot be used to launder
+//! a document sent to it. The key file must be readable by its owner only.
 
 use std::path::{Path, PathBuf};
 
@@ -23,7 +27,8 @@ use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{PrivatePkcs8KeyDer, SubjectPublicKeyInfoDer};
 
 use super::error::JobError;
-use crate::sim::document::{DocumentSignature, MomentsDocument};
+use super::peers::{PeerConfigError, check_owner_only, read_config_file};
+use crate::sim::document::{Attestation, DocumentSignature, MomentsDocument};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::SpecError;
 
@@ -68,12 +73,24 @@ impl Provenance {
         Ok(Self { key: key.map(SigningKey::load).transpose()?, trust: TrustedKeys::load(trust)? })
     }
 
-    /// `doc` signed with this server's key, if it has one.
-    pub fn sign(&self, doc: MomentsDocument) -> MomentsDocument {
+    /// `doc` signed with this server's key vouching for `attests`, if it has a key.
+    pub fn sign(&self, doc: MomentsDocument, attests: Attestation) -> MomentsDocument {
         match &self.key {
-            Some(key) => key.sign(doc),
+            Some(key) => key.sign(doc, attests),
             None => doc,
         }
+    }
+
+    /// Who vouches for a document about to be merged (already verified: its checksum matches its
+    /// content): the id of a trusted key — or this server's own — whose signature it carries, or
+    /// none. With `--trust`, a document without a trusted signature is refused (`at` is its JSON
+    /// path in the request, named in the error with `.signature`).
+    pub fn vouch(&self, doc: &MomentsDocument, at: &str) -> Result<Option<String>, JobError> {
+        if self.trust.required() {
+            return self.trust.check(doc, at).map(Some);
+        }
+        let own = self.key.as_ref().filter(|k| k.verifies(doc)).map(|k| k.key_id.clone());
+        Ok(own.or_else(|| self.trust.signer(doc)))
     }
 }
 
@@ -95,10 +112,17 @@ pub fn key_id(public: &[u8]) -> String {
 }
 
 impl SigningKey {
-    /// Reads an Ed25519 private key (PKCS#8 PEM, `-----BEGIN PRIVATE KEY-----`).
+    /// Reads an Ed25519 private key (PKCS#8 PEM, `-----BEGIN PRIVATE KEY-----`) from a file only
+    /// its owner can read (as `--token-file` and `--tls-key`: whoever reads the key can sign as
+    /// this server).
     pub fn load(path: &Path) -> Result<Self, KeyError> {
         let err = |message: String| KeyError::Signing { path: path.to_path_buf(), message };
-        let der = PrivatePkcs8KeyDer::from_pem_file(path).map_err(|e| {
+        check_owner_only(path).map_err(|e| match e {
+            PeerConfigError::Read { source, .. } => err(source.to_string()),
+            other => err(other.to_string()),
+        })?;
+        let pem = read_config_file(path).map_err(|e| err(e.to_string()))?;
+        let der = PrivatePkcs8KeyDer::from_pem_slice(&pem).map_err(|e| {
             err(format!("not a PKCS#8 PEM private key ({e}); make one with `openssl genpkey -algorithm ed25519`"))
         })?;
         let pair = Ed25519KeyPair::from_pkcs8_maybe_unchecked(der.secret_pkcs8_der())
@@ -113,15 +137,56 @@ impl SigningKey {
         &self.key_id
     }
 
-    /// `doc` signed with this key (any earlier signature replaced).
-    pub fn sign(&self, mut doc: MomentsDocument) -> MomentsDocument {
-        let signature = self.pair.sign(&doc.signed_message());
+    /// `doc` signed with this key, vouching for `attests` (any earlier signature replaced).
+    pub fn sign(&self, mut doc: MomentsDocument, attests: Attestation) -> MomentsDocument {
+        let signature = self.pair.sign(&doc.signed_message_with(Some(&attests)));
         doc.signature = Some(DocumentSignature {
             algorithm: "ed25519".into(),
             key_id: self.key_id.clone(),
             value: hex(signature.as_ref()),
+            attests: Some(attests),
         });
         doc
+    }
+
+    /// Whether `doc` carries a valid signature of this key.
+    fn verifies(&self, doc: &MomentsDocument) -> bool {
+        let public = self.pair.public_key().as_ref();
+        doc.signature.as_ref().is_some_and(|s| s.key_id == self.key_id && valid(doc, s, public))
+    }
+}
+
+/// Whether `signature` is a valid Ed25519 signature of `doc` (its message with its attestation)
+/// by the raw public key `public`.
+fn valid(doc: &MomentsDocument, signature: &DocumentSignature, public: &[u8]) -> bool {
+    signature.algorithm == "ed25519"
+        && well_formed(signature.attests.as_ref())
+        && unhex(&signature.value)
+            .filter(|v| v.len() == 64)
+            .is_some_and(|value| UnparsedPublicKey::new(&ED25519, public).verify(&doc.signed_message(), &value).is_ok())
+}
+
+/// An attestation names at most [`MAX_ATTESTED_KEYS`] keys, each a key id.
+fn well_formed(attests: Option<&Attestation>) -> bool {
+    attests.is_none_or(|a| a.keys.len() <= MAX_ATTESTED_KEYS && a.keys.iter().all(|k| is_key_id(k)))
+}
+
+/// Most keys one attestation names (a study has at most 256 sources).
+const MAX_ATTESTED_KEYS: usize = 256;
+
+/// Whether `text` has the form of a key id (16 lower-case hex digits).
+fn is_key_id(text: &str) -> bool {
+    text.len() == 16 && text.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+/// A value from a document, quoted for a message: whole if short, else its start and its length
+/// (a 5 MB key id was once quoted whole in a 422).
+fn quoted(text: &str) -> String {
+    if text.len() <= 40 {
+        format!("{text:?}")
+    } else {
+        let start: String = text.chars().take(32).collect();
+        format!("{start:?}… ({} bytes)", text.len())
     }
 }
 
@@ -138,7 +203,8 @@ impl TrustedKeys {
         let mut keys = Vec::with_capacity(paths.len());
         for path in paths {
             let err = |message: String| KeyError::Trust { path: path.to_path_buf(), message };
-            let der = SubjectPublicKeyInfoDer::from_pem_file(path).map_err(|e| {
+            let pem = read_config_file(path).map_err(|e| err(e.to_string()))?;
+            let der = SubjectPublicKeyInfoDer::from_pem_slice(&pem).map_err(|e| {
                 err(format!("not a PEM public key ({e}); make one with `openssl pkey -in KEY -pubout`"))
             })?;
             let raw = der
@@ -161,13 +227,17 @@ impl TrustedKeys {
         self.keys.iter().map(|(id, _)| id.as_str()).collect()
     }
 
+    /// The id of the trusted key whose valid signature `doc` carries, if any (never an error).
+    pub fn signer(&self, doc: &MomentsDocument) -> Option<String> {
+        let signature = doc.signature.as_ref()?;
+        let (id, public) = self.keys.iter().find(|(id, _)| *id == signature.key_id)?;
+        valid(doc, signature, public).then(|| id.clone())
+    }
+
     /// Checks that `doc` (already verified: its checksum matches its content) is signed by a
-    /// trusted key, when keys are trusted; `at` is the JSON path of the document in the request
-    /// (a peer's URL field for a pulled one), named in the error with `.signature`.
-    pub fn check(&self, doc: &MomentsDocument, at: &str) -> Result<(), JobError> {
-        if !self.required() {
-            return Ok(());
-        }
+    /// trusted key, and says which; `at` is the JSON path of the document in the request (a
+    /// peer's URL field for a pulled one), named in the error with `.signature`.
+    pub fn check(&self, doc: &MomentsDocument, at: &str) -> Result<String, JobError> {
         let field = if at.is_empty() { "signature".to_string() } else { format!("{at}.signature") };
         let refuse = |message: String| -> JobError { SpecError::new(field.clone(), message).into() };
         let Some(signature) = &doc.signature else {
@@ -178,25 +248,37 @@ impl TrustedKeys {
             )));
         };
         if signature.algorithm != "ed25519" {
-            return Err(refuse(format!("unsupported algorithm {:?}; expected \"ed25519\"", signature.algorithm)));
-        }
-        let Some((_, public)) = self.keys.iter().find(|(id, _)| *id == signature.key_id) else {
             return Err(refuse(format!(
-                "signed by key {:?}, which this server does not trust (it trusts {}); to trust it, start this server \
+                "unsupported algorithm {}; expected \"ed25519\"",
+                quoted(&signature.algorithm)
+            )));
+        }
+        if !is_key_id(&signature.key_id) {
+            return Err(refuse(format!(
+                "the key id {} is not a key id (16 hex digits of the SHA-256 of a public key)",
+                quoted(&signature.key_id)
+            )));
+        }
+        let Some((id, public)) = self.keys.iter().find(|(id, _)| *id == signature.key_id) else {
+            return Err(refuse(format!(
+                "signed by key {}, which this server does not trust (it trusts {}); to trust it, start this server \
                  with --trust and that key's public key file",
-                signature.key_id,
+                quoted(&signature.key_id),
                 self.ids().join(", ")
             )));
         };
-        let value = unhex(&signature.value)
-            .filter(|v| v.len() == 64)
-            .ok_or_else(|| refuse("the signature value is not 128 hex digits".into()))?;
-        UnparsedPublicKey::new(&ED25519, public).verify(&doc.signed_message(), &value).map_err(|_| {
-            refuse(format!(
-                "the signature of key {} does not match the document: it was edited after it was signed",
-                signature.key_id
-            ))
-        })
+        if !well_formed(signature.attests.as_ref()) {
+            return Err(refuse(format!("its attestation names more than {MAX_ATTESTED_KEYS} keys, or not key ids")));
+        }
+        if unhex(&signature.value).filter(|v| v.len() == 64).is_none() {
+            return Err(refuse("the signature value is not 128 hex digits".into()));
+        }
+        if !valid(doc, signature, public) {
+            return Err(refuse(format!(
+                "the signature of key {id} does not match the document: it was edited after it was signed"
+            )));
+        }
+        Ok(id.clone())
     }
 }
 
@@ -214,12 +296,15 @@ fn unhex(text: &str) -> Option<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::document::AttestationBasis;
 
     /// An Ed25519 key pair in the PEM files OpenSSL writes (made by rcgen).
     fn keypair(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        use std::os::unix::fs::PermissionsExt;
         let pair = rcgen::KeyPair::generate_for(&rcgen::PKCS_ED25519).unwrap();
         let (private, public) = (dir.join(format!("{name}.pem")), dir.join(format!("{name}.pub.pem")));
         std::fs::write(&private, pair.serialize_pem()).unwrap();
+        std::fs::set_permissions(&private, std::fs::Permissions::from_mode(0o600)).unwrap();
         std::fs::write(&public, pair.public_key_pem()).unwrap();
         (private, public)
     }
@@ -231,6 +316,10 @@ mod tests {
         MomentsDocument::new(job.spec().clone(), moments)
     }
 
+    fn computed() -> Attestation {
+        Attestation { basis: AttestationBasis::Computed, keys: Vec::new() }
+    }
+
     #[test]
     fn signed_documents_verify_and_edits_unsigned_or_unknown_keys_are_refused_naming_the_signature() {
         let dir = tempfile::tempdir().unwrap();
@@ -239,8 +328,8 @@ mod tests {
         let key = SigningKey::load(&private).unwrap();
         let trust = TrustedKeys::load(&[public]).unwrap();
         assert_eq!(trust.ids(), [key.key_id()]);
-        let signed = key.sign(document());
-        trust.check(&signed, "sources[0]").unwrap();
+        let signed = key.sign(document(), computed());
+        assert_eq!(trust.check(&signed, "sources[0]").unwrap(), key.key_id());
         // Through JSON and back: the signature survives (it is outside the checksummed body).
         let read = MomentsDocument::from_json(&signed.to_json()).unwrap();
         trust.check(&read, "").unwrap();
@@ -255,14 +344,56 @@ mod tests {
         let (f, m) = field(trust.check(&edited.sealed(), "sources[1]").unwrap_err());
         assert_eq!(f, "sources[1].signature");
         assert!(m.contains("edited after it was signed"), "{m}");
+        // The attestation is signed too: a "computed" turned into "merged" no longer verifies.
+        let mut claimed = signed.clone();
+        claimed.signature.as_mut().unwrap().attests =
+            Some(Attestation { basis: AttestationBasis::Merged, keys: Vec::new() });
+        assert!(field(trust.check(&claimed, "").unwrap_err()).1.contains("edited after it was signed"));
         let (f, m) = field(trust.check(&document(), "").unwrap_err());
         assert_eq!(f, "signature");
         assert!(m.contains("unsigned") && m.contains("--trust"), "{m}");
-        let stranger = SigningKey::load(&other).unwrap().sign(document());
+        let stranger = SigningKey::load(&other).unwrap().sign(document(), computed());
         let (_, m) = field(trust.check(&stranger, "").unwrap_err());
         assert!(m.contains("does not trust"), "{m}");
-        // Without trusted keys nothing is required.
-        TrustedKeys::default().check(&document(), "").unwrap();
+        // Without trusted keys nothing is required, and the signer is named only if trusted (or
+        // this server's own).
+        let open = Provenance::default();
+        assert_eq!(open.vouch(&document(), "").unwrap(), None);
+        assert_eq!(open.vouch(&stranger, "").unwrap(), None);
+        let own = Provenance { key: Some(SigningKey::load(&private).unwrap()), trust: TrustedKeys::default() };
+        assert_eq!(own.vouch(&signed, "").unwrap().as_deref(), Some(key.key_id()));
+        assert_eq!(own.vouch(&stranger, "").unwrap(), None);
+    }
+
+    /// Issue 39, item 11: a key id of megabytes is refused without being quoted whole.
+    #[test]
+    fn a_huge_key_id_is_refused_and_quoted_short() {
+        let dir = tempfile::tempdir().unwrap();
+        let (private, public) = keypair(dir.path(), "a");
+        let trust = TrustedKeys::load(&[public]).unwrap();
+        let mut doc = SigningKey::load(&private).unwrap().sign(document(), computed());
+        doc.signature.as_mut().unwrap().key_id = "f".repeat(5_000_000);
+        let JobError::Invalid(e) = trust.check(&doc, "").unwrap_err() else { panic!() };
+        assert!(e.message.len() < 200 && e.message.contains("(5000000 bytes)"), "{}", &e.message[..200]);
+        doc.signature.as_mut().unwrap().algorithm = "x".repeat(1_000_000);
+        let JobError::Invalid(e) = trust.check(&doc, "").unwrap_err() else { panic!() };
+        assert!(e.message.len() < 200, "{}", &e.message[..200]);
+    }
+
+    /// Issue 39, item 7: a signing key others can read is refused (as a token or a TLS key is),
+    /// and a key file that never ends (`/dev/zero`) is read only up to a bound (issue 39, item 13).
+    #[test]
+    fn a_signing_key_readable_by_others_and_an_endless_file_are_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let (private, _) = keypair(dir.path(), "a");
+        std::fs::set_permissions(&private, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let e = SigningKey::load(&private).unwrap_err().to_string();
+        assert!(e.contains("chmod 600"), "{e}");
+        std::fs::set_permissions(&private, std::fs::Permissions::from_mode(0o600)).unwrap();
+        SigningKey::load(&private).unwrap();
+        let e = TrustedKeys::load(&[PathBuf::from("/dev/zero")]).unwrap_err().to_string();
+        assert!(e.contains("larger than"), "{e}");
     }
 
     #[test]

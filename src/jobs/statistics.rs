@@ -16,7 +16,7 @@ use super::resource::JobState;
 use super::signing::Provenance;
 use super::toolbox::JobManager;
 use crate::sim::checks::published::applicable;
-use crate::sim::document::{MomentsDocument, merged_spec};
+use crate::sim::document::{Attestation, AttestationBasis, MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
 use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
@@ -175,12 +175,31 @@ impl Statistics {
     /// text, made on the request pool), signed if this server has a signing key. A merged job's
     /// spec says how many iterations it holds (and no shard), so that its document verifies.
     pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
+        let lineage = self.jobs.get(id).await?.provenance;
         let Latest { merged, job, moments, .. } = self.latest(id).await?;
+        // A job that merged nothing was computed here; a merged one is signed only if every source
+        // was computed here or signed by a trusted key (`MergeProvenance::attestation`).
+        let attests = match &lineage {
+            None if !merged => Some(Attestation { basis: AttestationBasis::Computed, keys: Vec::new() }),
+            None => None,
+            Some(lineage) => lineage.attestation(),
+        };
+        if attests.is_none() && self.provenance.key.is_some() {
+            tracing::info!(
+                job = id,
+                "exported unsigned: it holds statistics merged from sources no trusted key signed"
+            );
+        }
         let provenance = self.provenance.clone();
         self.jobs
             .compute(move || {
                 let spec = if merged { merged_spec(job.spec(), &moments) } else { job.spec().clone() };
-                provenance.sign(MomentsDocument::new(spec, moments)).to_json()
+                let doc = MomentsDocument::new(spec, moments);
+                match attests {
+                    Some(attests) => provenance.sign(doc, attests),
+                    None => doc,
+                }
+                .to_json()
             })
             .await
     }

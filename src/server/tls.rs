@@ -9,6 +9,8 @@ use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use tokio_rustls::TlsAcceptor;
 
+use crate::jobs::peers::read_config_file;
+
 /// Why the certificate or key cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum TlsError {
@@ -36,14 +38,16 @@ pub enum TlsError {
 /// An acceptor for the certificate chain in `cert` and the private key in `key` (PEM).
 pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
     crate::jobs::peers::install_crypto_provider();
-    let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
-        .and_then(|certs| certs.collect::<Result<_, _>>())
-        .map_err(|e| TlsError::Certificate { path: cert.to_path_buf(), message: e.to_string() })?;
+    let cert_error = |message: String| TlsError::Certificate { path: cert.to_path_buf(), message };
+    let pem = read_config_file(cert).map_err(|e| cert_error(e.to_string()))?;
+    let chain: Vec<CertificateDer<'static>> =
+        CertificateDer::pem_slice_iter(&pem).collect::<Result<_, _>>().map_err(|e| cert_error(e.to_string()))?;
     if chain.is_empty() {
-        return Err(TlsError::Certificate { path: cert.to_path_buf(), message: "holds no certificate".into() });
+        return Err(cert_error("holds no certificate".into()));
     }
-    let key = PrivateKeyDer::from_pem_file(key)
-        .map_err(|e| TlsError::Key { path: key.to_path_buf(), message: e.to_string() })?;
+    let key_error = |message: String| TlsError::Key { path: key.to_path_buf(), message };
+    let pem = read_config_file(key).map_err(|e| key_error(e.to_string()))?;
+    let key = PrivateKeyDer::from_pem_slice(&pem).map_err(|e| key_error(e.to_string()))?;
     let config = rustls::ServerConfig::builder()
         .with_no_client_auth()
         .with_single_cert(chain, key)

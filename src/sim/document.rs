@@ -23,6 +23,10 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use super::signature::{
+    ATTESTED_SIGNATURE_DOMAIN, Attestation, AttestationBasis, DocumentSignature, SIGNATURE_DOMAIN,
+};
+
 use super::configuration::explained;
 use super::spec::JobSpec;
 use crate::sim::math::digest::sha256_hex;
@@ -66,19 +70,6 @@ pub struct MomentsDocument {
     pub signature: Option<DocumentSignature>,
 }
 
-/// A detached signature of a document's checksum ([`MomentsDocument::signed_message`]).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-#[serde(deny_unknown_fields)]
-pub struct DocumentSignature {
-    /// Always `ed25519`.
-    pub algorithm: String,
-    /// The signing key's id: the first 16 hex digits of the SHA-256 of its raw public key.
-    pub key_id: String,
-    /// The 64-byte signature, hex.
-    pub value: String,
-}
-
 /// The checksummed part, in document order.
 #[derive(Serialize)]
 struct Body<'a> {
@@ -89,10 +80,6 @@ struct Body<'a> {
     spec: &'a JobSpec,
     moments: &'a Moments,
 }
-
-/// What a signature's message starts with, so that it cannot be taken for a signature of anything
-/// else made with the same key.
-pub const SIGNATURE_DOMAIN: &[u8] = b"optimis-moments-signature-v1\n";
 
 /// Why a document cannot be used.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -162,7 +149,19 @@ impl MomentsDocument {
     /// from the content whenever a document is read ([`MomentsDocument::verify`]), so a signature
     /// over it vouches for the content, and any edit — re-sealed or not — breaks it.
     pub fn signed_message(&self) -> Vec<u8> {
-        [SIGNATURE_DOMAIN, self.checksum.as_bytes()].concat()
+        self.signed_message_with(self.signature.as_ref().and_then(|s| s.attests.as_ref()))
+    }
+
+    /// The bytes a signature with the attestation `attests` covers: with one, the checksum and
+    /// the attestation's JSON behind their own domain tag, so that neither can be changed alone.
+    pub fn signed_message_with(&self, attests: Option<&Attestation>) -> Vec<u8> {
+        match attests {
+            None => [SIGNATURE_DOMAIN, self.checksum.as_bytes()].concat(),
+            Some(a) => {
+                let json = serde_json::to_vec(a).expect("an attestation serialises");
+                [ATTESTED_SIGNATURE_DOMAIN, self.checksum.as_bytes(), b"\n", &json].concat()
+            }
+        }
     }
 
     fn body(&self) -> Body<'_> {

@@ -14,10 +14,11 @@
 //!   the restricted engine, and the expected work of an iteration;
 //! * [`stats`] — exact, mergeable moments and the iterations they cover;
 //! * [`solve`] — solver options, the optimal weights, the noise table, the result document;
-//! * [`spec`], [`configuration`], [`document`], [`runner`], [`sweep`] — the job document users
-//!   submit (presets, validation), which of its fields make the configuration (and how two
-//!   differ), the portable moments document, the runner that puts iterations into moments, and
-//!   sweeps (a job document varied along axes, and their table);
+//! * [`spec`], [`configuration`], [`document`], [`signature`], [`runner`], [`sweep`] — the job
+//!   document users submit (presets, validation), which of its fields make the configuration (and
+//!   how two differ), the portable moments document and what its signature attests, the runner
+//!   that puts iterations into moments, and sweeps (a job document varied along axes, and their
+//!   table);
 //! * [`checks`] — independent references: the quadrature, exact merge expectations, engine
 //!   equivalence.
 //!
@@ -33,6 +34,7 @@ pub mod engines;
 pub mod math;
 pub mod model;
 pub mod runner;
+pub mod signature;
 pub mod solve;
 pub mod spec;
 pub mod stats;
