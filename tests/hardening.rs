@@ -528,3 +528,55 @@ async fn a_checkpoint_corrupted_under_a_running_server_is_reported() {
     assert!(problem["detail"].as_str().unwrap().contains("checksum"), "{problem}");
     server.stop().await;
 }
+
+/// Sets job `id`'s stored result (the `result` column only) in the database under `dir`.
+async fn set_stored_result(dir: &std::path::Path, id: i64, edit: impl FnOnce(String) -> String) {
+    let url = format!("sqlite://{}", dir.join("optimis.db").display());
+    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
+    let result: String =
+        sqlx::query_scalar("SELECT result FROM checkpoints WHERE job_id = ?").bind(id).fetch_one(&db).await.unwrap();
+    sqlx::query("UPDATE checkpoints SET result = ? WHERE job_id = ?")
+        .bind(edit(result))
+        .bind(id)
+        .execute(&db)
+        .await
+        .unwrap();
+    db.close().await;
+}
+
+/// Issue 39, item 12: the stored result was outside every checksum — an edited one was served
+/// (200), a garbled one answered 500. Both are now reported corrupted (409), as corrupted moments
+/// are.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_edited_or_garbled_stored_result_is_reported_not_served() {
+    let server = TestServer::start().await;
+    let (edited, _) = finished(&server, 3).await;
+    let (garbled, _) = finished(&server, 4).await;
+    let dir = server.stop().await;
+    // A valid document with one figure changed, and text that is not JSON.
+    set_stored_result(dir.path(), edited, |r| r.replacen("\"rms_percent\":", "\"rms_percent\":1", 1)).await;
+    set_stored_result(dir.path(), garbled, |_| "{ not json".to_string()).await;
+    let server = TestServer::start_in(dir, |_| {}).await;
+    for id in [edited, garbled] {
+        let problem = assert_problem(server.get(&format!("/v1/jobs/{id}/result")).await, 409);
+        assert!(problem["detail"].as_str().unwrap().contains("result checksum mismatch"), "{problem}");
+    }
+    // A row written before results had a checksum gets one at the next start, and is served.
+    let (old, _) = finished(&server, 5).await;
+    let dir = server.stop().await;
+    let url = format!("sqlite://{}", dir.path().join("optimis.db").display());
+    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
+    sqlx::query("UPDATE checkpoints SET result_checksum = NULL WHERE job_id = ?").bind(old).execute(&db).await.unwrap();
+    db.close().await;
+    let server = TestServer::start_in(dir, |_| {}).await;
+    assert_eq!(server.get(&format!("/v1/jobs/{old}/result")).await.status, 200);
+    let db = sqlx::SqlitePool::connect(&url).await.unwrap();
+    let filled: Option<String> = sqlx::query_scalar("SELECT result_checksum FROM checkpoints WHERE job_id = ?")
+        .bind(old)
+        .fetch_one(&db)
+        .await
+        .unwrap();
+    assert_eq!(filled.map(|c| c.len()), Some(64));
+    db.close().await;
+    server.stop().await;
+}

@@ -44,13 +44,21 @@ fn host_only(authority: &str) -> String {
         // `[v6]` or `[v6]:port` and nothing else: `[::1].evil.example` is not a loopback host but
         // an unparsable one (kept whole, so that no check accepts it).
         let Some((v6, after)) = rest.split_once(']') else { return authority };
-        let port = after.strip_prefix(':').map(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+        let port = after.strip_prefix(':').map(is_port);
         return if after.is_empty() || port == Some(true) { v6.to_string() } else { authority };
     }
     match authority.rsplit_once(':') {
-        Some((host, port)) if port.chars().all(|c| c.is_ascii_digit()) => host.to_string(),
+        Some((host, port)) if is_port(port) => host.to_string(),
         _ => authority,
     }
+}
+
+/// A TCP port: 1 to 65535 in decimal (`127.0.0.1:99999` names no host this server answers to).
+fn is_port(text: &str) -> bool {
+    !text.is_empty()
+        && text.len() <= 5
+        && text.bytes().all(|b| b.is_ascii_digit())
+        && text.parse::<u16>().is_ok_and(|p| p > 0)
 }
 
 fn is_loopback_host(host: &str) -> bool {
@@ -229,6 +237,11 @@ mod tests {
         for spoof in ["[::1].evil.example", "[::1]:80.evil.example", "[::1]:", "[::1"] {
             assert!(!is_loopback_host(&host_only(spoof)), "{spoof}");
         }
+        // Issue 39, item 13: a port that is no port names no host.
+        for bad in ["127.0.0.1:99999", "127.0.0.1:0", "localhost:", "[::1]:65536", "127.0.0.1:0080808"] {
+            assert!(!is_loopback_host(&host_only(bad)), "{bad}");
+        }
+        assert!(is_loopback_host(&host_only("127.0.0.1:65535")) && is_loopback_host(&host_only("localhost:08080")));
         assert_eq!(host_only("example.org"), "example.org");
         assert!(is_loopback_host("127.3.4.5") && is_loopback_host("::1") && !is_loopback_host("10.0.0.1"));
     }

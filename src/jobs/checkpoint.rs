@@ -83,6 +83,24 @@ pub(crate) async fn verified_checkpoint(
     Ok(checkpoint)
 }
 
+/// A stored result document, checked against its own checksum (a row written before that was
+/// kept has none until the start that fills it in) and parsed: an edited or garbled one is
+/// reported corrupted (409), never served. CPU work: on the request pool.
+pub(crate) fn checked_result<T: serde::de::DeserializeOwned>(
+    id: i64,
+    result: &str,
+    result_checksum: Option<&str>,
+) -> Result<T, JobError> {
+    let corrupt = |detail: String| JobError::Store(StoreError::Corrupt { job: id, detail });
+    if let Some(stored) = result_checksum {
+        let actual = sha256_hex(result.as_bytes());
+        if actual != stored {
+            return Err(corrupt(format!("result checksum mismatch (stored {stored}, computed {actual})")));
+        }
+    }
+    serde_json::from_str(result).map_err(|e| corrupt(format!("stored result unreadable: {e}")))
+}
+
 /// The refusal of a job that has no checkpoint yet.
 pub(crate) fn no_checkpoint(id: i64) -> JobError {
     JobError::Conflict(format!("job {id} has no checkpoint yet: results appear after its first checkpoint"))
@@ -150,11 +168,13 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option
         .map(|r| StrategyPoint { strategy: r.strategy, luminance: r.luminance, rms_percent: r.rms_percent })
         .collect();
     let internal = |e: serde_json::Error| JobError::Internal(e.to_string());
+    let result = serde_json::to_string(&report).map_err(internal)?;
     Ok(Checkpoint {
         iterations_done: moments.iterations(),
         checksum: sha256_hex(&bytes),
         moments: bytes,
-        result: serde_json::to_string(&report).map_err(internal)?,
+        result_checksum: Some(sha256_hex(result.as_bytes())),
+        result,
         best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
         warnings: Some(serde_json::to_string(&report.warnings).map_err(internal)?),
         history: serde_json::to_string(&history).map_err(internal)?,

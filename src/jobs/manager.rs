@@ -87,7 +87,27 @@ impl JobManager {
         Ok(manager)
     }
 
+    /// Fills in the result checksums of checkpoints written before they were kept (once: later
+    /// starts find none), in bounded batches hashed on the request pool.
+    async fn checksum_old_results(&self) -> Result<(), StoreError> {
+        loop {
+            let rows = self.inner.store.results_without_checksum(64).await?;
+            if rows.is_empty() {
+                return Ok(());
+            }
+            let hashed = self
+                .compute(move || rows.into_iter().map(|(id, result)| (id, sha256_hex(result.as_bytes()))).collect())
+                .await
+                .map_err(|e| StoreError::Corrupt { job: 0, detail: e.to_string() })?;
+            let hashed: Vec<(i64, String)> = hashed;
+            for (id, checksum) in hashed {
+                self.inner.store.fill_result_checksum(id, &checksum).await?;
+            }
+        }
+    }
+
     async fn recover(&self) -> Result<(), StoreError> {
+        self.checksum_old_results().await?;
         for row in self.inner.store.unfinished_jobs().await? {
             if row.cancel_requested {
                 // The cancel was acknowledged before the server stopped: honour it.

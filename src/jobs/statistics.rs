@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use serde_json::Value;
 
-use super::checkpoint::{decode_checkpoint, no_checkpoint};
+use super::checkpoint::{checked_result, decode_checkpoint, no_checkpoint};
 use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS};
 use super::error::JobError;
 use super::peers::Peers;
@@ -79,19 +79,16 @@ impl Statistics {
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
         let resource = self.jobs.get(id).await?;
         let (state, total) = (resource.state, resource.progress.iterations_total);
-        let (done, json, checksum) = self.jobs.store().load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
-        let known = self.jobs.recently_verified(id, &checksum);
-        let (done, json) = if known {
-            (done, json)
+        let stored = self.jobs.store().load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let known = self.jobs.recently_verified(id, &stored.checksum);
+        let (done, json, result_checksum) = if known {
+            (stored.iterations_done, stored.result, stored.result_checksum)
         } else {
             let checkpoint = self.jobs.verified_checkpoint(id).await?;
-            (checkpoint.iterations_done, checkpoint.result)
+            (checkpoint.iterations_done, checkpoint.result, checkpoint.result_checksum)
         };
-        let report: RunReport = self
-            .jobs
-            .compute(move || serde_json::from_str(&json))
-            .await?
-            .map_err(|e| JobError::Internal(format!("stored result of job {id} is unreadable: {e}")))?;
+        let report: RunReport =
+            self.jobs.compute(move || checked_result(id, &json, result_checksum.as_deref())).await??;
         let references = applicable(&resource.spec);
         Ok(JobResult {
             job_id: id,

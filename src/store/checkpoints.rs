@@ -25,12 +25,28 @@ pub struct Checkpoint {
     pub checksum: String,
     /// The result document (JSON) computed from them.
     pub result: String,
+    /// SHA-256 (hex) of `result` when written (none for a row written before it was kept, until
+    /// the start that fills it in).
+    pub result_checksum: Option<String>,
     /// The best strategy (JSON) at this checkpoint, copied to the job row.
     pub best: Option<String>,
     /// The result's warnings (JSON list), copied to the job row.
     pub warnings: Option<String>,
     /// Each strategy's luminance and RMS (JSON), appended to the job's history.
     pub history: String,
+}
+
+/// A job's latest result as stored, with the two checksums that guard it.
+#[derive(Debug, Clone)]
+pub struct StoredResult {
+    /// The iterations of the checkpoint.
+    pub iterations_done: u64,
+    /// The result document (JSON).
+    pub result: String,
+    /// SHA-256 (hex) of the checkpoint's moments.
+    pub checksum: String,
+    /// SHA-256 (hex) of `result` (none for a row written before it was kept).
+    pub result_checksum: Option<String>,
 }
 
 /// Replaces job `id`'s checkpoint row and appends (or replaces) its history row at the same
@@ -43,16 +59,17 @@ async fn upsert_checkpoint(
     now: i64,
 ) -> Result<(), StoreError> {
     sqlx::query(
-        "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, written_at) \
-         VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
+        "INSERT INTO checkpoints (job_id, iterations_done, moments, checksum, result, result_checksum, written_at) \
+         VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT (job_id) DO UPDATE SET iterations_done = excluded.iterations_done, \
          moments = excluded.moments, checksum = excluded.checksum, result = excluded.result, \
-         written_at = excluded.written_at",
+         result_checksum = excluded.result_checksum, written_at = excluded.written_at",
     )
     .bind(id)
     .bind(checkpoint.iterations_done as i64)
     .bind(&checkpoint.moments)
     .bind(&checkpoint.checksum)
     .bind(&checkpoint.result)
+    .bind(&checkpoint.result_checksum)
     .bind(now)
     .execute(&mut *tx)
     .await?;
@@ -158,16 +175,19 @@ impl Store {
 
     /// A job's latest checkpoint, if any.
     pub async fn load_checkpoint(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
-        let row = sqlx::query("SELECT iterations_done, moments, checksum, result FROM checkpoints WHERE job_id = ?")
-            .bind(id)
-            .fetch_optional(self.pool())
-            .await?;
+        let row = sqlx::query(
+            "SELECT iterations_done, moments, checksum, result, result_checksum FROM checkpoints WHERE job_id = ?",
+        )
+        .bind(id)
+        .fetch_optional(self.pool())
+        .await?;
         row.map(|row| {
             Ok::<_, sqlx::Error>(Checkpoint {
                 iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
                 moments: row.try_get("moments")?,
                 checksum: row.try_get("checksum")?,
                 result: row.try_get("result")?,
+                result_checksum: row.try_get("result_checksum")?,
                 best: None,
                 warnings: None,
                 history: String::new(),
@@ -177,17 +197,42 @@ impl Store {
         .map_err(StoreError::from)
     }
 
-    /// A job's latest result document without the moments: (iterations done, result JSON, the
-    /// moments' checksum) of its checkpoint, if it has one.
-    pub async fn load_result(&self, id: i64) -> Result<Option<(u64, String, String)>, StoreError> {
-        let row = sqlx::query("SELECT iterations_done, result, checksum FROM checkpoints WHERE job_id = ?")
-            .bind(id)
-            .fetch_optional(self.pool())
-            .await?;
+    /// A job's latest result document without the moments, if it has a checkpoint.
+    pub async fn load_result(&self, id: i64) -> Result<Option<StoredResult>, StoreError> {
+        let row =
+            sqlx::query("SELECT iterations_done, result, checksum, result_checksum FROM checkpoints WHERE job_id = ?")
+                .bind(id)
+                .fetch_optional(self.pool())
+                .await?;
         row.map(|row| {
-            Ok((row.try_get::<i64, _>("iterations_done")? as u64, row.try_get("result")?, row.try_get("checksum")?))
+            Ok(StoredResult {
+                iterations_done: row.try_get::<i64, _>("iterations_done")? as u64,
+                result: row.try_get("result")?,
+                checksum: row.try_get("checksum")?,
+                result_checksum: row.try_get("result_checksum")?,
+            })
         })
         .transpose()
         .map_err(|e: sqlx::Error| e.into())
+    }
+
+    /// The checkpoints whose result has no checksum yet (written before it was kept): (job id,
+    /// result JSON), at most `limit` of them.
+    pub async fn results_without_checksum(&self, limit: u32) -> Result<Vec<(i64, String)>, StoreError> {
+        let rows = sqlx::query("SELECT job_id, result FROM checkpoints WHERE result_checksum IS NULL LIMIT ?")
+            .bind(limit)
+            .fetch_all(self.pool())
+            .await?;
+        Ok(rows.iter().map(|r| Ok((r.try_get("job_id")?, r.try_get("result")?))).collect::<Result<_, sqlx::Error>>()?)
+    }
+
+    /// Records the checksum of job `id`'s stored result, if it still has none.
+    pub async fn fill_result_checksum(&self, id: i64, checksum: &str) -> Result<(), StoreError> {
+        sqlx::query("UPDATE checkpoints SET result_checksum = ? WHERE job_id = ? AND result_checksum IS NULL")
+            .bind(checksum)
+            .bind(id)
+            .execute(self.pool())
+            .await?;
+        Ok(())
     }
 }

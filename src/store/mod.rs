@@ -31,7 +31,7 @@ use sqlx::SqlitePool;
 use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
-pub use checkpoints::Checkpoint;
+pub use checkpoints::{Checkpoint, StoredResult};
 pub use history::{MAX_HISTORY_ROWS, evenly_kept};
 pub use jobs::{Inserted, JobFilter, JobRow, NewJob};
 pub use solves::SolveRow;

@@ -408,7 +408,8 @@ impl Sweeps {
             let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
             return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
-        let Some((_, _, checksum)) = self.jobs.store().load_result(job).await? else { return Ok(Vec::new()) };
+        let Some(stored) = self.jobs.store().load_result(job).await? else { return Ok(Vec::new()) };
+        let checksum = stored.checksum;
         let running = self.jobs.active(job).is_some();
         let cached = || {
             let cache = self.predictions.lock().expect("prediction cache");
