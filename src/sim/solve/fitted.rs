@@ -10,7 +10,7 @@
 use super::crossfit::{CrossFitting, Scored, Selection, score, select_lambda};
 use super::options::SolverOptions;
 use super::row::{HeuristicWeight, LambdaScore, NoiseRow};
-use super::solver::{stack_family, stackable};
+use super::solver::{adds_nothing, stack_family, stackable};
 use super::strategy::Strategy;
 use crate::sim::model::cells::CellGrid;
 
@@ -52,17 +52,48 @@ pub fn fitted_rows(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -
         out.rows.push(NoiseRow::failed(Strategy::OptimalStacked, why.to_string()));
         return out;
     }
-    let stacked =
-        select_lambda(cf, grid, fixed, &solver.cv_lambdas, &stack_family(cf.all.layout, fixed)).map_err(no_lambda);
+    // A heuristic that gives every path of these data the table base's weights adds nothing to
+    // the stack (its β would be undetermined for ever): it is left out, and the rows say so.
+    let nothing: Vec<_> = family.iter().copied().filter(|&h| adds_nothing(&cf.all, fixed, h)).collect();
+    let stack: Vec<_> = stack_family(cf.all.layout, fixed).into_iter().filter(|h| !nothing.contains(h)).collect();
+    let stacked = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &stack).map_err(no_lambda);
     let lambda = stacked.as_ref().ok().map(|s| s.chosen.cross_fit.lambda);
     out.push_selection(Strategy::OptimalStacked, stacked, cf);
+    let left_out: Vec<_> = stack_family(cf.all.layout, fixed).into_iter().filter(|h| nothing.contains(h)).collect();
+    if !left_out.is_empty()
+        && let Some(row) = out.rows.last_mut()
+    {
+        let names: Vec<&str> = left_out.iter().map(|h| h.name()).collect();
+        row.note = Some(if stack.is_empty() {
+            format!(
+                "{} left out: on these data every stacked heuristic gives every path the table's fixed weights \
+                 (nothing to stack), so this is the table alone",
+                names.join(", ")
+            )
+        } else {
+            format!(
+                "{} left out of the stack: on these data it gives every path the table's fixed weights (e.g. the \
+                 switch under a light without a spot is plane 3), so its β would stay undetermined",
+                names.join(", ")
+            )
+        });
+    }
     for &h in &family {
         let name = Strategy::corrected(h).expect("stackable strategies have a corrected row");
+        let adds = !nothing.contains(&h);
+        let corrected: Vec<_> = if adds { vec![h] } else { Vec::new() };
         let scored = match lambda {
-            Some(l) => score(cf, grid, fixed, l, &[h]),
+            Some(l) => score(cf, grid, fixed, l, &corrected),
             None => Err("the stacked optimum, whose λ it uses, could not be fitted".to_string()),
         };
         out.push(name, scored, cf, false);
+        if !adds && let Some(row) = out.rows.last_mut() {
+            row.note = Some(format!(
+                "{} gives every path of these data the table's fixed weights, so corrected by a table it is the \
+                 table alone at optimal_stacked's λ: these are the table's figures",
+                h.name()
+            ));
+        }
     }
     out
 }
@@ -136,5 +167,35 @@ pub(crate) fn scored_row(strategy: Strategy, s: &Scored, cf: &CrossFitting, in_s
         in_sample_luminance_stderr: inner.as_ref().and_then(|r| r.luminance_stderr),
         in_sample_rms_percent: inner.as_ref().and_then(|r| r.rms_percent),
         ..row
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::runner::run;
+    use crate::sim::solve::report::{ReportInputs, build_report};
+    use crate::sim::solve::strategy::Strategy;
+    use crate::sim::spec::parse_job_spec;
+
+    /// Issue 40, item 2: under a uniform light the switch is plane 3 on every path, so its stacked
+    /// column is zero; `optimal_stacked` and every `_corrected` row failed with "singular … run more
+    /// iterations", which no run length cures. Now the switch is left out and every row has figures,
+    /// the rows that changed saying why.
+    #[test]
+    fn a_heuristic_that_adds_nothing_is_left_out_and_every_row_has_figures() {
+        let doc = serde_json::json!({ "preset": "uniform-illumination", "iterations": 2000, "seed": 3 });
+        let job = parse_job_spec(&doc).unwrap().validate().unwrap();
+        let moments = run(job.config(), 3, 0..2000);
+        let report = build_report(&moments, &job.config().cells, &job.spec().solver, &ReportInputs::default());
+        for row in &report.noise_table {
+            assert!(row.error.is_none() && row.rms_percent.is_some(), "{:?}: {:?}", row.strategy, row.error);
+        }
+        let row = |s: Strategy| report.noise_table.iter().find(|r| r.strategy == s).unwrap();
+        let stacked = row(Strategy::OptimalStacked);
+        assert!(stacked.note.as_deref().is_some_and(|n| n.starts_with("switch left out")), "{:?}", stacked.note);
+        assert!(stacked.heuristics.iter().all(|h| h.strategy != Strategy::Switch));
+        let corrected = row(Strategy::corrected(crate::sim::engines::strategies::PathStrategy::Switch).unwrap());
+        assert!(corrected.note.is_some() && corrected.heuristics.is_empty());
+        assert!(row(Strategy::CorrelationAwarePlanes23Corrected).note.is_none());
     }
 }

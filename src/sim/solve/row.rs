@@ -108,6 +108,10 @@ pub struct NoiseRow {
     pub expected_error: Option<String>,
     /// Why the row's figures could not be computed (its values are then null).
     pub error: Option<String>,
+    /// How a fitted row's figures were made when it differs from its name's promise (e.g. a
+    /// heuristic left out of the stack because on these data it adds nothing to the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 fn keeps() -> bool {
@@ -146,6 +150,7 @@ impl NoiseRow {
             z: None,
             expected_error: None,
             error: None,
+            note: None,
         };
         if m < 2.0 {
             return Self { error: Some(format!("at least 2 iterations are needed, got {m}")), ..empty };

@@ -142,6 +142,32 @@ pub fn stack_family(layout: Layout, fixed: &FixedWeights) -> Vec<PathStrategy> {
     stackable(layout, fixed).into_iter().filter(|h| PathStrategy::STACKED.contains(h)).collect()
 }
 
+/// Variance, relative to the plane-3 estimate's, below which a stacked heuristic's column counts
+/// as zero (its sums differ from the table base's only by rounding).
+const NOTHING_ADDED: f64 = 1e-12;
+
+/// Whether stacking heuristic `h` adds nothing on these data: its per-iteration value differs from
+/// the table base's (the fixed weights' table, e.g. plane 3 alone with w0 = 0) by a constant — the
+/// switch under a uniform light, which has no spot, gives every path plane 3's weights. Its β would
+/// be undetermined however many iterations ran, so the family leaves it out (and says so).
+pub fn adds_nothing(stats: &YStats, fixed: &FixedWeights, h: PathStrategy) -> bool {
+    let layout = stats.layout;
+    let Some(hi) = layout.heuristic_index(h) else { return false };
+    let (base, _) = cell_parameters(fixed);
+    let k = layout.cells;
+    let mut d = DVector::zeros(layout.dimension());
+    d[hi] = 1.0;
+    d[layout.b_index()] = -1.0;
+    for a in 0..k {
+        d[a] -= base[0];
+        d[k + a] -= base[1];
+    }
+    let s = stats.covariance();
+    let variance = d.dot(&(&s * &d));
+    let plane3 = s[(layout.b_index(), layout.b_index())];
+    variance <= NOTHING_ADDED * plane3.abs() || !variance.is_finite()
+}
+
 /// Free parameterisation of one cell: (T₀, T₁) = base + Σ_k z_k·coef_k.
 fn cell_parameters(fixed: &FixedWeights) -> ([f64; 2], Vec<[f64; 2]>) {
     match (fixed.w0, fixed.w1, fixed.w2) {
