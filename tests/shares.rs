@@ -128,7 +128,7 @@ async fn slow_peer() -> String {
 /// processing slots and every server-wide pull, so a fast one-source study of another client got
 /// 429 after 10 s. Now a pull waiting on its peer holds no processing slot and only its client's
 /// share of the pulls: the other client's studies — from a fast peer, and from a document — are
-/// created.
+/// created. A shutdown answers the slow studies 503 (they got no answer after 10 s before).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_slow_peer_delays_only_the_client_whose_studies_pull_from_it() {
     let fast = TestServer::start().await;
@@ -156,9 +156,12 @@ async fn a_slow_peer_delays_only_the_client_whose_studies_pull_from_it() {
     let document = fast.moments(fast_job).await;
     let inline = server.study(&json!({ "sources": [document] })).await;
     assert_eq!(inline.status, 201, "{}", inline.text());
-    for study in slow_studies {
-        study.abort();
-    }
+    // A stopping server answers the studies still waiting on the slow peer (503) instead of
+    // holding them, and itself, until its grace runs out.
     server.stop().await;
+    for study in slow_studies {
+        let reply = study.await.unwrap();
+        assert_eq!(reply.status, 503, "{}", reply.text());
+    }
     fast.stop().await;
 }

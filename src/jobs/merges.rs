@@ -202,7 +202,13 @@ impl Statistics {
         let (doc, field) = match source {
             Source::Document { doc, field } => (*doc, field),
             Source::Peer { url, field } => {
-                let bytes = self.peers.pull(&url, &field, client).await?;
+                // A pull waits on the network: a stopping server answers 503 at once instead of
+                // holding the request (and its own exit) until the pull's deadline.
+                let mut stopping = self.jobs.shutdown_signal();
+                let bytes = tokio::select! {
+                    pulled = self.peers.pull(&url, &field, client) => pulled?,
+                    _ = stopping.wait_for(|&s| s) => return Err(JobError::ShuttingDown),
+                };
                 let doc = self.process(move || MomentsDocument::from_json(&bytes)).await?;
                 let doc = doc.map_err(|e| JobError::Peer {
                     field: field.clone(),
