@@ -114,6 +114,75 @@ fn the_recommendation_delivers_what_it_reports_on_an_independent_run() {
     assert!(covered * 10 >= scored * 8, "{covered} of {scored} covered");
 }
 
+/// The weights a table's recommendation hands to a renderer, as `evaluate` takes them.
+fn recommended_weights(table: &optimis::sim::solve::noise::NoiseTable, job: &ValidJob) -> GivenWeights {
+    let recommended = table.recommended.as_ref().expect("a recommendation");
+    match recommended.fit() {
+        None => GivenWeights { recommended: Some(named(recommended.strategy.name())), ..GivenWeights::default() },
+        Some(fit) => GivenWeights {
+            weights: weight_rows(job.config().cells(), fit, None)
+                .into_iter()
+                .map(|w| GivenCell { r2: w.r2, r3: w.r3, phi: w.phi, w0: w.w0, w1: w.w1, w2: w.w2 })
+                .collect(),
+            heuristics: fit
+                .heuristics
+                .iter()
+                .map(|&(h, beta)| GivenHeuristic {
+                    strategy: optimis::sim::solve::strategy::Strategy::of_path(h),
+                    beta,
+                })
+                .collect(),
+            ..Default::default()
+        },
+    }
+}
+
+/// Issue 40: outside the paper's preset a short run could recommend weights several times noisier
+/// than the heuristic beside them while reporting them better. At merge radius 0.01, seeds 44, 56
+/// and 60 of 10⁴ iterations recommended fits that moved plane-3 merges in the bright spot to
+/// w2 ≈ 1.1 (and plane 2 to −0.7): on this independent 10⁵-iteration run they delivered 74.5%,
+/// 40.1% and 81.9% RMS where `correlation_aware_planes23` delivers 20.4% (docs/results.md §18).
+/// Trusted only within 0.25 of that heuristic's weights, every recommendation stays within 10% of
+/// what the heuristic delivers, and its reported RMS covers what it delivers within 2.5 SE.
+#[test]
+fn outside_the_preset_a_short_run_never_recommends_a_gamble() {
+    let at = |seed: u64, iterations: u64| {
+        let doc = json!({ "preset": "paper-table1", "merge_radius": 0.01, "iterations": iterations, "seed": seed });
+        parse_job_spec(&doc).unwrap().validate().unwrap()
+    };
+    let long_job = at(1_000_003, 100_000);
+    let config = long_job.config();
+    let long = pool().install(|| run(config, 1_000_003, 0..100_000));
+    let anchor = GivenWeights { recommended: Some(named("correlation_aware_planes23")), ..GivenWeights::default() };
+    let anchor_delivered = evaluate(&long, config.cells(), &anchor).unwrap().evaluated.rms_percent.unwrap();
+    for seed in [44, 56, 60] {
+        let short = at(seed, 10_000);
+        let moments = pool().install(|| run(short.config(), seed, 0..10_000));
+        let table = noise_table(&moments, short.config().cells(), &short.spec().solver);
+        let recommended = table.recommended.as_ref().unwrap();
+        let row = table.rows.iter().find(|r| r.strategy == recommended.strategy).unwrap();
+        let (reported, se) = (row.rms_percent.unwrap(), row.rms_percent_stderr.unwrap());
+        let delivered = evaluate(&long, config.cells(), &recommended_weights(&table, &short))
+            .unwrap()
+            .evaluated
+            .rms_percent
+            .unwrap();
+        eprintln!(
+            "seed {seed}: {} reported {reported:.2} ± {se:.2}, delivered {delivered:.2}; the heuristic delivers {anchor_delivered:.2}",
+            recommended.strategy
+        );
+        assert!(
+            delivered <= 1.10 * anchor_delivered,
+            "seed {seed}: {} delivers {delivered:.2}%, more than 10% above correlation_aware_planes23's {anchor_delivered:.2}%",
+            recommended.strategy
+        );
+        assert!(
+            (reported - delivered).abs() <= 2.5 * se,
+            "seed {seed}: reported {reported:.2} ± {se:.2}, delivered {delivered:.2}"
+        );
+    }
+}
+
 /// The recommendation of a per-path strategy, as a result document names it.
 fn named(strategy: &str) -> optimis::sim::solve::evaluate::GivenRecommendation {
     serde_json::from_value(json!({ "strategy": strategy })).unwrap()

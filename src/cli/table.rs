@@ -176,6 +176,12 @@ pub fn write_noise_rows_with(
         if row.unstable {
             notes.push("unstable".to_string());
         }
+        if row.beyond_trust_region {
+            notes.push(match row.deviation {
+                Some(d) => format!("beyond trust region (deviation {d:.2})"),
+                None => "beyond trust region".to_string(),
+            });
+        }
         if row.in_sample {
             notes.push("in-sample (optimistic)".to_string());
         } else if row.lambda.is_some() {

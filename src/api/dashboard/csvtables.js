@@ -10,7 +10,8 @@ import { luminanceStderr } from './paper.js';
 
 /** The noise table's columns, in docs/csv.md's order. */
 export const NOISE_COLUMNS = ['strategy', 'paper_case', 'luminance', 'luminance_stderr', 'expected_luminance', 'z', 'expected_error',
-  'reference_luminance', 'rms_percent', 'rms_percent_stderr', 'lambda', 'in_sample', 'respects_fixed', 'unstable', 'recommended',
+  'reference_luminance', 'rms_percent', 'rms_percent_stderr', 'lambda', 'in_sample', 'respects_fixed', 'unstable', 'deviation',
+  'beyond_trust_region', 'recommended',
   'heuristics', 'in_sample_luminance', 'in_sample_luminance_stderr', 'in_sample_rms_percent', 'paper_luminance', 'paper_rms_percent',
   'error'];
 
@@ -41,6 +42,8 @@ function noiseRows(result) {
       in_sample: row.in_sample,
       respects_fixed: row.respects_fixed,
       unstable: row.unstable,
+      deviation: row.deviation,
+      beyond_trust_region: row.beyond_trust_region ?? false,
       recommended: row.strategy === result.recommended?.strategy,
       // β of the stacked heuristics as JSON ([{strategy, beta, beta_stderr}]); empty for the others.
       heuristics: row.heuristics?.length ? JSON.stringify(row.heuristics) : null,

@@ -236,17 +236,19 @@ pub struct Selection {
     pub scored: Vec<Scored>,
 }
 
-/// Cross-fits every λ of `lambdas` and chooses one by the one-standard-error rule among the stable
-/// fits (module docs): the largest λ whose cross-fitted RMS is within one jackknife SE of the
-/// lowest; if none of those is stable, the stable λ with the lowest RMS; if no λ is stable, the
-/// rule's λ anyway (the caller sees `is_stable()` false and must not recommend it). The failures
-/// of the λ that could not be scored come back when none could.
+/// Cross-fits every λ of `lambdas` and chooses one by the one-standard-error rule among the
+/// eligible fits (stable, and within the trust region where the caller has one: `eligible`; module
+/// docs): the largest λ whose cross-fitted RMS is within one jackknife SE of the lowest; if none
+/// of those is eligible, the eligible λ with the lowest RMS; if no λ is eligible, the rule's λ
+/// anyway (the caller sees that and must not recommend it). The failures of the λ that could not
+/// be scored come back when none could.
 pub fn select_lambda(
     cf: &CrossFitting,
     grid: &CellGrid,
     fixed: &FixedWeights,
     lambdas: &[f64],
     family: &[PathStrategy],
+    eligible: &dyn Fn(&Scored) -> bool,
 ) -> Result<Selection, Vec<String>> {
     let mut scored: Vec<Scored> = Vec::new();
     let mut failures = Vec::new();
@@ -261,9 +263,9 @@ pub fn select_lambda(
     let largest = |s: &&Scored| s.cross_fit.lambda;
     let within = || scored.iter().filter(|s| s.rms_percent <= threshold);
     let chosen = within()
-        .filter(|s| s.is_stable())
+        .filter(|s| eligible(s))
         .max_by(|a, b| largest(a).total_cmp(&largest(b)))
-        .or_else(|| scored.iter().filter(|s| s.is_stable()).min_by(|a, b| a.rms_percent.total_cmp(&b.rms_percent)))
+        .or_else(|| scored.iter().filter(|s| eligible(s)).min_by(|a, b| a.rms_percent.total_cmp(&b.rms_percent)))
         .or_else(|| within().max_by(|a, b| largest(a).total_cmp(&largest(b))))
         .expect("the best λ is within its own threshold")
         .clone();
@@ -289,7 +291,8 @@ pub fn nested_selection(
             cf.train[f].clone(),
             cf.used().filter(|&g| g != f).map(|g| cf.test[g].clone()).collect(),
         );
-        let chosen = select_lambda(&inner, grid, fixed, lambdas, family).map_err(|e| e.join("; "))?;
+        let chosen =
+            select_lambda(&inner, grid, fixed, lambdas, family, &Scored::is_stable).map_err(|e| e.join("; "))?;
         let (s1, s2) = cf.test[f].evaluate(&chosen.chosen.all.coefficients(cf.all.layout));
         total = [total[0] + cf.test[f].m, total[1] + s1, total[2] + s2];
     }

@@ -12,7 +12,7 @@ use super::strategy::Strategy;
 use crate::sim::math::csv::{Csv, json_cell, number, quoted};
 
 /// The noise table's columns, in the vocabulary of docs/csv.md (the dashboard writes the same).
-const NOISE_COLUMNS: [&str; 22] = [
+const NOISE_COLUMNS: [&str; 24] = [
     "strategy",
     "paper_case",
     "luminance",
@@ -27,6 +27,8 @@ const NOISE_COLUMNS: [&str; 22] = [
     "in_sample",
     "respects_fixed",
     "unstable",
+    "deviation",
+    "beyond_trust_region",
     "recommended",
     "heuristics",
     "in_sample_luminance",
@@ -74,6 +76,8 @@ pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperCol
             r.in_sample.to_string(),
             r.respects_fixed.to_string(),
             r.unstable.to_string(),
+            number(r.deviation),
+            r.beyond_trust_region.to_string(),
             (Some(r.strategy) == chosen).to_string(),
             heuristics,
             number(r.in_sample_luminance),

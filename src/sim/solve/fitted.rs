@@ -12,6 +12,7 @@ use super::options::SolverOptions;
 use super::row::{HeuristicWeight, LambdaScore, NoiseRow};
 use super::solver::{adds_nothing, stack_family, stackable};
 use super::strategy::Strategy;
+use super::trust::TrustRegion;
 use crate::sim::model::cells::CellGrid;
 
 /// A cross-fitted row and the λ it was scored at: its figures, its all-data weights and their
@@ -32,14 +33,23 @@ pub struct FittedRows {
     pub rows: Vec<NoiseRow>,
     /// The fits of the rows that could be computed.
     pub fitted: Vec<Fitted>,
+    /// The trust region the rows were measured against, if any.
+    region: Option<TrustRegion>,
 }
 
-/// Computes every fitted row but the in-sample `optimal`.
-pub fn fitted_rows(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -> FittedRows {
+/// Computes every fitted row but the in-sample `optimal`. With a trust `region`, the rows chosen by
+/// cross-validation choose λ among the fits within it, and every row beyond it is marked so.
+pub fn fitted_rows(
+    cf: &CrossFitting,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    region: Option<TrustRegion>,
+) -> FittedRows {
     let fixed = &solver.fixed;
-    let mut out = FittedRows { rows: Vec::new(), fitted: Vec::new() };
+    let mut out = FittedRows { rows: Vec::new(), fitted: Vec::new(), region };
+    let eligible = |s: &Scored| s.is_stable() && region.is_none_or(|r| r.admits(&s.all));
     out.push(Strategy::OptimalHoldout, score(cf, grid, fixed, solver.lambda, &[]), cf, false);
-    let cv = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &[]);
+    let cv = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &[], &eligible);
     out.push_selection(Strategy::OptimalCv, cv.map_err(no_lambda), cf);
 
     let family = stackable(cf.all.layout, fixed);
@@ -56,7 +66,7 @@ pub fn fitted_rows(cf: &CrossFitting, grid: &CellGrid, solver: &SolverOptions) -
     // the stack (its β would be undetermined for ever): it is left out, and the rows say so.
     let nothing: Vec<_> = family.iter().copied().filter(|&h| adds_nothing(&cf.all, fixed, h)).collect();
     let stack: Vec<_> = stack_family(cf.all.layout, fixed).into_iter().filter(|h| !nothing.contains(h)).collect();
-    let stacked = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &stack).map_err(no_lambda);
+    let stacked = select_lambda(cf, grid, fixed, &solver.cv_lambdas, &stack, &eligible).map_err(no_lambda);
     let lambda = stacked.as_ref().ok().map(|s| s.chosen.cross_fit.lambda);
     out.push_selection(Strategy::OptimalStacked, stacked, cf);
     let left_out: Vec<_> = stack_family(cf.all.layout, fixed).into_iter().filter(|h| nothing.contains(h)).collect();
@@ -129,7 +139,12 @@ impl FittedRows {
     fn push(&mut self, strategy: Strategy, scored: Result<Scored, String>, cf: &CrossFitting, in_sample: bool) {
         match scored {
             Ok(s) => {
-                self.rows.push(scored_row(strategy, &s, cf, in_sample));
+                let mut row = scored_row(strategy, &s, cf, in_sample);
+                if let Some(region) = self.region {
+                    row.deviation = region.deviation(&s.all);
+                    row.beyond_trust_region = !region.admits(&s.all);
+                }
+                self.rows.push(row);
                 self.fitted.push(Fitted { strategy, scored: s });
             }
             Err(e) => self.rows.push(NoiseRow::failed(strategy, e)),

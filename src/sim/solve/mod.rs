@@ -6,7 +6,8 @@
 //! * [`crossfit`] — K-fold cross-fitting of fitted weights and the jackknife over the fold fits;
 //! * [`row`] — one row of the noise table (L, RMS and their standard errors) and the per-path rows;
 //! * [`fitted`] — the fitted rows: the table, the stacked optimum, each heuristic corrected;
-//! * [`recommend`] — which row to recommend, with its guard, and the gain;
+//! * [`recommend`] — which row to recommend, with its guard, and the gain; [`trust`] — how far a
+//!   fit may move from the best per-path row to be trusted;
 //! * [`rms_error`] — the standard error of a fitted row's RMS;
 //! * [`noise`] — the noise table: every row, the recommendation and the gain;
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
@@ -38,5 +39,6 @@ pub mod row;
 pub mod solver;
 pub mod strategy;
 pub mod tables;
+pub mod trust;
 pub mod warnings;
 pub mod ystats;

@@ -17,13 +17,14 @@ use serde::{Deserialize, Serialize};
 use super::crossfit::{CrossFitting, Scored, cross_fit, score};
 use super::fitted::{Fitted, fitted_rows};
 use super::options::{FixedWeights, SolverOptions};
-use super::recommend::{Gain, Recommended, recommend};
+use super::recommend::{Gain, Margin, Recommended, recommend};
 use super::row::path_fold_sums;
 use super::row::path_row;
 pub use super::row::{HeuristicWeight, NoiseRow, WeightErrors, path_rows, respects_fixed};
 pub(crate) use super::row::{central_3_4, power_sums};
-use super::solver::{Fit, SolveError, fit, stack_family};
+use super::solver::{Fit, SolveError, adds_nothing, fit, stack_family};
 use super::strategy::Strategy;
+use super::trust::{TrustRegion, anchor_of};
 use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::{FoldMoments, Moments};
@@ -47,6 +48,8 @@ pub struct NoiseTable {
     pub unconstrained: Option<Gain>,
     /// The guard's test: the best per-path row against the best stable fitted row.
     pub guard: Option<Gain>,
+    /// The recommendation's margin (the guard as a verdict).
+    pub margin: Margin,
     /// When that strategy is measurably better: the stacked optimum with the fixed weights freed
     /// (which contains it), cross-fitted at the stacked optimum's λ.
     pub free_stacked: Option<Scored>,
@@ -62,28 +65,30 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
     let pooled = moments.pooled();
     let path = |s| path_row(&pooled, s, &solver.fixed);
     let cf = CrossFitting::new(moments, &pooled);
-    let mut rows: Vec<NoiseRow> =
-        [PathStrategy::Plane1, PathStrategy::Plane2, PathStrategy::Plane3, PathStrategy::Switch]
-            .into_iter()
-            .map(path)
-            .collect();
+    let per_path: Vec<NoiseRow> = PathStrategy::ALL.iter().map(|&s| path(s)).collect();
+    let is_case = |r: &NoiseRow| r.strategy.path().is_some_and(|s| s.is_case());
+    // The paper's cases 1–4 first (PathStrategy::ALL lists them first, in that order).
+    let mut rows: Vec<NoiseRow> = per_path.iter().filter(|r| is_case(r)).cloned().collect();
     // Case 5: fitted and evaluated on all iterations (the paper's procedure).
     let optimal = fit(&cf.all, grid, &solver.fixed, solver.lambda, &[]);
     rows.push(match &optimal {
         Ok(f) => in_sample_row(Strategy::Optimal, f, &cf),
         Err(e) => NoiseRow::failed(Strategy::Optimal, e.to_string()),
     });
-    let fitted = fitted_rows(&cf, grid, solver);
+    // Fitted rows are trusted only as corrections of the best per-path row (`trust`).
+    let region = solver.trust_region.zip(anchor_of(&per_path)).map(|(radius, anchor)| TrustRegion { anchor, radius });
+    let fitted = fitted_rows(&cf, grid, solver, region);
     let table_rows = [Strategy::OptimalHoldout, Strategy::OptimalCv];
     let row_of = |s: Strategy| fitted.rows.iter().find(|r| r.strategy == s).cloned();
     rows.extend(table_rows.iter().filter_map(|&s| row_of(s)));
-    rows.extend(PathStrategy::ALL.iter().filter(|s| !s.is_case()).map(|&s| path(s)));
+    rows.extend(per_path.into_iter().filter(|r| !is_case(r)));
     rows.extend(fitted.rows.iter().filter(|r| !table_rows.contains(&r.strategy)).cloned());
     let choice = recommend(&rows, &fitted.fitted, &|p| path_fold_sums(moments, p));
     let free_stacked = choice
         .unconstrained
         .filter(|g| g.stderr.is_some_and(|se| g.value + 2.0 * se < 1.0))
         .and_then(|_| unconstrained_optimum(&cf, grid, solver, &fitted.fitted));
+    let margin = choice.margin();
     NoiseTable {
         rows,
         optimal,
@@ -92,14 +97,16 @@ pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -
         gain: choice.gain,
         unconstrained: choice.unconstrained,
         guard: choice.guard,
+        margin,
         free_stacked,
         pooled,
         cross_fitting: cf,
     }
 }
 
-/// The stacked optimum with the fixed weights freed (all its heuristics admitted), at the λ the
-/// stacked (or else the table's) optimum chose: what freeing the fixed weights would give.
+/// The stacked optimum with the fixed weights freed (all its heuristics admitted, but those that
+/// add nothing), at the λ the stacked (or else the table's) optimum chose: what freeing the fixed
+/// weights would give.
 fn unconstrained_optimum(
     cf: &CrossFitting,
     grid: &CellGrid,
@@ -107,12 +114,17 @@ fn unconstrained_optimum(
     fitted: &[Fitted],
 ) -> Option<Scored> {
     let free = FixedWeights::default();
-    let family = stack_family(cf.all.layout, &free);
-    let lambda = [Strategy::OptimalStacked, Strategy::OptimalCv]
+    // As the stacked optimum, without the heuristics that add nothing on these data.
+    let family: Vec<PathStrategy> =
+        stack_family(cf.all.layout, &free).into_iter().filter(|&h| !adds_nothing(&cf.all, &free, h)).collect();
+    // The stacked (or else the table's) optimum's λ; where the wider free family cannot be fitted
+    // there (a short run at λ = 0), the grid's largest, the most regularised.
+    let chosen = [Strategy::OptimalStacked, Strategy::OptimalCv]
         .iter()
         .find_map(|s| fitted.iter().find(|f| f.strategy == *s))
         .map_or(solver.lambda, |f| f.scored.cross_fit.lambda);
-    score(cf, grid, &free, lambda, &family).ok()
+    let largest = solver.cv_lambdas.iter().copied().fold(chosen, f64::max);
+    [chosen, largest].into_iter().find_map(|lambda| score(cf, grid, &free, lambda, &family).ok())
 }
 
 /// The row of weights `f` scored on the iterations they were fitted to.

@@ -26,6 +26,26 @@ pub struct SolverOptions {
     pub lambda: f64,
     /// The λ grid searched by the `optimal_cv` strategy.
     pub cv_lambdas: Vec<f64>,
+    /// How far a fitted row's per-path weights may move from the best per-path row's to be
+    /// trusted (`solve::trust`): λ is chosen among the fits within it, and a fit beyond it is never
+    /// recommended. `null` switches the region off (every stable fit is trusted, as before issue
+    /// 40).
+    // Left out when it has its default, so that a spec (and a moments document, whose checksum
+    // covers its spec) written before the option existed reads back to the same bytes.
+    #[serde(default = "default_trust_region", skip_serializing_if = "is_default_trust_region")]
+    pub trust_region: Option<f64>,
+}
+
+/// The default trust region: fitted weights may move by at most 0.25 on any path from the best
+/// per-path row's (`solve::trust`; docs/results.md §18 for how it was chosen).
+pub const DEFAULT_TRUST_REGION: f64 = 0.25;
+
+fn default_trust_region() -> Option<f64> {
+    Some(DEFAULT_TRUST_REGION)
+}
+
+fn is_default_trust_region(region: &Option<f64>) -> bool {
+    *region == default_trust_region()
 }
 
 /// Per-component fixed weights; `None` means fitted.
@@ -88,6 +108,11 @@ pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
     check(solver.lambda.is_finite() && (0.0..=MAX_LAMBDA).contains(&solver.lambda), "solver.lambda", || {
         format!("must be in [0, {MAX_LAMBDA:e}], got {}", solver.lambda)
     })?;
+    if let Some(r) = solver.trust_region {
+        check(r.is_finite() && r >= 0.0, "solver.trust_region", || {
+            format!("must be a finite radius ≥ 0 (or null: no trust region), got {r}")
+        })?;
+    }
     check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
         format!("must list 1 to {MAX_CV_LAMBDAS} values, got {}", solver.cv_lambdas.len())
     })?;
@@ -109,6 +134,7 @@ mod tests {
             fixed: FixedWeights { w0: Some(0.0), ..FixedWeights::default() },
             lambda: 0.0,
             cv_lambdas: vec![0.1],
+            trust_region: Some(0.25),
         }
     }
 

@@ -25,7 +25,7 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::crossfit::{CrossFitting, jackknife_se, select_lambda};
+use super::crossfit::{CrossFitting, Scored, jackknife_se, select_lambda};
 use super::fitted::{Fitted, scored_row};
 use super::noise::{NoiseRow, respects_fixed};
 use super::options::SolverOptions;
@@ -327,7 +327,7 @@ impl Predictor {
                     families.push((Strategy::OptimalStacked, family));
                 }
                 for (name, family) in families {
-                    match select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas, &family) {
+                    match select_lambda(cf, grid, &solver.fixed, &solver.cv_lambdas, &family, &Scored::is_stable) {
                         Ok(selection) => {
                             rows.push(scored_row(name, &selection.chosen, cf, false));
                             fitted.push(Fitted { strategy: name, scored: selection.chosen });
@@ -370,6 +370,7 @@ impl Predictor {
                         .map(|x| x.heuristics.clone())
                         .unwrap_or_default(),
                     reason: format!("{}{note}", r.reason),
+                    margin: Some(choice.margin()),
                 });
                 if let Some(fit) = r.fit() {
                     weights = weight_rows(grid, fit, r.weight_stderr().as_deref());

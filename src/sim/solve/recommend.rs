@@ -84,6 +84,78 @@ pub struct Gain {
     pub strategy: Strategy,
 }
 
+/// How sure a recommendation is: the guard's comparison of the best trusted fitted row with the
+/// best per-path row, as a verdict a reader can act on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct Margin {
+    /// `beats`: the fitted row is better beyond [`GUARD_SE`] standard errors, and recommended;
+    /// `within_noise`: it is not measurably better, so the per-path row is recommended;
+    /// `noisier`: the fitted row is the noisier one (ratio below 1); `no_fit`: no fitted row is
+    /// stable and within the trust region, or none could be compared.
+    pub verdict: MarginVerdict,
+    /// The best per-path row that keeps the fixed weights.
+    pub versus: Option<Strategy>,
+    /// The best trusted fitted row it was compared with.
+    pub fitted: Option<Strategy>,
+    /// Var(versus)/Var(fitted) on the same iterations (> 1: the fit is better).
+    pub variance_ratio: Option<f64>,
+    /// Its paired jackknife SE over the folds.
+    pub stderr: Option<f64>,
+    /// (ratio − 1)/SE: how many standard errors the fit is better by.
+    pub z: Option<f64>,
+}
+
+/// [`Margin::verdict`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum MarginVerdict {
+    /// The fitted row beats the per-path row beyond the guard, and is recommended.
+    Beats,
+    /// Not measurably better: the per-path row is recommended.
+    WithinNoise,
+    /// The fitted row is noisier than the per-path row.
+    Noisier,
+    /// No trusted fitted row to compare.
+    NoFit,
+}
+
+impl Choice {
+    /// The margin of this choice (from its guard).
+    pub fn margin(&self) -> Margin {
+        let fitted_recommended = self.recommended.as_ref().is_ok_and(|r| r.fitted.is_some());
+        match self.guard {
+            Some(g) => {
+                let z = g.stderr.filter(|s| *s > 0.0).map(|s| (g.value - 1.0) / s);
+                let verdict = if fitted_recommended {
+                    MarginVerdict::Beats
+                } else if g.value < 1.0 {
+                    MarginVerdict::Noisier
+                } else {
+                    MarginVerdict::WithinNoise
+                };
+                Margin {
+                    verdict,
+                    versus: Some(g.versus),
+                    fitted: Some(g.strategy),
+                    variance_ratio: Some(g.value),
+                    stderr: g.stderr,
+                    z,
+                }
+            }
+            None => Margin {
+                verdict: if fitted_recommended { MarginVerdict::Beats } else { MarginVerdict::NoFit },
+                versus: None,
+                fitted: None,
+                variance_ratio: None,
+                stderr: None,
+                z: None,
+            },
+        }
+    }
+}
+
 /// The recommendation and its gains.
 #[derive(Debug, Clone)]
 pub struct Choice {
@@ -115,7 +187,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
         &mut rows
             .iter()
             .filter(usable)
-            .filter(|r| r.strategy.is_fitted() && !r.in_sample && !r.unstable)
+            .filter(|r| r.strategy.is_fitted() && !r.in_sample && !r.unstable && !r.beyond_trust_region)
             .filter(|r| fitted.iter().any(|f| f.strategy == r.strategy)),
     );
     let sums = |s: Strategy| fold_sums(path_sums, fitted, s);
@@ -164,7 +236,10 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
         }
         (None, Some(p)) => Ok((
             p,
-            format!("the lowest honest RMS ({:.1}%) of the per-path strategies; no fitted row is stable", rms(p)),
+            format!(
+                "the lowest honest RMS ({:.1}%) of the per-path strategies; no fitted row is stable and within the trust region",
+                rms(p)
+            ),
         )),
         (None, None) => Err("no honest row keeping the solver's fixed weights has a finite RMS".to_string()),
     };

@@ -13,7 +13,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
-use super::recommend::Gain;
+use super::recommend::{Gain, Margin};
 use super::solver::stack_family;
 use super::solver::{CellStatus, Fit};
 use super::strategy::Strategy;
@@ -93,6 +93,10 @@ pub struct RecommendedWeights {
     /// Why this row: the guard's verdict in a sentence.
     #[serde(default)]
     pub reason: String,
+    /// How sure the recommendation is: the best trusted fitted row against the best per-path row
+    /// (variance ratio ± SE, z, and the verdict: `beats`, `within_noise`, `noisier`, `no_fit`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub margin: Option<Margin>,
 }
 
 /// The result of a run (or of a re-solve of stored moments).
@@ -226,6 +230,7 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
             .map(|x| x.heuristics.clone())
             .unwrap_or_default(),
         reason: r.reason.clone(),
+        margin: Some(table.margin.clone()),
     });
     let (weights, weights_fit, solve_error) = match (inputs.weights, &table.recommended) {
         (Some(q), _) => {

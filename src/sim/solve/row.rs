@@ -95,6 +95,16 @@ pub struct NoiseRow {
     /// (jackknife SE): never recommended.
     #[serde(default)]
     pub unstable: bool,
+    /// A fitted row's bound on how far its per-path weights move from those of the best per-path
+    /// row that keeps the fixed weights (`solver.trust_region`; docs/model.md §10); null for
+    /// per-path rows and for fits that cannot represent that row (a table alone against a
+    /// heuristic).
+    #[serde(default)]
+    pub deviation: Option<f64>,
+    /// A fitted row beyond the trust region (its `deviation` above `solver.trust_region`, or none):
+    /// its advantage may rest on events the run did not draw, so it is never recommended.
+    #[serde(default)]
+    pub beyond_trust_region: bool,
     /// The row's expected luminance at the job's merge radius R by quadrature (docs/model.md §11);
     /// null for fitted rows (their expectation depends on weights fitted to these data) and where
     /// the quadrature could not resolve it (`expected_error`).
@@ -146,6 +156,8 @@ impl NoiseRow {
             heuristics: Vec::new(),
             cv_path: Vec::new(),
             unstable: false,
+            deviation: None,
+            beyond_trust_region: false,
             expected_luminance: None,
             z: None,
             expected_error: None,

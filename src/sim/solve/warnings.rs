@@ -28,6 +28,10 @@ pub enum WarningCode {
     /// A fitted row reports a lower RMS than the recommended one, but its weights are unstable from
     /// fold to fold, so it is not recommended.
     UnstableFit,
+    /// A fitted row reports a lower RMS than the recommended one, but its weights move further
+    /// from the best per-path row's than the trust region allows (`solver.trust_region`): its
+    /// advantage may rest on events the run did not draw, so it is not recommended.
+    BeyondTrustRegion,
     /// The recommended row is not measurably better than the per-path strategy compared with
     /// (or no fitted row beat the recommended per-path strategy).
     NoGain,
@@ -103,6 +107,7 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
             });
         }
         let recommended_rms = table.rows.iter().find(|x| x.strategy == r.strategy).and_then(|x| x.rms_percent);
+        out.extend(beyond_trust_region(&table.rows, r.strategy, recommended_rms, table.margin.versus));
         for row in table.rows.iter().filter(|x| x.unstable && x.error.is_none()) {
             if let (Some(a), Some(b)) = (row.rms_percent, recommended_rms)
                 && a < b
@@ -173,6 +178,37 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
     out.extend(heavy_tails(&table.pooled, &table.rows));
     out.extend(in_sample_gap(&table.rows));
     out
+}
+
+/// A [`WarningCode::BeyondTrustRegion`] for the lowest-RMS fitted row beyond the trust region when
+/// it reports a lower RMS than the recommended row.
+fn beyond_trust_region(
+    rows: &[NoiseRow],
+    recommended: Strategy,
+    recommended_rms: Option<f64>,
+    anchor: Option<Strategy>,
+) -> Option<Warning> {
+    let row = rows
+        .iter()
+        .filter(|x| x.beyond_trust_region && !x.unstable && x.error.is_none())
+        .filter(|x| x.rms_percent.zip(recommended_rms).is_some_and(|(a, b)| a < b))
+        .min_by(|a, b| a.rms_percent.unwrap_or(f64::INFINITY).total_cmp(&b.rms_percent.unwrap_or(f64::INFINITY)))?;
+    let anchor = anchor.map_or_else(|| "the best per-path row".to_string(), |a| a.to_string());
+    let how_far = match row.deviation {
+        Some(d) => format!("its weights move by up to {d:.2} from {anchor}'s on some path"),
+        None => format!("its family cannot represent {anchor}, so nothing bounds how far its weights move from it"),
+    };
+    Some(Warning {
+        code: WarningCode::BeyondTrustRegion,
+        message: format!(
+            "{} reports a lower RMS ({:.1}%) than the recommended {recommended} ({:.1}%), but {how_far}, more than the trust region (solver.trust_region) allows: an advantage that large may rest on rare events this run did not draw (a longer run would show them), so it is not recommended",
+            row.strategy,
+            row.rms_percent.unwrap_or(f64::NAN),
+            recommended_rms.unwrap_or(f64::NAN),
+        ),
+        strategy: Some(row.strategy),
+        cells: Vec::new(),
+    })
 }
 
 /// A [`WarningCode::SparseCells`] when the cells of `fit` that its own samples cannot estimate

@@ -82,7 +82,7 @@ fn mean_se(x: &[f64]) -> (f64, f64) {
 fn cross_fitting_is_unbiased_where_the_in_sample_fit_is_not() {
     let config = config();
     let truth: f64 = CELL_L.iter().sum();
-    let solver = SolverOptions { fixed: Default::default(), lambda: 0.0, cv_lambdas: vec![0.0] };
+    let solver = SolverOptions { fixed: Default::default(), lambda: 0.0, cv_lambdas: vec![0.0], trust_region: None };
     let (mut cross, mut inner, mut cv, mut rms_gap) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for seed in 0..300 {
         let moments = run(&config, 1000 + seed, 60);
@@ -123,7 +123,8 @@ fn cross_fits_of_merged_shards_equal_the_whole_run() {
         }
         merged.merge(&part).unwrap();
     }
-    let solver = SolverOptions { fixed: Default::default(), lambda: 0.0, cv_lambdas: vec![0.0, 0.1] };
+    let solver =
+        SolverOptions { fixed: Default::default(), lambda: 0.0, cv_lambdas: vec![0.0, 0.1], trust_region: None };
     let (a, b) = (noise_table(&whole, &config.cells, &solver), noise_table(&merged, &config.cells, &solver));
     assert_eq!(a.rows, b.rows);
     assert_eq!(whole.folds.iter().map(|f| f.iterations).collect::<Vec<_>>(), vec![6, 6, 6, 6, 6, 6, 6, 5, 5, 5]);
