@@ -176,6 +176,9 @@ pub fn write_noise_rows_with(
         if row.unstable {
             notes.push("unstable".to_string());
         }
+        if row.tail_missing {
+            notes.push("tail missing (L far below its expectation)".to_string());
+        }
         if row.beyond_trust_region {
             notes.push(match row.deviation {
                 Some(d) => format!("beyond trust region (deviation {d:.2})"),

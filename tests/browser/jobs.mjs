@@ -170,6 +170,8 @@ export async function checkNoiseTable(page, id) {
   check(marked('in-sample').join() === 'optimal', 'only the paper\'s optimal row is marked in-sample');
   check(marked('unstable').join() === result.noise_table.filter((r) => r.unstable).map((r) => r.strategy).join(),
     `the unstable rows are marked (${marked('unstable').join(', ') || 'none'})`);
+  check(marked('tail missing').join() === result.noise_table.filter((r) => r.tail_missing).map((r) => r.strategy).join(),
+    `the rows missing their tail are marked (${marked('tail missing').join(', ') || 'none'})`);
   check(marked('beyond trust region').join() === result.noise_table.filter((r) => r.beyond_trust_region).map((r) => r.strategy).join(),
     `the rows beyond the trust region are marked (${marked('beyond trust region').join(', ') || 'none'})`);
   const recommended = result.recommended.strategy;

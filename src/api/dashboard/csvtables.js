@@ -9,7 +9,7 @@ import { CASES, published } from './noisetable.js';
 import { luminanceStderr } from './paper.js';
 
 /** The noise table's columns, in docs/csv.md's order. */
-export const NOISE_COLUMNS = ['strategy', 'paper_case', 'luminance', 'luminance_stderr', 'expected_luminance', 'z', 'expected_error',
+export const NOISE_COLUMNS = ['strategy', 'paper_case', 'luminance', 'luminance_stderr', 'expected_luminance', 'z', 'tail_missing', 'expected_error',
   'reference_luminance', 'rms_percent', 'rms_percent_stderr', 'lambda', 'in_sample', 'respects_fixed', 'unstable', 'deviation',
   'beyond_trust_region', 'recommended',
   'heuristics', 'in_sample_luminance', 'in_sample_luminance_stderr', 'in_sample_rms_percent', 'paper_luminance', 'paper_rms_percent',
@@ -34,6 +34,7 @@ function noiseRows(result) {
       luminance_stderr: row.luminance_stderr,
       expected_luminance: row.expected_luminance,
       z: row.z,
+      tail_missing: row.tail_missing ?? false,
       expected_error: row.expected_error,
       reference_luminance: result.reference_luminance,
       rms_percent: row.rms_percent,

@@ -15,6 +15,7 @@ export const CASES = { plane1: '1', plane2: '2', plane3: '3', switch: '4', optim
 const MARKS = {
   'in-sample': 'Fitted and scored on the same iterations: optimistic (L biased, SE and RMS too small)',
   unstable: 'Its fitted weights (or β) change from fold to fold by more than 0.25 (jackknife SE): never recommended',
+  tail: 'Its L lies more than 3 SE below its exact expectation at R: the run lacks the rare large contributions that carry its variance, so its RMS is far too small; never recommended',
   beyond: 'Its weights move further from the best per-path row\'s than the trust region (solver.trust_region) allows: its advantage may rest on rare events the run did not draw; never recommended',
   outside: "Does not keep the solver's fixed weights: shown for comparison, never recommended",
 };
@@ -99,6 +100,7 @@ function noiseRow(row, context) {
       isRecommended ? mark('recommended-mark', 'recommended', recommended.reason ?? 'The recommended weights') : null,
       row.in_sample ? mark('in-sample-mark', 'in-sample', MARKS['in-sample']) : null,
       row.unstable ? mark('unstable-mark', 'unstable', MARKS.unstable) : null,
+      row.tail_missing ? mark('unstable-mark', 'tail missing', MARKS.tail) : null,
       row.beyond_trust_region ? mark('unstable-mark', 'beyond trust region', `${MARKS.beyond}${row.deviation == null ? '' : ` (deviation ${row.deviation.toFixed(2)})`}`) : null,
       row.respects_fixed === false ? mark('outside-mark', 'outside fixed weights', MARKS.outside) : null),
     h('td', { class: 'num', 'data-col': 'case' }, CASES[row.strategy] ?? ''),

@@ -12,13 +12,14 @@ use super::strategy::Strategy;
 use crate::sim::math::csv::{Csv, json_cell, number, quoted};
 
 /// The noise table's columns, in the vocabulary of docs/csv.md (the dashboard writes the same).
-const NOISE_COLUMNS: [&str; 24] = [
+const NOISE_COLUMNS: [&str; 25] = [
     "strategy",
     "paper_case",
     "luminance",
     "luminance_stderr",
     "expected_luminance",
     "z",
+    "tail_missing",
     "expected_error",
     "reference_luminance",
     "rms_percent",
@@ -68,6 +69,7 @@ pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperCol
             number(r.luminance_stderr),
             number(r.expected_luminance),
             number(r.z),
+            r.tail_missing.to_string(),
             r.expected_error.as_deref().map(quoted).unwrap_or_default(),
             number(report.reference_luminance),
             number(r.rms_percent),

@@ -6,6 +6,8 @@
 //! * [`crossfit`] — K-fold cross-fitting of fitted weights and the jackknife over the fold fits;
 //! * [`row`] — one row of the noise table (L, RMS and their standard errors) and the per-path rows;
 //! * [`fitted`] — the fitted rows: the table, the stacked optimum, each heuristic corrected;
+//! * [`expectation`] — each per-path row's exact expectation, its z, and a tail missing from the
+//!   run;
 //! * [`recommend`] — which row to recommend, with its guard, and the gain; [`trust`] — how far a
 //!   fit may move from the best per-path row to be trusted;
 //! * [`rms_error`] — the standard error of a fitted row's RMS;
@@ -27,6 +29,7 @@ pub mod budget;
 pub mod compare;
 pub mod crossfit;
 pub mod evaluate;
+pub mod expectation;
 pub mod export;
 pub mod fitted;
 pub mod noise;

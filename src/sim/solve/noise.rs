@@ -15,6 +15,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::{CrossFitting, Scored, cross_fit, score};
+use super::expectation::{ExpectedLuminance, apply_expectation, tail_missing};
 use super::fitted::{Fitted, fitted_rows};
 use super::options::{FixedWeights, SolverOptions};
 use super::recommend::{Gain, Margin, Recommended, recommend};
@@ -62,10 +63,28 @@ pub struct NoiseTable {
 
 /// Computes the noise table of `moments` with the given solver options.
 pub fn noise_table(moments: &Moments, grid: &CellGrid, solver: &SolverOptions) -> NoiseTable {
+    noise_table_with(moments, grid, solver, None)
+}
+
+/// The noise table, with each per-path row's exact expectation at R where known (`expected`): a row
+/// whose L lies far below it is missing its tail (`expectation`), and neither recommended nor the
+/// trust region's anchor.
+pub fn noise_table_with(
+    moments: &Moments,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    expected: Option<&[ExpectedLuminance]>,
+) -> NoiseTable {
     let pooled = moments.pooled();
     let path = |s| path_row(&pooled, s, &solver.fixed);
     let cf = CrossFitting::new(moments, &pooled);
-    let per_path: Vec<NoiseRow> = PathStrategy::ALL.iter().map(|&s| path(s)).collect();
+    let mut per_path: Vec<NoiseRow> = PathStrategy::ALL.iter().map(|&s| path(s)).collect();
+    if let Some(expected) = expected {
+        for row in &mut per_path {
+            apply_expectation(row, expected);
+            row.tail_missing = tail_missing(row);
+        }
+    }
     let is_case = |r: &NoiseRow| r.strategy.path().is_some_and(|s| s.is_case());
     // The paper's cases 1–4 first (PathStrategy::ALL lists them first, in that order).
     let mut rows: Vec<NoiseRow> = per_path.iter().filter(|r| is_case(r)).cloned().collect();

@@ -182,7 +182,11 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
             .map(|r| r.strategy)
     };
     let is_path = |r: &&NoiseRow| r.strategy.path().is_some();
-    let best_path = lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed));
+    // A per-path row missing its tail (its L far below its exact expectation) has an RMS far too
+    // small: it is passed over while another row keeps the fixed weights (`expectation`).
+    let best_path =
+        lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed && !r.tail_missing))
+            .or_else(|| lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed)));
     let best_fitted = lowest(
         &mut rows
             .iter()

@@ -12,7 +12,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table, weights_at};
+pub use super::expectation::ExpectedLuminance;
+use super::expectation::apply_expectation;
+use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table_with, weights_at};
 use super::recommend::{Gain, Margin};
 use super::solver::stack_family;
 use super::solver::{CellStatus, Fit};
@@ -174,20 +176,6 @@ pub fn weight_rows(grid: &CellGrid, fit: &Fit, stderr: Option<&[[f64; 3]]>) -> V
         .collect()
 }
 
-/// A per-path strategy's expected luminance at the configuration's merge radius R, by quadrature
-/// (docs/model.md §11; computed by `checks::expected`), or why there is none.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
-pub struct ExpectedLuminance {
-    /// The per-path strategy.
-    pub strategy: Strategy,
-    /// The strategy's expected luminance at R; null when the quadrature could not give it (see
-    /// `error`).
-    pub luminance: Option<f64>,
-    /// Why there is no expected luminance; null when there is one.
-    pub error: Option<String>,
-}
-
 /// Which fitted weights a report's table shows instead of the recommended ones: a fitted row's
 /// family (`optimal` — the table alone —, `optimal_stacked`, or a `…_corrected` row) fitted in
 /// sample on all iterations at `lambda`.
@@ -213,7 +201,7 @@ pub struct ReportInputs<'a> {
 /// Builds the report of `moments` with the given solver options. The weights table holds the
 /// recommended weights, or with `inputs.weights` the in-sample fit of all iterations asked for.
 pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, inputs: &ReportInputs) -> RunReport {
-    let mut table = noise_table(moments, grid, solver);
+    let mut table = noise_table_with(moments, grid, solver, inputs.expected);
     let warnings = warnings(moments, &table);
     if let Some(expected) = inputs.expected {
         for row in &mut table.rows {
@@ -284,26 +272,5 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },
         fingerprint: moments.fingerprint.clone(),
         coverage: moments.coverage.clone(),
-    }
-}
-
-/// A row's expected luminance at R and its z; fitted rows have none (their weights follow these
-/// data), which the row says.
-fn apply_expectation(row: &mut NoiseRow, expected: &[ExpectedLuminance]) {
-    if row.strategy.path().is_none() {
-        row.expected_error =
-            Some("fitted to these iterations: its expectation depends on the fitted weights (compare its L with the per-path rows')".into());
-        return;
-    }
-    match expected.iter().find(|e| e.strategy == row.strategy) {
-        Some(e) => {
-            row.expected_luminance = e.luminance;
-            row.expected_error = e.error.clone();
-            row.z = match (row.luminance, row.luminance_stderr, e.luminance) {
-                (Some(l), Some(se), Some(x)) if se > 0.0 => Some((l - x) / se),
-                _ => None,
-            };
-        }
-        None => row.expected_error = Some("no expectation was computed for this strategy".into()),
     }
 }

@@ -101,6 +101,12 @@ pub struct NoiseRow {
     /// heuristic).
     #[serde(default)]
     pub deviation: Option<f64>,
+    /// A per-path row whose L lies more than 3 SE below its exact expectation at R
+    /// (`solve::expectation`): the run lacks the rare large contributions that dominate its
+    /// variance, so its RMS is far too small; it is neither recommended nor the trust region's
+    /// anchor.
+    #[serde(default)]
+    pub tail_missing: bool,
     /// A fitted row beyond the trust region (its `deviation` above `solver.trust_region`, or none):
     /// its advantage may rest on events the run did not draw, so it is never recommended.
     #[serde(default)]
@@ -158,6 +164,7 @@ impl NoiseRow {
             unstable: false,
             deviation: None,
             beyond_trust_region: false,
+            tail_missing: false,
             expected_luminance: None,
             z: None,
             expected_error: None,

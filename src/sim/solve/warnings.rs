@@ -37,6 +37,9 @@ pub enum WarningCode {
     NoGain,
     /// A strategy's values are so heavy-tailed that its standard errors are unreliable.
     HeavyTail,
+    /// A per-path strategy's L lies far below its exact expectation: the run lacks the rare large
+    /// contributions that carry its variance, so its RMS is far too small (`solve::expectation`).
+    TailMissing,
     /// The in-sample `optimal` row is far from its cross-fitted counterpart.
     InSampleOptimistic,
     /// A per-path strategy outside the solver's fixed weights is measurably less noisy than the
@@ -176,6 +179,17 @@ pub fn warnings(moments: &Moments, table: &NoiseTable) -> Vec<Warning> {
         });
     }
     out.extend(heavy_tails(&table.pooled, &table.rows));
+    out.extend(table.rows.iter().filter(|r| r.tail_missing).map(|r| Warning {
+        code: WarningCode::TailMissing,
+        message: format!(
+            "{}: its L lies {:.1} standard errors below its exact expectation at R (quadrature): this run lacks the rare large contributions that carry its mean and its variance, so its RMS ({:.1}%) is far too small, however small its standard error; it is neither recommended nor compared with — run more iterations to see its real noise",
+            r.strategy,
+            -r.z.unwrap_or(f64::NAN),
+            r.rms_percent.unwrap_or(f64::NAN)
+        ),
+        strategy: Some(r.strategy),
+        cells: Vec::new(),
+    }));
     out.extend(in_sample_gap(&table.rows));
     out
 }
