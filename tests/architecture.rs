@@ -52,7 +52,7 @@ const SIM_LAYERS: &[&[&str]] = &[
     &["engines"],
     &["stats"],
     &["solve"],
-    &["spec", "configuration", "document", "signature", "runner", "sweep", "mod"],
+    &["spec", "configuration", "document", "signature", "runner", "sweep", "weights", "mod"],
     &["checks"],
 ];
 

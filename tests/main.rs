@@ -30,3 +30,4 @@ mod simulation;
 mod slow_clients;
 mod sweeps;
 mod wait;
+mod weights;

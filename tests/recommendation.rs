@@ -32,7 +32,7 @@ fn the_recommendation_delivers_what_it_reports_on_an_independent_run() {
     let long = pool().install(|| run(config, 1000, 0..100_000));
     let switch_delivered = {
         let given = GivenWeights { recommended: Some(named("switch")), ..GivenWeights::default() };
-        evaluate(&long, config.cells(), &given).unwrap().evaluated.rms_percent.unwrap()
+        evaluate(&long, config.cells(), &given, &Default::default()).unwrap().evaluated.rms_percent.unwrap()
     };
     let (mut covered, mut scored) = (0, 0);
     for seed in 1..=8 {
@@ -78,7 +78,8 @@ fn the_recommendation_delivers_what_it_reports_on_an_independent_run() {
             ));
         }
         for (name, rms, se, given) in &rows {
-            let delivered = evaluate(&long, config.cells(), given).unwrap().evaluated.rms_percent.unwrap();
+            let delivered =
+                evaluate(&long, config.cells(), given, &Default::default()).unwrap().evaluated.rms_percent.unwrap();
             let inside = (rms - delivered).abs() <= 2.5 * se;
             eprintln!(
                 "seed {seed}: {name:<40} reported {rms:6.2} ± {se:5.2}, delivered {delivered:6.2} {}",
@@ -154,7 +155,8 @@ fn outside_the_preset_a_short_run_never_recommends_a_gamble() {
     let config = long_job.config();
     let long = pool().install(|| run(config, 1_000_003, 0..100_000));
     let anchor = GivenWeights { recommended: Some(named("correlation_aware_planes23")), ..GivenWeights::default() };
-    let anchor_delivered = evaluate(&long, config.cells(), &anchor).unwrap().evaluated.rms_percent.unwrap();
+    let anchor_delivered =
+        evaluate(&long, config.cells(), &anchor, &Default::default()).unwrap().evaluated.rms_percent.unwrap();
     for seed in [44, 56, 60] {
         let short = at(seed, 10_000);
         let moments = pool().install(|| run(short.config(), seed, 0..10_000));
@@ -162,7 +164,7 @@ fn outside_the_preset_a_short_run_never_recommends_a_gamble() {
         let recommended = table.recommended.as_ref().unwrap();
         let row = table.rows.iter().find(|r| r.strategy == recommended.strategy).unwrap();
         let (reported, se) = (row.rms_percent.unwrap(), row.rms_percent_stderr.unwrap());
-        let delivered = evaluate(&long, config.cells(), &recommended_weights(&table, &short))
+        let delivered = evaluate(&long, config.cells(), &recommended_weights(&table, &short), &Default::default())
             .unwrap()
             .evaluated
             .rms_percent

@@ -244,7 +244,9 @@ pub(super) fn query_problem(rejection: QueryRejection) -> ApiError {
     let text = rejection.body_text();
     let reason = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
     match reason.split_once(": ") {
-        Some((name, message)) if ["state", "limit", "cursor", "lambda", "format", "table"].contains(&name) => {
+        Some((name, message))
+            if ["state", "limit", "cursor", "lambda", "format", "table", "strategy"].contains(&name) =>
+        {
             ApiError::Invalid { field: name.into(), message: message.into() }
         }
         _ => ApiError::Invalid { field: "query".into(), message: reason.into() },

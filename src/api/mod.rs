@@ -29,6 +29,7 @@ mod statistics;
 mod studies;
 mod sweeps;
 mod wait;
+mod weights;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -127,6 +128,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(jobs::extend))
         .routes(routes!(statistics::moments))
         .routes(routes!(statistics::history))
+        .routes(routes!(weights::weights))
         .routes(with_limit(routes!(studies::merge)))
         .routes(with_limit(routes!(studies::create)))
         .routes(routes!(sweeps::create, sweeps::list))

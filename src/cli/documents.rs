@@ -81,7 +81,7 @@ pub struct ReportArgs {
 }
 
 /// A strategy by its result name (`optimal_stacked`).
-fn parse_strategy(name: &str) -> Result<Strategy, String> {
+pub(super) fn parse_strategy(name: &str) -> Result<Strategy, String> {
     serde_json::from_value(Value::String(name.to_string())).map_err(|_| format!("no strategy named {name:?}"))
 }
 

@@ -11,13 +11,16 @@ use super::documents::{document_job, read_document};
 use super::{CliError, table};
 use crate::sim::model::params::SpecError;
 use crate::sim::solve::evaluate::{Evaluation, GivenWeights, evaluate as score};
+use crate::sim::weights::artifact::{WEIGHTS_FORMAT, WeightsArtifact};
+use crate::sim::weights::function::WeightFunction;
 
 #[derive(Debug, Args)]
 pub struct EvaluateArgs {
     /// The moments document to score on (another seed's run, for an independent check).
     pub document: PathBuf,
-    /// The weights: a result document (its recommended table, heuristics included), or a JSON
-    /// object with `weights` (one entry per cell, as in a result) and optionally `heuristics`.
+    /// The weights: a weights artifact (`optimis weights`), a result document (its recommended
+    /// table, heuristics included), or a JSON object with `weights` (one entry per cell, as in a
+    /// result) and optionally `heuristics`.
     #[arg(long, value_name = "FILE")]
     pub weights: PathBuf,
     /// Print the evaluation as JSON instead of a table.
@@ -30,9 +33,19 @@ pub fn evaluate(args: EvaluateArgs) -> Result<(), CliError> {
     let job = document_job(&doc, &args.document)?;
     let path = &args.weights;
     let bytes = std::fs::read(path).map_err(|source| CliError::Read { path: path.clone(), source })?;
-    let given: GivenWeights =
+    let value: serde_json::Value =
         serde_json::from_slice(&bytes).map_err(|source| CliError::Json { path: path.clone(), source })?;
-    let evaluation = score(&doc.moments, &job.config().cells, &given)
+    // A weights artifact (`optimis weights`) is scored exactly as the result it came from.
+    let given: GivenWeights = if value.get("format").and_then(serde_json::Value::as_str) == Some(WEIGHTS_FORMAT) {
+        let artifact: WeightsArtifact =
+            serde_json::from_value(value).map_err(|source| CliError::Json { path: path.clone(), source })?;
+        WeightFunction::new(artifact.clone())
+            .map_err(|e| CliError::Unusable { path: path.clone(), detail: e.to_string() })?;
+        artifact.given().map_err(|detail| CliError::Unusable { path: path.clone(), detail })?
+    } else {
+        serde_json::from_value(value).map_err(|source| CliError::Json { path: path.clone(), source })?
+    };
+    let evaluation = score(&doc.moments, &job.config().cells, &given, &job.spec().solver.fixed)
         .map_err(|e| CliError::Invalid { what: "weights", source: SpecError::new(e.field, e.message) })?;
     let mut out = std::io::stdout().lock();
     if args.json {

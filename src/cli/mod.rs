@@ -23,6 +23,7 @@ mod sweep;
 mod table;
 #[cfg(feature = "server")]
 mod wait;
+mod weights;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -75,6 +76,9 @@ pub enum Command {
     /// Compare runs strategy by strategy: moments documents, or jobs of a server with --server;
     /// ratios and differences against the first, with standard errors.
     Compare(compare::CompareArgs),
+    /// The weight function of a run as a portable artifact for renderers (the recommended row's
+    /// by default), with test vectors to check an evaluator against the engine.
+    Weights(weights::WeightsArgs),
     /// Run a sweep (a job varied along axes) locally or one run per cluster task, and collect its
     /// table (`optimis sweep collect DIR`).
     Sweep(sweep::SweepArgs),
@@ -231,6 +235,7 @@ pub fn main() -> ExitCode {
         Command::Evaluate(args) => evaluate::evaluate(args),
         Command::Budget(args) => budget::budget(args),
         Command::Sweep(args) => sweep::sweep(args),
+        Command::Weights(args) => weights::weights(args),
         Command::Compare(args) => compare::compare(args),
         Command::Figure(args) => figure::figure(args),
         #[cfg(feature = "server")]

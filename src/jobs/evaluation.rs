@@ -32,7 +32,8 @@ impl Statistics {
         let evaluation = self
             .jobs
             .compute_heavy(move |_| -> Result<Evaluation, JobError> {
-                evaluate(&moments, &job.config().cells, &given).map_err(|e| SpecError::new(e.field, e.message).into())
+                evaluate(&moments, &job.config().cells, &given, &job.spec().solver.fixed)
+                    .map_err(|e| SpecError::new(e.field, e.message).into())
             })
             .await??;
         Ok(JobEvaluation { job_id: id, partial, state, evaluation })

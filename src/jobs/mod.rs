@@ -32,6 +32,7 @@
 //!   job's statistics come from; [`error`] — what job operations
 //!   fail with.
 
+pub mod artifacts;
 pub mod checkpoint;
 pub mod cluster;
 pub mod compute;

@@ -31,6 +31,7 @@ use super::peers::{PeerConfigError, check_owner_only, read_config_file};
 use crate::sim::document::{Attestation, DocumentSignature, MomentsDocument};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::SpecError;
+use crate::sim::weights::artifact::WeightsArtifact;
 
 /// The DER prefix of an Ed25519 SubjectPublicKeyInfo (RFC 8410): the raw 32-byte key follows.
 const ED25519_SPKI_PREFIX: [u8; 12] = [0x30, 0x2a, 0x30, 0x05, 0x06, 0x03, 0x2b, 0x65, 0x70, 0x03, 0x21, 0x00];
@@ -79,6 +80,37 @@ impl Provenance {
             Some(key) => key.sign(doc, attests),
             None => doc,
         }
+    }
+
+    /// `artifact` signed with this server's key vouching for `attests`, if it has a key.
+    pub fn sign_artifact(&self, mut artifact: WeightsArtifact, attests: Attestation) -> WeightsArtifact {
+        if let Some(key) = &self.key {
+            artifact.signature = None;
+            let signature = key.pair.sign(&artifact.signed_message(&attests));
+            artifact.signature = Some(DocumentSignature {
+                algorithm: "ed25519".into(),
+                key_id: key.key_id.clone(),
+                value: hex(signature.as_ref()),
+                attests: Some(attests),
+            });
+        }
+        artifact
+    }
+
+    /// Whether `artifact` carries a valid signature of a trusted key (or this server's own), and
+    /// whose.
+    pub fn artifact_signer(&self, artifact: &WeightsArtifact) -> Option<String> {
+        let signature = artifact.signature.as_ref()?;
+        let attests = signature.attests.as_ref()?;
+        let value = unhex(&signature.value).filter(|v| v.len() == 64)?;
+        let message = artifact.signed_message(attests);
+        let own = self.key.as_ref().map(|k| (k.key_id.clone(), k.pair.public_key().as_ref().to_vec()));
+        own.into_iter()
+            .chain(self.trust.keys.iter().cloned())
+            .find(|(id, public)| {
+                *id == signature.key_id && UnparsedPublicKey::new(&ED25519, public).verify(&message, &value).is_ok()
+            })
+            .map(|(id, _)| id)
     }
 
     /// Who vouches for a document about to be merged (already verified: its checksum matches its

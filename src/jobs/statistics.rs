@@ -168,16 +168,13 @@ impl Statistics {
         Ok(JobResult { job_id: id, partial, state, references, report })
     }
 
-    /// The latest checkpoint's moments as a portable, checksummed document (its canonical JSON
-    /// text, made on the request pool), signed if this server has a signing key. A merged job's
-    /// spec says how many iterations it holds (and no shard), so that its document verifies.
-    pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
-        let lineage = self.jobs.get(id).await?.provenance;
-        let Latest { merged, job, moments, .. } = self.latest(id).await?;
-        // A job that merged nothing was computed here; a merged one is signed only if every source
-        // was computed here or signed by a trusted key (`MergeProvenance::attestation`).
-        let attests = match &lineage {
-            None if !merged => Some(Attestation { basis: AttestationBasis::Computed, keys: Vec::new() }),
+    /// What this server's signature on job `id`'s statistics may vouch for: a job that merged
+    /// nothing was computed here; a merged one only if every source was computed here or signed by
+    /// a trusted key (`MergeProvenance::attestation`). None: exports go unsigned.
+    pub(super) async fn attestation(&self, id: i64) -> Result<Option<Attestation>, JobError> {
+        let resource = self.jobs.get(id).await?;
+        let attests = match &resource.provenance {
+            None if !resource.merged => Some(Attestation { basis: AttestationBasis::Computed, keys: Vec::new() }),
             None => None,
             Some(lineage) => lineage.attestation(),
         };
@@ -187,6 +184,15 @@ impl Statistics {
                 "exported unsigned: it holds statistics merged from sources no trusted key signed"
             );
         }
+        Ok(attests)
+    }
+
+    /// The latest checkpoint's moments as a portable, checksummed document (its canonical JSON
+    /// text, made on the request pool), signed if this server has a signing key. A merged job's
+    /// spec says how many iterations it holds (and no shard), so that its document verifies.
+    pub async fn moments_json(&self, id: i64) -> Result<Vec<u8>, JobError> {
+        let attests = self.attestation(id).await?;
+        let Latest { merged, job, moments, .. } = self.latest(id).await?;
         let provenance = self.provenance.clone();
         self.jobs
             .compute(move || {

@@ -19,6 +19,8 @@
 //!   how two differ), the portable moments document and what its signature attests, the runner
 //!   that puts iterations into moments, and sweeps (a job document varied along axes, and their
 //!   table);
+//! * [`weights`] — the recommended weight function as a portable artifact, its reference
+//!   evaluator, and the engine's weights the evaluators are checked against;
 //! * [`checks`] — independent references: the quadrature, exact merge expectations, engine
 //!   equivalence.
 //!
@@ -39,3 +41,4 @@ pub mod solve;
 pub mod spec;
 pub mod stats;
 pub mod sweep;
+pub mod weights;

@@ -137,8 +137,14 @@ pub struct Versus {
     pub variance_ratio_stderr: Option<f64>,
 }
 
-/// Scores `given` on `moments` (drawn on `grid`).
-pub fn evaluate(moments: &Moments, grid: &CellGrid, given: &GivenWeights) -> Result<Evaluation, EvaluateError> {
+/// Scores `given` on `moments` (drawn on `grid`); the run's per-path rows say whether they keep the
+/// run's `fixed` weights, as its result's rows do.
+pub fn evaluate(
+    moments: &Moments,
+    grid: &CellGrid,
+    given: &GivenWeights,
+    fixed: &FixedWeights,
+) -> Result<Evaluation, EvaluateError> {
     let layout = moments.layout();
     if let Some(c) = &given.coverage {
         c.check().map_err(|e| invalid("coverage", e.to_string()))?;
@@ -185,7 +191,7 @@ pub fn evaluate(moments: &Moments, grid: &CellGrid, given: &GivenWeights) -> Res
         None => rms_stderr(&folds_sums, &reference_rows),
     };
     let evaluated = NoiseRow { rms_percent_stderr: stderr, in_sample, ..own };
-    let versus = path_rows(moments, &FixedWeights::default())
+    let versus = path_rows(moments, fixed)
         .into_iter()
         .zip(PathStrategy::ALL)
         .filter(|(row, _)| row.error.is_none())

@@ -224,7 +224,14 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         (Some(q), _) => {
             let family = match q.strategy {
                 Strategy::Optimal => Ok(Vec::new()),
-                Strategy::OptimalStacked => Ok(stack_family(moments.layout(), &solver.fixed)),
+                // The heuristics the row itself stacked (a heuristic that adds nothing on these
+                // data is left out, `fitted`); the whole family where the row has none to say.
+                Strategy::OptimalStacked => Ok(table
+                    .rows
+                    .iter()
+                    .find(|r| r.strategy == Strategy::OptimalStacked && !r.heuristics.is_empty())
+                    .map(|r| r.heuristics.iter().filter_map(|h| h.strategy.path()).collect())
+                    .unwrap_or_else(|| stack_family(moments.layout(), &solver.fixed))),
                 s => PathStrategy::STACKABLE
                     .into_iter()
                     .find(|&h| Strategy::corrected(h) == Some(s))

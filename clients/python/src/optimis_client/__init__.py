@@ -10,6 +10,13 @@ DataFrames::
     client.wait(job["id"])
     print(client.noise_table(job["id"]))
 
+Weights artifacts (``optimis weights``) evaluate without a server, in numpy::
+
+    from optimis_client import WeightFunction, model_path
+
+    f = WeightFunction.load("weights.json")
+    w1 = f.weight_of(1, model_path(f, x2, x3))
+
 Errors: every exception is an :class:`OptimisError` — :class:`ApiError` (the server's problem
 document), :class:`ServerUnreachable` (:class:`RequestTimeout`, a :class:`TimeoutError`, when a
 request took longer than the client's ``timeout``), :class:`ResponseTooLarge` (an answer over
@@ -37,6 +44,22 @@ from ._frames import (
     sweep_table_frame,
     weights_frame,
 )
+from .weights import (
+    CellAxes,
+    Heuristic,
+    ModelPath,
+    Ring,
+    Scene,
+    WeightFunction,
+    WeightVectors,
+    cell_index,
+    check_vectors,
+    lobe_pdf,
+    model_path,
+    read_vectors,
+    start_density,
+    vector_errors,
+)
 
 __version__ = "0.1.0"
 
@@ -46,20 +69,34 @@ __all__ = [
     "FINAL_STATES",
     "MAX_WAIT_SECONDS",
     "ApiError",
+    "CellAxes",
     "Client",
+    "Heuristic",
     "JobFailed",
+    "ModelPath",
     "OptimisError",
     "RequestTimeout",
     "ResponseTooLarge",
+    "Ring",
+    "Scene",
     "ServerUnreachable",
     "SweepFailed",
     "UnexpectedRedirect",
     "WaitTimeout",
+    "WeightFunction",
+    "WeightVectors",
+    "cell_index",
+    "check_vectors",
     "compare_frame",
     "history_frame",
+    "lobe_pdf",
+    "model_path",
     "noise_table_frame",
     "paper_figures",
+    "read_vectors",
+    "start_density",
     "sweep_table_frame",
+    "vector_errors",
     "weights_frame",
     "__version__",
 ]

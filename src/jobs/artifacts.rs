@@ -1,0 +1,41 @@
+//! A job's weight function as a portable artifact (`GET /v1/jobs/{id}/weights`,
+//! `sim::weights`): its recommended row's (or any row's) weights from the latest checkpoint, with
+//! the scene and the heuristics' definitions, signed where this server signs (over the artifact's
+//! canonical bytes, vouching exactly as its moments export does).
+
+use super::error::JobError;
+use super::references::{expected_luminances, scene_reference};
+use super::statistics::{Latest, Statistics};
+use crate::sim::solve::report::ReportInputs;
+use crate::sim::solve::strategy::Strategy;
+use crate::sim::spec::SpecError;
+use crate::sim::weights::artifact::WeightsArtifact;
+use crate::sim::weights::build::artifact_of_moments;
+
+impl Statistics {
+    /// The artifact of job `id`'s row `strategy` (none: its recommended row) from its latest
+    /// checkpoint. CPU work (a report, maybe a refit): on the heavy pool.
+    pub async fn weights(&self, id: i64, strategy: Option<Strategy>) -> Result<WeightsArtifact, JobError> {
+        let attests = self.attestation(id).await?;
+        let Latest { job, moments, .. } = self.latest(id).await?;
+        let provenance = self.provenance.clone();
+        self.jobs
+            .compute_heavy(move |_| -> Result<WeightsArtifact, JobError> {
+                let config = job.config();
+                let expected = expected_luminances(config);
+                let inputs = ReportInputs {
+                    reference: scene_reference(&config.scene),
+                    expected: Some(&expected),
+                    weights: None,
+                };
+                let mut artifact = artifact_of_moments(&moments, &job, &inputs, strategy)
+                    .map_err(|e| JobError::from(SpecError::new("strategy", e)))?;
+                artifact.provenance.job_id = Some(id);
+                if let Some(attests) = attests {
+                    artifact = provenance.sign_artifact(artifact, attests);
+                }
+                Ok(artifact)
+            })
+            .await?
+    }
+}
