@@ -21,6 +21,7 @@ use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
 use crate::sim::spec::{SpecError, ValidJob};
+use crate::sim::weights::effective::{EFFECTIVE_PATHS, attach_effective};
 
 #[derive(Debug, Args)]
 pub struct MergeArgs {
@@ -168,7 +169,8 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-    let report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
+    let mut report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
+    attach_effective(&mut report, job.config(), EFFECTIVE_PATHS);
     let mut spec = doc.spec.clone();
     spec.solver = solver.clone();
     write_csv(&spec, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;

@@ -24,6 +24,7 @@ use crate::sim::solve::export::{noise_table_csv, weights_csv};
 use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
 use crate::sim::spec::{JobSpec, Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
+use crate::sim::weights::effective::{EFFECTIVE_PATHS, attach_effective};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -339,7 +340,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let expected = pool.install(|| expected_luminances(config));
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
-    let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
+    let mut report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
+    attach_effective(&mut report, config, EFFECTIVE_PATHS);
     write_csv(job.spec(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {

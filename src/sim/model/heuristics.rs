@@ -129,7 +129,20 @@ use super::scene::{Scene, angle_between};
 pub struct JoinGeometry {
     d1: f64,
     d2: f64,
+    theta: f64,
     q: f64,
+}
+
+/// A full path (pixel, x2, x3, light)'s measure: its contribution f to the pixel's luminance per
+/// unit area of x2 and of x3, f = (L2/d1³)(L3²/d2⁴)·g(ϑ)·p_l(x3)/π² (the integrand of
+/// `checks::quadrature`, whose integral is L), and the area density with which the camera draws
+/// the pair (x2, x3), p_c(x2)·p_c(x3|x2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathMeasure {
+    /// f(x2, x3).
+    pub contribution: f64,
+    /// The camera's density of (x2, x3).
+    pub camera: f64,
 }
 
 /// Area densities of the join path's vertices as each side samples them (module doc); the light's
@@ -153,7 +166,19 @@ impl JoinGeometry {
         let v = Vector3::new(x3[0] - x2[0], x3[1] - x2[1], scene.l3);
         let (d1, d2) = (u.norm(), v.norm());
         let theta = angle_between(&(u / d1), &(v / d2));
-        Self { d1, d2, q: scene.lobe.pdf_w(theta) }
+        Self { d1, d2, theta, q: scene.lobe.pdf_w(theta) }
+    }
+
+    /// The full path's measure ([`PathMeasure`]) with the light's start density `light_start` =
+    /// p_l(x3).
+    pub fn path_measure(&self, scene: &Scene, light_start: f64) -> PathMeasure {
+        let v = self.vertex_densities(scene);
+        let (d1_3, d2_4) = (self.d1 * self.d1 * self.d1, (self.d2 * self.d2) * (self.d2 * self.d2));
+        let g = scene.lobe.g(self.theta);
+        PathMeasure {
+            contribution: (scene.l2 / d1_3) * (scene.l3 * scene.l3 / d2_4) * g * light_start / (PI * PI),
+            camera: v.camera_x2 * v.camera_x3,
+        }
     }
 
     /// Relative technique densities (p₀, p₁, p₂), up to a common factor.

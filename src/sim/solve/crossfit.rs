@@ -24,6 +24,7 @@
 //! one seed in thirty once chose λ = 10⁻⁵ with weights from −0.9 to 2.1 that delivered more noise
 //! than the switch).
 
+use super::effective::FitReplicates;
 use super::options::FixedWeights;
 use super::rms_error::{FoldSums, RmsReference, references, rms_stderr};
 pub use super::rms_error::{jackknife_se, rms_percent};
@@ -131,6 +132,11 @@ impl CrossFit {
                 .map(|i| jackknife_se(self.folds.iter().map(|(_, fit, _)| fit.heuristics[i].1)))
                 .collect()
         })
+    }
+
+    /// The fold fits as jackknife replicates of the weight function.
+    pub fn replicates(&self) -> FitReplicates {
+        FitReplicates::of(self.folds.iter().map(|(_, fit, _)| fit))
     }
 
     /// The cross-fitted RMS% (of all scored folds).

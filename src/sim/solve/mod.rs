@@ -15,6 +15,8 @@
 //! * [`ystats`] — the moments of a set of iterations as the solver reads them;
 //! * [`warnings`] — what the data cannot support, machine-readable;
 //! * [`strategy`] — the rows of the noise table, by name;
+//! * [`effective`] — a weight function's effective weights per (r2, r3) bin (Fig. 2 of any
+//!   recommendation) and the fold fits behind their errors;
 //! * [`report`] — the result document of a run; [`export`] — its tables as CSV; [`tables`] — the
 //!   noise table as Markdown and LaTeX;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
@@ -28,6 +30,7 @@
 pub mod budget;
 pub mod compare;
 pub mod crossfit;
+pub mod effective;
 pub mod evaluate;
 pub mod expectation;
 pub mod export;

@@ -15,6 +15,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::crossfit::{CrossFitting, Scored, cross_fit, score};
+use super::effective::FitReplicates;
 use super::expectation::{ExpectedLuminance, apply_expectation, tail_missing};
 use super::fitted::{Fitted, fitted_rows};
 use super::options::{FixedWeights, SolverOptions};
@@ -154,17 +155,19 @@ pub(crate) fn in_sample_row(name: Strategy, f: &Fit, cf: &CrossFitting) -> Noise
 }
 
 /// The in-sample fit of all iterations at λ with the heuristics `family` stacked on the table, with
-/// jackknife standard errors (the weights table a `?lambda=` query asks for: the table alone).
+/// jackknife standard errors and the fold fits (the weights table a `?lambda=` query asks for: the
+/// table alone).
 pub fn weights_at(
     cf: &CrossFitting,
     grid: &CellGrid,
     solver: &SolverOptions,
     lambda: f64,
     family: &[PathStrategy],
-) -> Result<(Fit, Option<WeightErrors>), SolveError> {
+) -> Result<(Fit, Option<WeightErrors>, Option<FitReplicates>), SolveError> {
     let all = fit(&cf.all, grid, &solver.fixed, lambda, family)?;
-    let stderr = cross_fit(cf, grid, &solver.fixed, lambda, family).ok().and_then(|c| c.weight_stderr());
-    Ok((all, stderr))
+    let folds = cross_fit(cf, grid, &solver.fixed, lambda, family).ok();
+    let stderr = folds.as_ref().and_then(|c| c.weight_stderr());
+    Ok((all, stderr, folds.map(|c| c.replicates())))
 }
 
 /// Mean and standard error of merge events per iteration, per plane.

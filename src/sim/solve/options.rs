@@ -28,11 +28,18 @@ pub struct SolverOptions {
     pub cv_lambdas: Vec<f64>,
     /// How far a fitted row's per-path weights may move from the best per-path row's to be
     /// trusted (`solve::trust`): λ is chosen among the fits within it, and a fit beyond it is never
-    /// recommended. `null` switches the region off (every stable fit is trusted, as before issue
-    /// 40).
+    /// recommended. `"off"` switches the region off (every stable fit is trusted, as before issue
+    /// 40); `null` in a whole specification means the same.
     // Left out when it has its default, so that a spec (and a moments document, whose checksum
-    // covers its spec) written before the option existed reads back to the same bytes.
-    #[serde(default = "default_trust_region", skip_serializing_if = "is_default_trust_region")]
+    // covers its spec) written before the option existed reads back to the same bytes. "Off" is
+    // written as the word, not as null: in a merge patch (`patched`) null means "remove", which
+    // would bring the default back — a patch could never switch the region off.
+    #[serde(
+        default = "default_trust_region",
+        skip_serializing_if = "is_default_trust_region",
+        with = "trust_region_json"
+    )]
+    #[cfg_attr(feature = "server", schema(value_type = Option<TrustRegionJson>))]
     pub trust_region: Option<f64>,
 }
 
@@ -46,6 +53,46 @@ fn default_trust_region() -> Option<f64> {
 
 fn is_default_trust_region(region: &Option<f64>) -> bool {
     *region == default_trust_region()
+}
+
+/// `solver.trust_region` as JSON: a radius, or the word `"off"`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(untagged)]
+pub enum TrustRegionJson {
+    /// The largest move of a per-path weight from the anchor's (≥ 0).
+    Radius(f64),
+    /// No trust region.
+    Off(Off),
+}
+
+/// The word `"off"`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum Off {
+    /// Switched off.
+    Off,
+}
+
+mod trust_region_json {
+    use super::{Off, TrustRegionJson};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(region: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+        match region {
+            Some(r) => TrustRegionJson::Radius(*r),
+            None => TrustRegionJson::Off(Off::Off),
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+        Ok(match Option::<TrustRegionJson>::deserialize(d)? {
+            Some(TrustRegionJson::Radius(r)) => Some(r),
+            Some(TrustRegionJson::Off(_)) | None => None,
+        })
+    }
 }
 
 /// Per-component fixed weights; `None` means fitted.
@@ -110,7 +157,7 @@ pub fn validate_solver(solver: &SolverOptions) -> Result<(), SpecError> {
     })?;
     if let Some(r) = solver.trust_region {
         check(r.is_finite() && r >= 0.0, "solver.trust_region", || {
-            format!("must be a finite radius ≥ 0 (or null: no trust region), got {r}")
+            format!("must be a finite radius ≥ 0 (or \"off\": no trust region), got {r}")
         })?;
     }
     check((1..=MAX_CV_LAMBDAS).contains(&solver.cv_lambdas.len()), "solver.cv_lambdas", || {
@@ -154,5 +201,22 @@ mod tests {
         assert_eq!(field(json!({ "fixed": { "w1": 2e6 } })), "solver.fixed.w1");
         assert_eq!(field(json!({ "lamda": 1 })), "solver.lamda", "an unknown option is named");
         assert_eq!(field(json!(3)), "solver");
+        assert_eq!(field(json!({ "trust_region": "of" })), "solver.trust_region");
+        assert_eq!(field(json!({ "trust_region": -0.1 })), "solver.trust_region");
+    }
+
+    #[test]
+    fn a_patch_switches_the_trust_region_off_and_null_brings_the_default_back() {
+        // Merge-patch null removes the key; "off" is how a patch says "no region".
+        let off = base().patched(&json!({ "trust_region": "off" })).unwrap();
+        assert_eq!(off.trust_region, None);
+        assert_eq!(serde_json::to_value(&off).unwrap()["trust_region"], "off");
+        assert_eq!(off.patched(&json!({ "lambda": 1 })).unwrap().trust_region, None, "off survives another patch");
+        assert_eq!(off.patched(&json!({ "trust_region": null })).unwrap().trust_region, Some(DEFAULT_TRUST_REGION));
+        assert_eq!(base().patched(&json!({ "trust_region": 0.1 })).unwrap().trust_region, Some(0.1));
+        let whole: SolverOptions =
+            serde_json::from_value(json!({ "fixed": {}, "lambda": 0, "cv_lambdas": [0], "trust_region": null }))
+                .unwrap();
+        assert_eq!(whole.trust_region, None, "null in a whole specification is off");
     }
 }

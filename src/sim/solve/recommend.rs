@@ -34,6 +34,7 @@ use serde::{Deserialize, Serialize};
 pub const GUARD_SE: f64 = 1.645;
 
 use super::crossfit::{Scored, jackknife_se};
+use super::effective::FitReplicates;
 use super::fitted::Fitted;
 use super::row::{NoiseRow, WeightErrors, sample_variance};
 use super::solver::Fit;
@@ -60,6 +61,11 @@ impl Recommended {
     /// The weights to take into a renderer: the fit on all iterations at the row's λ.
     pub fn fit(&self) -> Option<&Fit> {
         self.fitted.as_ref().map(|s| &s.all)
+    }
+
+    /// The fold fits of a fitted recommendation (the jackknife replicates of its weights).
+    pub fn replicates(&self) -> Option<FitReplicates> {
+        self.fitted.as_ref().map(|s| s.cross_fit.replicates())
     }
 
     /// Jackknife standard errors of each cell's weights over the fold fits.

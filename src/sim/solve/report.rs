@@ -12,6 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::effective::{EffectiveWeights, FitReplicates};
 pub use super::expectation::ExpectedLuminance;
 use super::expectation::apply_expectation;
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table_with, weights_at};
@@ -146,6 +147,15 @@ pub struct RunReport {
     pub fingerprint: String,
     /// The (seed, iteration range) pairs the moments hold.
     pub coverage: Coverage,
+    /// The recommended weights' effective weights per (r2, r3) bin, with standard errors (Fig. 2
+    /// of any kind of recommendation; `solve::effective`); absent from a result made without its
+    /// scene at hand or by an earlier optimis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effective: Option<EffectiveWeights>,
+    /// The fold fits of the fitted row `weights` shows, for the fit errors of `effective`; not
+    /// part of the document.
+    #[serde(skip)]
+    pub replicates: Option<FitReplicates>,
 }
 
 /// The rows of a weights table.
@@ -220,7 +230,7 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         reason: r.reason.clone(),
         margin: Some(table.margin.clone()),
     });
-    let (weights, weights_fit, solve_error) = match (inputs.weights, &table.recommended) {
+    let (weights, weights_fit, solve_error, replicates) = match (inputs.weights, &table.recommended) {
         (Some(q), _) => {
             let family = match q.strategy {
                 Strategy::Optimal => Ok(Vec::new()),
@@ -243,12 +253,13 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
             match family
                 .and_then(|f| weights_at(&table.cross_fitting, grid, solver, q.lambda, &f).map_err(|e| e.to_string()))
             {
-                Ok((fit, se)) => (
+                Ok((fit, se, folds)) => (
                     weight_rows(grid, &fit, se.as_deref()),
                     Some(WeightsFit { strategy: q.strategy, lambda: q.lambda, fitted_on_all_iterations: true }),
                     None,
+                    folds,
                 ),
-                Err(e) => (Vec::new(), None, Some(e)),
+                Err(e) => (Vec::new(), None, Some(e), None),
             }
         }
         (None, Ok(r)) => match (r.fit(), r.lambda()) {
@@ -256,10 +267,11 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
                 weight_rows(grid, fit, r.weight_stderr().as_deref()),
                 Some(WeightsFit { strategy: r.strategy, lambda, fitted_on_all_iterations: true }),
                 None,
+                r.replicates(),
             ),
-            _ => (Vec::new(), None, None),
+            _ => (Vec::new(), None, None, None),
         },
-        (None, Err(e)) => (Vec::new(), None, Some(e.clone())),
+        (None, Err(e)) => (Vec::new(), None, Some(e.clone()), None),
     };
     let fit_error = || table.rows.iter().find(|r| r.strategy == Strategy::OptimalCv).and_then(|r| r.error.clone());
     let solve_error = solve_error.or_else(fit_error);
@@ -279,5 +291,7 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },
         fingerprint: moments.fingerprint.clone(),
         coverage: moments.coverage.clone(),
+        effective: None,
+        replicates,
     }
 }
