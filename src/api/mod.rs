@@ -129,6 +129,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(statistics::moments))
         .routes(routes!(statistics::history))
         .routes(routes!(weights::weights))
+        .routes(routes!(weights::effective))
         .routes(with_limit(routes!(studies::merge)))
         .routes(with_limit(routes!(studies::create)))
         .routes(routes!(sweeps::create, sweeps::list))

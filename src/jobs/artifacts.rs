@@ -1,16 +1,19 @@
-//! A job's weight function as a portable artifact (`GET /v1/jobs/{id}/weights`,
-//! `sim::weights`): its recommended row's (or any row's) weights from the latest checkpoint, with
-//! the scene and the heuristics' definitions, signed where this server signs (over the artifact's
-//! canonical bytes, vouching exactly as its moments export does).
+//! A job's weight function as a portable artifact (`GET /v1/jobs/{id}/weights`, `sim::weights`):
+//! its recommended row's (or any row's) weights from the latest checkpoint, with the scene and the
+//! heuristics' definitions, signed where this server signs (over the artifact's canonical bytes,
+//! vouching exactly as its moments export does); and the same row's effective weights per (r2, r3)
+//! bin (`GET /v1/jobs/{id}/effective`, what Fig. 2 draws).
 
 use super::error::JobError;
 use super::references::{expected_luminances, scene_reference};
 use super::statistics::{Latest, Statistics};
+use crate::sim::solve::effective::EffectiveWeights;
 use crate::sim::solve::report::ReportInputs;
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::SpecError;
 use crate::sim::weights::artifact::WeightsArtifact;
 use crate::sim::weights::build::artifact_of_moments;
+use crate::sim::weights::effective::effective_of_moments;
 
 impl Statistics {
     /// The artifact of job `id`'s row `strategy` (none: its recommended row) from its latest
@@ -35,6 +38,34 @@ impl Statistics {
                     artifact = provenance.sign_artifact(artifact, attests);
                 }
                 Ok(artifact)
+            })
+            .await?
+    }
+}
+
+impl Statistics {
+    /// The effective weights per (r2, r3) bin of job `id`'s row `strategy` (none: its recommended
+    /// row) over `paths` paths per side, from its latest checkpoint (Fig. 2 of any recommendation,
+    /// `sim::weights::effective`). CPU work (a report, maybe a refit, the paths): on the heavy
+    /// pool, bounded by `paths` ≤ `MAX_EFFECTIVE_PATHS`.
+    pub async fn effective(
+        &self,
+        id: i64,
+        strategy: Option<Strategy>,
+        paths: usize,
+    ) -> Result<EffectiveWeights, JobError> {
+        let Latest { job, moments, .. } = self.latest(id).await?;
+        self.jobs
+            .compute_heavy(move |_| -> Result<EffectiveWeights, JobError> {
+                let config = job.config();
+                let expected = expected_luminances(config);
+                let inputs = ReportInputs {
+                    reference: scene_reference(&config.scene),
+                    expected: Some(&expected),
+                    weights: None,
+                };
+                effective_of_moments(&moments, &job, &inputs, strategy, paths)
+                    .map_err(|e| JobError::from(SpecError::new("strategy", e)))
             })
             .await?
     }

@@ -8,6 +8,8 @@
 //! * [`fitted`] — the fitted rows: the table, the stacked optimum, each heuristic corrected;
 //! * [`expectation`] — each per-path row's exact expectation, its z, and a tail missing from the
 //!   run;
+//! * [`anchor`] — the per-path row a run stands on: the correlation-aware prior unless another
+//!   beats it beyond the guard;
 //! * [`recommend`] — which row to recommend, with its guard, and the gain; [`trust`] — how far a
 //!   fit may move from the best per-path row to be trusted;
 //! * [`rms_error`] — the standard error of a fitted row's RMS;
@@ -27,6 +29,7 @@
 //!
 //! Imports: crate::sim::engines, crate::sim::math, crate::sim::model, crate::sim::stats
 
+pub mod anchor;
 pub mod budget;
 pub mod compare;
 pub mod crossfit;

@@ -14,6 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::anchor::anchor_of;
 use super::crossfit::{CrossFitting, Scored, cross_fit, score};
 use super::effective::FitReplicates;
 use super::expectation::{ExpectedLuminance, apply_expectation, tail_missing};
@@ -26,7 +27,7 @@ pub use super::row::{HeuristicWeight, NoiseRow, WeightErrors, path_rows, respect
 pub(crate) use super::row::{central_3_4, power_sums};
 use super::solver::{Fit, SolveError, adds_nothing, fit, stack_family};
 use super::strategy::Strategy;
-use super::trust::{TrustRegion, anchor_of};
+use super::trust::TrustRegion;
 use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::{FoldMoments, Moments};
@@ -96,14 +97,16 @@ pub fn noise_table_with(
         Err(e) => NoiseRow::failed(Strategy::Optimal, e.to_string()),
     });
     // Fitted rows are trusted only as corrections of the best per-path row (`trust`).
-    let region = solver.trust_region.zip(anchor_of(&per_path)).map(|(radius, anchor)| TrustRegion { anchor, radius });
+    let path_sums = |p| path_fold_sums(moments, p);
+    let anchor = anchor_of(&per_path, &path_sums).map(|a| a.strategy);
+    let region = solver.trust_region.zip(anchor).map(|(radius, anchor)| TrustRegion { anchor, radius });
     let fitted = fitted_rows(&cf, grid, solver, region);
     let table_rows = [Strategy::OptimalHoldout, Strategy::OptimalCv];
     let row_of = |s: Strategy| fitted.rows.iter().find(|r| r.strategy == s).cloned();
     rows.extend(table_rows.iter().filter_map(|&s| row_of(s)));
     rows.extend(per_path.into_iter().filter(|r| !is_case(r)));
     rows.extend(fitted.rows.iter().filter(|r| !table_rows.contains(&r.strategy)).cloned());
-    let choice = recommend(&rows, &fitted.fitted, &|p| path_fold_sums(moments, p));
+    let choice = recommend(&rows, &fitted.fitted, &path_sums);
     let free_stacked = choice
         .unconstrained
         .filter(|g| g.stderr.is_some_and(|se| g.value + 2.0 * se < 1.0))

@@ -21,22 +21,14 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Standard errors by which a fitted row's paired variance ratio must exceed 1 for it to be
-/// recommended over the best per-path row: the one-sided 95% point of the normal, so a fitted row
-/// is recommended when the run gives 95% confidence that it is better. Not one SE (the issue's
-/// first proposal): at one SE, 1 of 8 seeds of 2000 paper iterations recommended `switch_corrected`
-/// (ratio 1.52 ± 0.41 over correlation_aware_planes23, 1.26 SE) whose weights delivered 105% RMS
-/// on an independent run against the heuristic's 56.5% (tests/recommendation.rs) — where one rare
-/// event is in all folds' training data or none, every fitted row looks better than it is
-/// together. Not two either: over 60 seeds of 2000 iterations and 30 of 10⁴ no fitted row lies
-/// between 1.26 and 2.26 SE, while at 10⁵ iterations, where the jackknife SE is reliable, two SE
-/// turned away stacked optima 1.8–2.0 SE better than the heuristic (docs/results.md §10).
-pub const GUARD_SE: f64 = 1.645;
+pub use super::anchor::GUARD_SE;
 
-use super::crossfit::{Scored, jackknife_se};
+use super::anchor::anchor_of;
+pub(crate) use super::anchor::paired_ratio;
+use super::crossfit::Scored;
 use super::effective::FitReplicates;
 use super::fitted::Fitted;
-use super::row::{NoiseRow, WeightErrors, sample_variance};
+use super::row::{NoiseRow, WeightErrors};
 use super::solver::Fit;
 use super::strategy::Strategy;
 use crate::sim::engines::strategies::PathStrategy;
@@ -188,11 +180,11 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
             .map(|r| r.strategy)
     };
     let is_path = |r: &&NoiseRow| r.strategy.path().is_some();
-    // A per-path row missing its tail (its L far below its exact expectation) has an RMS far too
-    // small: it is passed over while another row keeps the fixed weights (`expectation`).
-    let best_path =
-        lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed && !r.tail_missing))
-            .or_else(|| lowest(&mut rows.iter().filter(usable).filter(is_path).filter(|r| r.respects_fixed)));
+    // The per-path row the run stands on: the correlation-aware prior unless another beats it
+    // beyond the guard, never a row missing its tail while another keeps the fixed weights.
+    let anchor = anchor_of(rows, path_sums);
+    let best_path = anchor.as_ref().map(|a| Strategy::of_path(a.strategy));
+    let anchor_note = anchor.and_then(|a| a.note).map_or_else(String::new, |n| format!("; {n}"));
     let best_fitted = lowest(
         &mut rows
             .iter()
@@ -233,7 +225,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
                     Ok((
                         p,
                         format!(
-                            "no fitted row beats it beyond {GUARD_SE} standard errors (one-sided 95%): the best fitted row, {f} ({:.1}%), {relation} {p} ({:.1}%){by}",
+                            "no fitted row beats it beyond {GUARD_SE} standard errors (one-sided 95%): the best fitted row, {f} ({:.1}%), {relation} {p} ({:.1}%){by}{anchor_note}",
                             rms(f),
                             rms(p)
                         ),
@@ -247,7 +239,7 @@ pub fn recommend(rows: &[NoiseRow], fitted: &[Fitted], path_sums: &dyn Fn(PathSt
         (None, Some(p)) => Ok((
             p,
             format!(
-                "the lowest honest RMS ({:.1}%) of the per-path strategies; no fitted row is stable and within the trust region",
+                "the per-path row the run stands on ({:.1}%); no fitted row is stable and within the trust region{anchor_note}",
                 rms(p)
             ),
         )),
@@ -284,46 +276,5 @@ fn fold_sums(path_sums: &dyn Fn(PathStrategy) -> FoldSums, fitted: &[Fitted], s:
             .find(|f| f.strategy == s)
             .map(|f| f.scored.cross_fit.folds.iter().map(|(fold, _, sums)| (*fold, *sums)).collect())
             .unwrap_or_default(),
-    }
-}
-
-/// Var(numerator)/Var(denominator) on the folds both hold, with the paired delete-a-fold jackknife
-/// SE (None with fewer than two such folds).
-pub(crate) fn paired_ratio(numerator: &FoldSums, denominator: &FoldSums) -> Option<(f64, Option<f64>)> {
-    let folds: Vec<usize> =
-        numerator.iter().map(|(f, _)| *f).filter(|f| denominator.iter().any(|(g, _)| g == f)).collect();
-    let total = |sums: &FoldSums, left_out: Option<usize>| {
-        sums.iter()
-            .filter(|(f, _)| folds.contains(f) && Some(*f) != left_out)
-            .fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]])
-    };
-    let variance = |[m, s1, s2]: [f64; 3]| (m >= 2.0).then(|| sample_variance(m, s1, s2));
-    let ratio = |left_out: Option<usize>| {
-        let den = variance(total(denominator, left_out))?;
-        let num = variance(total(numerator, left_out))?;
-        (den > 0.0).then(|| num / den)
-    };
-    let value = ratio(None)?;
-    let replicates: Option<Vec<f64>> = folds.iter().map(|&f| ratio(Some(f))).collect();
-    let stderr = replicates.filter(|r| r.len() >= 2).map(|r| jackknife_se(r.into_iter()));
-    Some((value, stderr))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Two strategies on the same folds: the ratio of their pooled variances, and a jackknife SE
-    /// that vanishes when they differ by a constant factor in every fold.
-    #[test]
-    fn the_paired_ratio_is_exact_for_proportional_strategies() {
-        let folds: FoldSums = (0..5).map(|f| (f, [10.0, 10.0 + f as f64, 20.0 + 3.0 * f as f64])).collect();
-        // The same values scaled by 2: Σ C doubles, Σ C² quadruples — variance × 4 in every fold.
-        let scaled: FoldSums = folds.iter().map(|&(f, [m, s1, s2])| (f, [m, 2.0 * s1, 4.0 * s2])).collect();
-        let (value, se) = paired_ratio(&scaled, &folds).unwrap();
-        assert!((value - 4.0).abs() < 1e-12, "{value}");
-        assert!(se.unwrap() < 1e-9, "{se:?}");
-        let one_fold: FoldSums = folds[..1].to_vec();
-        assert_eq!(paired_ratio(&one_fold, &folds).unwrap().1, None, "one common fold: no SE");
     }
 }

@@ -19,7 +19,6 @@
 //! over the cells with merge events and m = 0, 1, 2. A row that cannot represent the anchor (a
 //! table alone, when the anchor is a heuristic) has no bound and is not trusted.
 
-use super::row::NoiseRow;
 use super::solver::Fit;
 use crate::sim::engines::strategies::PathStrategy;
 
@@ -43,23 +42,6 @@ impl TrustRegion {
     pub fn admits(&self, fit: &Fit) -> bool {
         self.radius.is_infinite() || self.deviation(fit).is_some_and(|d| d <= self.radius)
     }
-}
-
-/// The anchor of a noise table: its per-path row that keeps the fixed weights with the lowest
-/// finite RMS (the row the recommendation's guard compares fitted rows with) — among those not
-/// missing their tail when any is (`expectation`).
-pub fn anchor_of(rows: &[NoiseRow]) -> Option<PathStrategy> {
-    let lowest = |sound: bool| {
-        rows.iter()
-            .filter(|r| {
-                r.respects_fixed && r.error.is_none() && r.rms_percent.is_some_and(|x| x.is_finite() && x > 0.0)
-            })
-            .filter(|r| !(sound && r.tail_missing))
-            .filter_map(|r| r.strategy.path().map(|p| (p, r.rms_percent.unwrap_or(f64::INFINITY))))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(p, _)| p)
-    };
-    lowest(true).or_else(|| lowest(false))
 }
 
 /// The bound of [`TrustRegion::deviation`] for anchor `anchor`.

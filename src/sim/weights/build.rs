@@ -10,6 +10,7 @@ use super::artifact::{TableCell, WEIGHTS_FORMAT, WEIGHTS_VERSION, WeightsArtifac
 use crate::sim::engines::strategies::PathStrategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::model::config::SimConfig;
+use crate::sim::solve::effective::FitReplicates;
 use crate::sim::solve::evaluate::{GivenCell, GivenHeuristic, GivenRecommendation, GivenWeights};
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightRow, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
@@ -142,17 +143,32 @@ pub fn artifact_of_moments(
     inputs: &ReportInputs<'_>,
     strategy: Option<Strategy>,
 ) -> Result<WeightsArtifact, String> {
+    artifact_and_replicates(moments, job, inputs, strategy).map(|(a, _)| a)
+}
+
+/// [`artifact_of_moments`] with the fold fits of its row at its λ (none for a per-path row), the
+/// fit errors of its effective weights (`effective`).
+pub fn artifact_and_replicates(
+    moments: &Moments,
+    job: &ValidJob,
+    inputs: &ReportInputs<'_>,
+    strategy: Option<Strategy>,
+) -> Result<(WeightsArtifact, Option<FitReplicates>), String> {
     let config = job.config();
     let solver = &job.spec().solver;
     let report = build_report(moments, config.cells(), solver, inputs);
     let recommended = report.recommended.as_ref().map(|r| r.strategy);
     let chosen = strategy.or(recommended).ok_or("the run recommends no row")?;
     if Some(chosen) == recommended {
-        return artifact(config, &report, &recommended_row(&report).expect("a recommendation"));
+        let row = recommended_row(&report).expect("a recommendation");
+        let own =
+            report.weights_fit.as_ref().is_some_and(|f| Some(f.lambda) == row.lambda && f.strategy == row.strategy);
+        let replicates = if own { report.replicates.clone() } else { None };
+        return Ok((artifact(config, &report, &row)?, replicates));
     }
     if chosen.path().is_some() {
         let row = RowWeights { strategy: chosen, recommended: false, table: &[], heuristics: Vec::new(), lambda: None };
-        return artifact(config, &report, &row);
+        return Ok((artifact(config, &report, &row)?, None));
     }
     let row = report.noise_table.iter().find(|r| r.strategy == chosen);
     let lambda = row.and_then(|r| r.lambda).ok_or_else(|| format!("{chosen} has no fit on this run"))?;
@@ -174,7 +190,7 @@ pub fn artifact_of_moments(
         heuristics: heuristics.unwrap_or_default(),
         lambda: Some(lambda),
     };
-    artifact(config, &report, &weights)
+    Ok((artifact(config, &report, &weights)?, fitted.replicates.clone()))
 }
 
 /// The recommended row of `report` as [`RowWeights`].

@@ -30,7 +30,7 @@ use std::f64::consts::{PI, TAU};
 use nalgebra::Vector3;
 
 use super::artifact::{WeightsArtifact, WeightsKind};
-use super::build::{artifact, recommended_row};
+use super::build::{artifact, artifact_and_replicates, recommended_row};
 use crate::sim::engines::camera::CameraSet;
 use crate::sim::engines::strategies::{PathStrategy, PathWeights, Technique, light_start};
 use crate::sim::math::rng::{stream, uniform};
@@ -39,7 +39,10 @@ use crate::sim::model::heuristics::JoinGeometry;
 use crate::sim::model::scene::{Lobe, Scene, advance, angle_between, sample_lobe};
 use crate::sim::solve::crossfit::jackknife_se;
 use crate::sim::solve::effective::{EffectiveBin, EffectiveWeights, FitReplicates};
-use crate::sim::solve::report::RunReport;
+use crate::sim::solve::report::{ReportInputs, RunReport};
+use crate::sim::solve::strategy::Strategy;
+use crate::sim::spec::ValidJob;
+use crate::sim::stats::moments::Moments;
 
 /// Paths each side draws for a figure by default: the sampling error of a bin holding 1% of the
 /// light is then ≈ 0.03 × the spread of the weights within it.
@@ -324,6 +327,7 @@ fn table_by_cell(config: &SimConfig, artifact: &WeightsArtifact) -> Result<Optio
 /// (nothing when it recommends nothing). The fit errors come from the report's fold fits when its
 /// weights table is the recommended row's.
 pub fn attach_effective(report: &mut RunReport, config: &SimConfig, paths: usize) {
+    report.effective = None;
     let Some(row) = recommended_row(report) else { return };
     let own = report.weights_fit.as_ref().is_some_and(|f| Some(f.lambda) == row.lambda && f.strategy == row.strategy);
     let effective = artifact(config, report, &row).and_then(|a| {
@@ -331,4 +335,17 @@ pub fn attach_effective(report: &mut RunReport, config: &SimConfig, paths: usize
         effective_weights(config, &a, replicates, paths)
     });
     report.effective = effective.ok();
+}
+
+/// The effective weights of row `strategy` (none: the recommended row) of the run `moments` of
+/// `job` (`build::artifact_and_replicates`), over `paths` paths per side.
+pub fn effective_of_moments(
+    moments: &Moments,
+    job: &ValidJob,
+    inputs: &ReportInputs<'_>,
+    strategy: Option<Strategy>,
+    paths: usize,
+) -> Result<EffectiveWeights, String> {
+    let (artifact, replicates) = artifact_and_replicates(moments, job, inputs, strategy)?;
+    effective_weights(job.config(), &artifact, replicates.as_ref(), paths)
 }
