@@ -70,11 +70,50 @@ fn table1_and_fig2_as_svg_png_and_pdf() {
     let svg = std::fs::read_to_string(dir.path().join("l3.svg")).unwrap();
     assert!(svg.contains("does not apply") && !svg.contains("<polygon"), "{svg:.400}");
 
+    // Fig. 2: the recommended row's effective weights (left), whatever its kind, and the paper's
+    // in-sample table at λ = 0 (right) with every off-scale cell marked and its value written
+    // (seed 3 of 10⁴ iterations fits 11 cells off the scale).
+    let run = ["run", "--iterations", "10000", "--seed", "3", "--quiet", "--out", "seed3.json"];
+    succeeded(&optimis(dir.path(), &run));
+    succeeded(&optimis(dir.path(), &["figure", "fig2", "seed3.json", "--out", "fig2.svg"]));
+    let svg = std::fs::read_to_string(dir.path().join("fig2.svg")).unwrap();
+    assert!(
+        svg.contains("correlation_aware_planes23: heuristic"),
+        "the left panel names the recommendation: {svg:.600}"
+    );
+    assert!(svg.contains("effective weights") && svg.contains("not an honest estimate"), "{svg:.600}");
+    let paper: Value = {
+        let out = optimis(dir.path(), &["report", "seed3.json", "--weights-lambda", "0", "--json"]);
+        succeeded(&out);
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let off: Vec<&Value> = paper["weights"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["status"] != "empty" && w["status"] != "uninformative")
+        .filter(|w| !(-0.5..=1.5).contains(&w["w1"].as_f64().unwrap()))
+        .collect();
+    assert!(!off.is_empty(), "seed 3 fits some cells far off the scale at λ = 0");
+    assert_eq!(svg.matches("<polygon").count(), off.len(), "one triangle per off-scale cell");
+    assert!(svg.contains(&format!("{} cells off the scale", off.len())));
+    for w in &off {
+        assert!(svg.contains(&format!("{:.2}", w["w1"].as_f64().unwrap())), "its value is written: {w}");
+    }
+    // Every kind draws data: a stack and a table by name, each with its error bars.
+    for (strategy, kind) in [("optimal_stacked", "stack"), ("optimal_cv", "table")] {
+        let out = format!("{strategy}.svg");
+        succeeded(&optimis(dir.path(), &["figure", "fig2", "paper.json", "--strategy", strategy, "--out", &out]));
+        let svg = std::fs::read_to_string(dir.path().join(&out)).unwrap();
+        assert!(svg.contains(&format!("{strategy}: {kind} (effective weights")), "{svg:.600}");
+        assert!(svg.matches("<circle").count() > 2 * 25, "w1 and w2 of 25 bins at least: {strategy}");
+    }
+
     // PNG at 2× by default, or --width; PDF as vector.
     let out = optimis(dir.path(), &["figure", "fig2", "paper.json", "--out", "fig2.png"]);
     if fonts(&out) {
         let png = std::fs::read(dir.path().join("fig2.png")).unwrap();
-        assert_eq!(png_size(&png), (2400, 1600));
+        assert_eq!(png_size(&png), (3200, 1400));
         succeeded(&optimis(dir.path(), &["figure", "table1", "paper.json", "--out", "t.png", "--width", "800"]));
         assert_eq!(png_size(&std::fs::read(dir.path().join("t.png")).unwrap()), (800, 534));
         succeeded(&optimis(dir.path(), &["figure", "fig2", "paper.json", "--out", "fig2.pdf"]));

@@ -106,16 +106,15 @@ fn the_cli_prints_the_paper_column_and_names_what_is_wrong() {
     // A merge of two configurations names the fields that differ.
     let out = optimis(dir.path(), &["run", "--iterations", "200", "--seed", "2", "--out", "l3-paper.json"]);
     assert!(out.status.success(), "{out:?}");
-    // The paper's Fig. 2 without a browser: one marker per cell, bars only where a cell has a
-    // data SE, the spot's edge marked.
+    // The paper's Fig. 2 without a browser: the recommendation's effective weights beside the
+    // in-sample table at λ = 0, the spot's edge marked in both (tests/figures.rs checks the data).
     let out = optimis(dir.path(), &["figure", "fig2", "l3-paper.json", "--out", "fig2.svg"]);
     assert!(out.status.success(), "{out:?}");
     let svg = std::fs::read_to_string(dir.path().join("fig2.svg")).unwrap();
-    assert!(svg.starts_with("<svg") && svg.contains("w1 against r3") && svg.contains("r3 = a = 0.02"), "{svg:.300}");
-    // Markers have radius 4; each error bar has a dot of radius 3 under its marker.
-    assert_eq!(svg.matches(r#"r="4""#).count(), 52, "one marker per cell of the paper's grid");
-    let bars = svg.matches(r#"r="3""#).count();
-    assert!(bars > 0 && bars < 52, "bars on the cells with a data SE only ({bars})");
+    assert!(svg.starts_with("<svg") && svg.contains("w1 against r3"), "{svg:.300}");
+    assert_eq!(svg.matches("r3 = a = 0.02").count(), 2, "the spot's edge in both panels");
+    assert!(svg.contains("effective weights") && svg.contains("fitted in-sample at λ = 0"), "{svg:.600}");
+    assert!(svg.matches(r#"r="4""#).count() > 52, "w1 and w2 of every bin with light, and the table's cells");
 
     let out = optimis(dir.path(), &["merge", "l3-paper.json", "l3.json", "--out", "merged.json"]);
     assert_eq!(out.status.code(), Some(4), "{out:?}");

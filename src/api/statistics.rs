@@ -21,9 +21,10 @@ use crate::jobs::evaluation::JobEvaluation;
 use crate::sim::checks::published::{figures, paper_columns};
 use crate::sim::document::MomentsDocument;
 use crate::sim::solve::evaluate::GivenWeights;
-use crate::sim::solve::export::{noise_table_csv, weights_csv};
+use crate::sim::solve::export::{effective_csv, noise_table_csv, weights_csv};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
+use crate::sim::weights::effective::EFFECTIVE_PATHS;
 
 /// Query of a job's result.
 #[derive(Debug, Deserialize, IntoParams)]
@@ -38,8 +39,11 @@ pub struct ResultQuery {
     /// without it, `Accept: text/csv` asks for CSV.
     #[param(pattern = "^(csv|json|markdown|latex)$")]
     format: Option<String>,
-    /// With CSV: `noise` (default; one row per strategy) or `weights` (one row per cell).
-    #[param(pattern = "^(noise|weights)$")]
+    /// With CSV: `noise` (default; one row per strategy), `weights` (the weights table, one row
+    /// per cell, its `table` column saying which table it is; for a per-path recommendation, which
+    /// has no table, the effective weights) or `effective` (the recommended row's effective
+    /// weights, one row per (r2, r3) bin; its weight function itself: `GET /v1/jobs/{id}/weights`).
+    #[param(pattern = "^(noise|weights|effective)$")]
     table: Option<String>,
 }
 
@@ -57,7 +61,7 @@ pub struct HistoryQuery {
 #[utoipa::path(
     get, operation_id = "get_result", path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = i64, Path, description = "Job id"), ResultQuery),
     responses(
-        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy; weights: one row per cell; the columns and units of docs/csv.md)", content(
+        (status = 200, description = "Results: the result document, or with format=csv one of its tables (noise: one row per strategy; weights: one row per cell, or for a per-path recommendation the effective weights; effective: one row per (r2, r3) bin; the columns and units of docs/csv.md)", content(
             (JobResult = "application/json"),
             (String = "text/csv"),
             (String = "text/markdown"),
@@ -108,12 +112,18 @@ pub async fn result(
             let csv = noise_table_csv(&result.report, |s| paper_columns(&result.references, s.name()));
             Ok(csv_response(csv, &format!("optimis-job-{id}-noise.csv")))
         }
-        (true, Some("weights")) => {
-            Ok(csv_response(weights_csv(&result.report.weights), &format!("optimis-job-{id}-weights.csv")))
+        // A per-path recommendation has no table: its effective weights, labelled, rather than an
+        // empty file a renderer would read as "no weights".
+        (true, Some("weights")) if !result.report.weights.is_empty() => {
+            Ok(csv_response(weights_csv(&result.report), &format!("optimis-job-{id}-weights.csv")))
+        }
+        (true, Some("weights" | "effective")) => {
+            let effective = state.statistics.effective(id, None, EFFECTIVE_PATHS).await?;
+            Ok(csv_response(effective_csv(&effective), &format!("optimis-job-{id}-effective.csv")))
         }
         (true, Some(other)) => Err(ApiError::Invalid {
             field: "table".into(),
-            message: format!("must be noise or weights, got {other:?}"),
+            message: format!("must be noise, weights or effective, got {other:?}"),
         }),
     }
 }

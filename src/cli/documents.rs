@@ -76,7 +76,8 @@ pub struct ReportArgs {
     /// Write the noise table as CSV (one row per strategy).
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
-    /// Write the weights table as CSV (one row per cell).
+    /// Write the weights table as CSV (one row per cell; for a per-path recommendation, which has
+    /// no table, its effective weights per (r2, r3) bin).
     #[arg(long, value_name = "FILE")]
     pub weights_csv: Option<PathBuf>,
 }

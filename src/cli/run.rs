@@ -20,7 +20,7 @@ use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
 use crate::sim::model::params::{merge_patch, path_patch};
 use crate::sim::runner::run_iterations;
-use crate::sim::solve::export::{noise_table_csv, weights_csv};
+use crate::sim::solve::export::{effective_csv, noise_table_csv, weights_csv};
 use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
 use crate::sim::spec::{JobSpec, Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
@@ -88,7 +88,8 @@ pub struct RunArgs {
     /// Write the noise table as CSV (one row per strategy).
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
-    /// Write the weights table as CSV (one row per cell).
+    /// Write the weights table as CSV (one row per cell; for a per-path recommendation, which has
+    /// no table, its effective weights per (r2, r3) bin).
     #[arg(long, value_name = "FILE")]
     pub weights_csv: Option<PathBuf>,
     #[command(flatten)]
@@ -108,7 +109,21 @@ pub(super) fn write_csv(
         write_atomically(path, csv.as_bytes())?;
     }
     if let Some(path) = weights {
-        write_atomically(path, weights_csv(&report.weights).as_bytes())?;
+        // A per-path recommendation has no table: its effective weights, labelled, rather than an
+        // empty file a renderer would read as "no weights".
+        let csv = match &report.effective {
+            Some(effective) if report.weights.is_empty() => {
+                eprintln!(
+                    "{}: {} is a per-path weight function with no table: wrote its effective weights per (r2, r3) bin \
+                     (`optimis weights` writes the function itself)",
+                    path.display(),
+                    effective.strategy
+                );
+                effective_csv(effective)
+            }
+            _ => weights_csv(report),
+        };
+        write_atomically(path, csv.as_bytes())?;
     }
     Ok(())
 }

@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, Iterator, List, Tuple, Type
 
 import requests
 
+import numpy as np
 import pandas as pd
 import pytest
 import urllib3
@@ -28,6 +29,9 @@ from optimis_client import (
     ServerUnreachable,
     UnexpectedRedirect,
     WaitTimeout,
+    WeightFunction,
+    effective_weights_frame,
+    model_path,
     noise_table_frame,
 )
 
@@ -150,6 +154,130 @@ def test_weights_history_and_lambda(client: Client, done: Dict[str, Dict[str, An
     assert history["iterations"].max() == PAPER["iterations"]
     strategies = {row["strategy"] for row in client.result(job_id)["noise_table"]}
     assert set(history["strategy"]) <= strategies and "switch" in set(history["strategy"])
+
+
+def sums_to_one(f: WeightFunction, x2: np.ndarray, x3: np.ndarray) -> np.ndarray:
+    """The weights (w0, w1, w2) of `f` on the model scene's join paths (x2, x3), checked to sum to 1."""
+    w = f.weights(**model_path(f, x2, x3).inputs())
+    assert w.shape == (len(x2), 3)
+    np.testing.assert_allclose(w.sum(axis=-1), 1.0, rtol=0, atol=1e-12 * (1 + f.beta_sum))
+    return w
+
+
+def test_weights_artifact(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """The artifact is the recommended row's weight function, and the numpy evaluator reads it."""
+    job_id = done["paper"]["id"]
+    result = client.result(job_id)
+    recommended = result["recommended"]["strategy"]
+    artifact = client.weights_artifact(job_id)
+    assert artifact["format"] == "optimis-weights" and artifact["version"] == 1
+    assert artifact["strategy"] == recommended and artifact["recommended"] is True
+    assert artifact["provenance"]["job_id"] == job_id
+    assert artifact["provenance"]["iterations"] == PAPER["iterations"]
+    assert artifact["provenance"]["fingerprint"] == result["fingerprint"]
+    assert artifact["scene"]["merge_radius"] == 0.003 and artifact["scene"]["camera_paths"] == 100
+    # A per-path recommendation has no table (the result's weights are empty too), a fitted one has.
+    assert (artifact["kind"] == "heuristic") == (not result["weights"])
+    if artifact["kind"] == "heuristic":
+        assert artifact["cells"] is None and artifact["table"] == []
+        assert [h["name"] for h in artifact["heuristics"]] == [recommended]
+    # Evaluated on a few join paths: the weights sum to 1, and keep the paper's fixed w0 = 0.
+    f = client.weight_function(job_id)
+    assert f.strategy == recommended and f.kind == artifact["kind"]
+    row = next(r for r in result["noise_table"] if r["strategy"] == recommended)
+    assert row["respects_fixed"]
+    x2 = np.array([[0.1, 0.0], [0.3, -0.2], [-0.05, 0.4], [1.2, 0.7]])
+    x3 = np.array([[0.01, 0.0], [0.3, 0.05], [-0.6, 1.1], [0.015, -0.01]])
+    w = sums_to_one(f, x2, x3)
+    assert (w[:, 0] == 0.0).all()
+
+    # Any row by name: a per-path one is a heuristic, the stacked optimum a table and its β.
+    balance = client.weights_artifact(job_id, strategy="balance_planes23")
+    assert balance["strategy"] == "balance_planes23" and balance["kind"] == "heuristic"
+    assert balance["recommended"] is (recommended == "balance_planes23")
+    stacked = client.weight_function(job_id, strategy="optimal_stacked")
+    assert stacked.strategy == "optimal_stacked" and stacked.kind == "stack"
+    assert stacked.cells is not None and stacked.cells.cells == 52 and stacked.heuristics
+    assert (sums_to_one(stacked, x2, x3)[:, 0] == 0.0).all()
+
+
+def test_effective_weights(client: Client, done: Dict[str, Dict[str, Any]]) -> None:
+    """One row per (r2, r3) bin; where a bin carries light, w0 + w1 + w2 = 1 with standard errors."""
+    job_id = done["paper"]["id"]
+    result = client.result(job_id)
+    recommended = result["recommended"]["strategy"]
+    frame = client.effective_weights(job_id, paths=5000)
+    assert frame.attrs["strategy"] == recommended and frame.attrs["paths_per_side"] == 5000
+    assert frame.attrs["kind"] in ("table", "heuristic", "stack")
+    assert frame.attrs["camera_paths_reaching_plane3"] > 0
+    assert frame.attrs["luminance"] == pytest.approx(result["reference_luminance"], rel=0.1)
+    cells = done["paper"]["spec"]["cells"]
+    assert len(frame) == len(cells["r2_edges"]) * len(cells["r3_edges"])
+    columns = ["strategy", "kind", "r2_lo", "r2_hi", "r3_lo", "r3_hi", "paths", "luminance_share"]
+    columns += [f"w{m}{s}" for s in ("", "_stderr", "_sampling_stderr", "_fit_stderr") for m in range(3)]
+    assert set(columns) <= set(frame.columns)
+    assert (frame["strategy"] == recommended).all() and (frame["kind"] == frame.attrs["kind"]).all()
+    # The tail bin is open on both axes.
+    assert math.isnan(frame["r2_hi"].iloc[-1]) and math.isnan(frame["r3_hi"].iloc[-1])
+    lit = frame[frame["w1"].notna()]
+    assert len(lit) > 10 and (lit["paths"] > 0).all()
+    np.testing.assert_allclose(lit["w0"] + lit["w1"] + lit["w2"], 1.0, rtol=0, atol=1e-9)
+    assert (lit["w0"] == 0.0).all()  # the paper's fixed weight, kept by the recommendation
+    for m in range(3):
+        assert (lit[f"w{m}_stderr"] >= 0).all() and (lit[f"w{m}_sampling_stderr"] >= 0).all()
+    assert (lit["w1_stderr"] > 0).any()
+    assert frame["luminance_share"].sum() == pytest.approx(1.0, abs=1e-9)
+    # No light, no weights.
+    assert (frame.loc[frame["w1"].isna(), "luminance_share"] == 0).all()
+    if frame.attrs["kind"] == "heuristic":
+        assert frame[["w0_fit_stderr", "w1_fit_stderr", "w2_fit_stderr"]].isna().all().all()
+    # The same document converted without the client's call gives the same frame.
+    raw = client.request("GET", f"/v1/jobs/{job_id}/effective", params={"paths": 5000}).json()
+    pd.testing.assert_frame_equal(effective_weights_frame(raw), frame)
+    first = int(lit.index[0])
+    assert raw["bins"][first]["w"] == [frame.loc[first, f"w{m}"] for m in range(3)]
+    assert raw["bins"][first]["stderr"] == [frame.loc[first, f"w{m}_stderr"] for m in range(3)]
+
+    # A fitted row has fit errors too; its SE combines sampling and fit.
+    stacked = client.effective_weights(job_id, strategy="optimal_stacked", paths=2000)
+    assert stacked.attrs["strategy"] == "optimal_stacked" and stacked.attrs["kind"] == "stack"
+    lit = stacked[stacked["w1"].notna()]
+    np.testing.assert_allclose(lit["w0"] + lit["w1"] + lit["w2"], 1.0, rtol=0, atol=1e-9)
+    assert lit["w1_fit_stderr"].notna().all() and (lit["w1_fit_stderr"] > 0).any()
+    combined = np.hypot(lit["w1_sampling_stderr"], lit["w1_fit_stderr"])
+    np.testing.assert_allclose(lit["w1_stderr"], combined, rtol=1e-9, atol=1e-15)
+
+
+def test_weights_arguments_are_checked(
+    client: Client, done: Dict[str, Dict[str, Any]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A bad `paths` or `strategy` raises ValueError before sending; the server's 422 names the field."""
+    job_id = done["paper"]["id"]
+    sent: List[Any] = []
+    with monkeypatch.context() as patch:
+        patch.setattr(client, "request", lambda *args, **kwargs: sent.append(args))
+        for paths in (999, 1_000_001, 0, -5000, 2000.0, "5000", True):
+            with pytest.raises(ValueError, match="paths"):
+                client.effective_weights(job_id, paths=paths)  # type: ignore[arg-type]
+        for strategy in ("Optimal", "", "a" * 65, "optimal stacked", "optimal_stacked\n", 3):
+            with pytest.raises(ValueError, match="strategy"):
+                client.effective_weights(job_id, strategy=strategy)  # type: ignore[arg-type]
+            with pytest.raises(ValueError, match="strategy"):
+                client.weights_artifact(job_id, strategy=strategy)  # type: ignore[arg-type]
+    assert sent == []
+    # The bounds are inclusive.
+    assert client.effective_weights(job_id, paths=1000).attrs["paths_per_side"] == 1000
+    # The server's own checks surface as ApiError 422 naming the field.
+    with pytest.raises(ApiError) as caught:
+        client.request("GET", f"/v1/jobs/{job_id}/effective", params={"paths": 10})
+    assert caught.value.status == 422 and caught.value.field == "paths"
+    for call in (client.effective_weights, client.weights_artifact):
+        with pytest.raises(ApiError) as caught:
+            call(job_id, strategy="no_such_row")
+        assert caught.value.status == 422 and caught.value.field == "strategy"
+    with pytest.raises(ApiError) as caught:
+        client.weights_artifact(10**9)
+    assert caught.value.status == 404
 
 
 def test_labels_filter(client: Client) -> None:

@@ -201,6 +201,9 @@ def test_a_small_stack_is_looked_up_as_the_rust_evaluator_does(tmp_path: Path) -
     assert WeightFunction.load(json.dumps(doc)).table.tolist() == f.table.tolist()  # type: ignore[union-attr]
     (tmp_path / "w.json").write_text(json.dumps(doc))
     assert WeightFunction.load(tmp_path / "w.json").table.tolist() == f.table.tolist()  # type: ignore[union-attr]
+    # A signing server's artifact (its signature beside the weights) is read the same.
+    signed = dict(doc, signature={"algorithm": "ed25519", "key_id": "k", "value": "AA=="})
+    assert WeightFunction.load(signed).table.tolist() == f.table.tolist()  # type: ignore[union-attr]
     # A value on an edge belongs to the bin above; φ = π is in the last bin; negative and NaN → 0.
     r2 = np.array([0.0, 0.999, 1.0, 5.0, -1.0, np.nan, 0.2, 0.2])
     r3 = np.array([0.0, 0.5, 0.499, 7.0, 0.1, 0.1, np.nan, 0.1])

@@ -9,8 +9,8 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Deserialize;
 
-use super::fig2::{HEIGHT, WIDTH};
 use super::{COLORS, drawing};
+use super::{HEIGHT, WIDTH};
 use crate::cli::CliError;
 
 /// The strategies drawn by default (those the history has): the paper's four cases and the rows a

@@ -18,9 +18,14 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::CliError;
-use super::documents::lambda_flag;
+use super::documents::{lambda_flag, parse_strategy};
 use super::run::write_atomically;
 use crate::sim::model::params::check;
+
+/// The size of a one-panel drawing (table1, convergence) in SVG user units (pixels at 1×);
+/// fig2's two panels have their own (`fig2::WIDTH`).
+pub const WIDTH: u32 = 1200;
+pub const HEIGHT: u32 = 800;
 
 /// The largest PNG width: 8192 px is beyond any journal's column at 600 dpi and bounds the pixmap
 /// (8192 × 5462 × 4 bytes ≈ 180 MB).
@@ -28,7 +33,8 @@ const MAX_WIDTH: u32 = 8192;
 
 #[derive(Debug, Args)]
 pub struct FigureArgs {
-    /// Which figure: `fig2` (w₁ against r₃ of the weights table, the paper's Fig. 2), `table1`
+    /// Which figure: `fig2` (the paper's Fig. 2: the recommended weights' effective w₁ and w₂
+    /// against r₃, and the in-sample table the paper draws), `table1`
     /// (each strategy's RMS ± SE, the paper's values beside them where they apply) — both from a
     /// moments document —, or `convergence` (L ± SE and RMS against iterations, from a job's
     /// history: `GET /v1/jobs/{id}/history`).
@@ -40,13 +46,18 @@ pub struct FigureArgs {
     /// Where to write the figure: FILE.svg, FILE.png or FILE.pdf.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    /// PNG only: the image's width in pixels (default 2400, twice the drawing's 1200).
+    /// PNG only: the image's width in pixels (default twice the drawing's: 3200 for fig2, 2400
+    /// for the others).
     #[arg(long, value_name = "PX")]
     pub width: Option<u32>,
-    /// fig2 only: draw the in-sample table optimum at this λ (0: the paper's procedure) instead of
-    /// the recommended table. (Table 1's rows do not depend on it: each fitted row has its own λ.)
+    /// fig2 only: the λ of the right panel, the in-sample table optimum (default 0: the paper's
+    /// procedure). (Table 1's rows do not depend on it: each fitted row has its own λ.)
     #[arg(long, allow_hyphen_values = true)]
     pub lambda: Option<f64>,
+    /// fig2 only: the noise-table row whose effective weights the left panel draws (default: the
+    /// recommended row).
+    #[arg(long, value_name = "STRATEGY")]
+    pub strategy: Option<String>,
     /// convergence only: the strategies to draw, comma-separated (default: the paper's four cases,
     /// and optimal_cv, optimal_stacked and correlation_aware_planes23 where the history has them).
     #[arg(long, value_delimiter = ',')]
@@ -65,7 +76,10 @@ fn format_of(args: &FigureArgs) -> Result<Format, CliError> {
     let extension = args.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let format = match extension.as_deref() {
         Some("svg") => Format::Svg,
-        Some("png") => Format::Png { width: args.width.unwrap_or(2 * fig2::WIDTH) },
+        Some("png") => {
+            let drawing = if args.which == "fig2" { fig2::WIDTH } else { WIDTH };
+            Format::Png { width: args.width.unwrap_or(2 * drawing) }
+        }
         Some("pdf") => Format::Pdf,
         _ => {
             return Err(CliError::Config(format!(
@@ -91,9 +105,16 @@ pub fn figure(args: FigureArgs) -> Result<(), CliError> {
     check(args.which == "fig2" || args.lambda.is_none(), "--lambda", || {
         "applies to fig2 only (table1's fitted rows each have their own λ; a history holds no moments to solve)".into()
     })?;
+    check(args.which == "fig2" || args.strategy.is_none(), "--strategy", || "applies to fig2 only".into())?;
     lambda_flag("--lambda", args.lambda)?;
+    let strategy = args
+        .strategy
+        .as_deref()
+        .map(parse_strategy)
+        .transpose()
+        .map_err(|e| CliError::Config(format!("--strategy: {e}")))?;
     let (svg, what) = match args.which.as_str() {
-        "fig2" => fig2::figure(&args.document, args.lambda)?,
+        "fig2" => fig2::figure(&args.document, args.lambda, strategy)?,
         "table1" => table1::figure(&args.document)?,
         _ => convergence::figure(&args.document, &args.strategies)?,
     };

@@ -7,9 +7,9 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::fig2::{HEIGHT, WIDTH};
 use super::solvable::Solvable;
 use super::{COLORS, drawing, legend};
+use super::{HEIGHT, WIDTH};
 use crate::cli::CliError;
 use crate::sim::checks::published::{applicable, figures};
 use crate::sim::solve::row::NoiseRow;

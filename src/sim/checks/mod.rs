@@ -7,10 +7,13 @@
 //! * [`expectation`] — exact expected merge counts given the camera paths;
 //! * [`equivalence`] — block-wise comparison of two engines' figures;
 //! * [`references`] — each strategy's expected luminance at the job's R, as reports take it;
-//! * [`published`] — the paper's Table 1 as data, and whether a job's configuration is the paper's.
+//! * [`published`] — the paper's Table 1 as data, and whether a job's configuration is the paper's;
+//! * `effective` (tests) — the effective weights against the quadrature and their own spread.
 //!
-//! Imports: crate::sim::engines, crate::sim::model, crate::sim::runner, crate::sim::solve, crate::sim::spec, crate::sim::stats
+//! Imports: crate::sim::engines, crate::sim::model, crate::sim::runner, crate::sim::solve, crate::sim::spec, crate::sim::stats, crate::sim::weights
 
+#[cfg(test)]
+mod effective;
 pub mod equivalence;
 pub mod expectation;
 pub mod expected;

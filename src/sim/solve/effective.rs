@@ -53,8 +53,8 @@ pub struct EffectiveWeights {
     /// Full paths each side drew (camera paths that reach plane 3, light paths joined to the
     /// pixel; from streams of their own), combined by the balance heuristic over the two samplers.
     pub paths_per_side: u64,
-    /// Camera paths that reached plane 3 (fewer than `paths_per_side` only in a scene whose camera
-    /// paths almost never do).
+    /// Of the `paths_per_side` camera paths, those that reached plane 3 (the others were deflected
+    /// past the horizontal at x2 and carry no light).
     pub camera_paths_reaching_plane3: u64,
     /// The paths' estimate of the pixel's luminance L (a check against the reference quadrature).
     pub luminance: f64,

@@ -1,13 +1,15 @@
 //! The result document's tables as CSV (`GET /v1/jobs/{id}/result?format=csv`, `optimis report
 //! --csv`): the noise table, one row per strategy (with the paper's figures where its Table 1
-//! applies), and the weights table, one row per cell.
+//! applies), the weights table, one row per cell, and the effective weights, one row per (r2, r3)
+//! bin (what a per-path recommendation, which has no table, gives instead).
 //!
 //! Column names and units follow docs/csv.md, one vocabulary for every table: `luminance` (and its
 //! standard error) in the model's units (docs/model.md: the light's radiance scale, as in the
 //! JSON); `rms_percent` in percent of L for one iteration; cell bounds in the scene's lengths (r2,
 //! r3) and radians (φ); an open bound (the tail cell) is empty.
 
-use super::report::{RunReport, WeightRow};
+use super::effective::EffectiveWeights;
+use super::report::RunReport;
 use super::strategy::Strategy;
 use crate::sim::math::csv::{Csv, json_cell, number, quoted};
 
@@ -93,8 +95,12 @@ pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperCol
     csv.finish()
 }
 
-/// The weights table's columns.
-const WEIGHT_COLUMNS: [&str; 15] = [
+/// The weights table's columns: which table it is first (as the dashboard writes them), then the
+/// cell.
+const WEIGHT_COLUMNS: [&str; 18] = [
+    "table",
+    "strategy",
+    "lambda",
     "cell",
     "r2_lo",
     "r2_hi",
@@ -112,11 +118,32 @@ const WEIGHT_COLUMNS: [&str; 15] = [
     "status",
 ];
 
-/// The weights table as CSV, one row per cell in the document's order.
-pub fn weights_csv(rows: &[WeightRow]) -> String {
+/// Which table a report's `weights` are, for the `table` column: `recommended` (a table alone),
+/// `recommended_table_part` (the table of a stack: a path's weights add Σ β · heuristic, the β in
+/// the JSON and the weights artifact), or `fit_at_lambda_not_recommended` (a table asked for at a
+/// λ, fitted in-sample).
+pub fn weights_table_label(report: &RunReport) -> &'static str {
+    let recommended = report.recommended.as_ref();
+    match (&report.weights_fit, recommended) {
+        (Some(fit), Some(r)) if fit.strategy == r.strategy && Some(fit.lambda) == r.lambda => {
+            if r.heuristics.is_empty() { "recommended" } else { "recommended_table_part" }
+        }
+        _ => "fit_at_lambda_not_recommended",
+    }
+}
+
+/// The weights table as CSV, one row per cell in the document's order (empty of rows when the
+/// report has no table: a per-path recommendation — [`effective_csv`] is its CSV).
+pub fn weights_csv(report: &RunReport) -> String {
     let mut csv = Csv::new(WEIGHT_COLUMNS);
-    for (alpha, w) in rows.iter().enumerate() {
+    let table = weights_table_label(report);
+    let strategy = report.weights_fit.as_ref().map(|f| f.strategy.name().to_string()).unwrap_or_default();
+    let lambda = number(report.weights_fit.as_ref().map(|f| f.lambda));
+    for (alpha, w) in report.weights.iter().enumerate() {
         csv.row([
+            table.to_string(),
+            strategy.clone(),
+            lambda.clone(),
             alpha.to_string(),
             number(w.r2[0]),
             number(w.r2[1]),
@@ -132,6 +159,70 @@ pub fn weights_csv(rows: &[WeightRow]) -> String {
             number(w.w2_stderr),
             w.samples.to_string(),
             json_cell(&w.status),
+        ]);
+    }
+    csv.finish()
+}
+
+/// The effective weights' columns (docs/csv.md).
+const EFFECTIVE_COLUMNS: [&str; 23] = [
+    "table",
+    "strategy",
+    "kind",
+    "paths_per_side",
+    "r2_lo",
+    "r2_hi",
+    "r3_lo",
+    "r3_hi",
+    "paths",
+    "luminance_share",
+    "w0",
+    "w0_stderr",
+    "w1",
+    "w1_stderr",
+    "w2",
+    "w2_stderr",
+    "w0_sampling_stderr",
+    "w1_sampling_stderr",
+    "w2_sampling_stderr",
+    "w0_fit_stderr",
+    "w1_fit_stderr",
+    "w2_fit_stderr",
+    "note",
+];
+
+/// Effective weights as CSV, one row per (r2, r3) bin: `table` is `effective`, the weights are
+/// averages over the bin's paths (not a lookup table: the weight function itself is the weights
+/// artifact), empty where no sampled path of the bin carries light.
+pub fn effective_csv(effective: &EffectiveWeights) -> String {
+    let mut csv = Csv::new(EFFECTIVE_COLUMNS);
+    let at = |v: Option<[f64; 3]>, m: usize| number(v.map(|v| v[m]));
+    for b in &effective.bins {
+        let note = if b.w.is_none() { "no sampled path of this bin carries light" } else { "" };
+        csv.row([
+            "effective".to_string(),
+            effective.strategy.clone(),
+            effective.kind.clone(),
+            effective.paths_per_side.to_string(),
+            number(b.r2[0]),
+            number(b.r2[1]),
+            number(b.r3[0]),
+            number(b.r3[1]),
+            b.paths.to_string(),
+            b.luminance_share.to_string(),
+            at(b.w, 0),
+            at(b.stderr, 0),
+            at(b.w, 1),
+            at(b.stderr, 1),
+            at(b.w, 2),
+            at(b.stderr, 2),
+            at(b.sampling_stderr, 0),
+            at(b.sampling_stderr, 1),
+            at(b.sampling_stderr, 2),
+            at(b.fit_stderr, 0),
+            at(b.fit_stderr, 1),
+            at(b.fit_stderr, 2),
+            quoted(note),
         ]);
     }
     csv.finish()

@@ -72,7 +72,10 @@ struct BinSums {
     paths: u64,
     c: f64,
     c2: f64,
-    /// Σ c·v_m, Σ c²·v_m, Σ c²·v_m².
+    /// The first path's weights: the sums below are of d_m = v_m − shift_m, so that a bin whose
+    /// weights barely vary (a table's cell: not at all) loses no digits to cancellation.
+    shift: Option<[f64; 3]>,
+    /// Σ c·d_m, Σ c²·d_m, Σ c²·d_m².
     cv: [f64; 3],
     c2v: [f64; 3],
     c2v2: [f64; 3],
@@ -88,6 +91,17 @@ pub fn effective_weights(
     artifact: &WeightsArtifact,
     replicates: Option<&FitReplicates>,
     paths: usize,
+) -> Result<EffectiveWeights, String> {
+    effective_weights_from(config, artifact, replicates, paths, EFFECTIVE_SEED)
+}
+
+/// [`effective_weights`] from the paths of another `seed` (the calibration of their errors).
+pub fn effective_weights_from(
+    config: &SimConfig,
+    artifact: &WeightsArtifact,
+    replicates: Option<&FitReplicates>,
+    paths: usize,
+    seed: u64,
 ) -> Result<EffectiveWeights, String> {
     let grid = config.cells();
     let nphi = grid.phi_bins() as usize;
@@ -106,26 +120,26 @@ pub fn effective_weights(
     let n = paths.clamp(1, MAX_EFFECTIVE_PATHS);
     let mut sums = Sums::new(config, table, heuristics, n as f64);
     let mut cameras = CameraSet::default();
-    let (mut drawn, mut iteration) = (0usize, 0u64);
-    // A scene whose camera paths never reach plane 3 must not loop for ever: bounded draws.
-    let max_iterations = (n as u64).div_ceil(config.camera_paths.max(1)) * 64 + 64;
-    while drawn < n && iteration < max_iterations {
-        cameras.regenerate(config, EFFECTIVE_SEED, iteration);
+    // Exactly n camera paths, those that never reach plane 3 (deflected past the horizontal at
+    // x2) included: the mixture's density n·p_camera counts every draw, and leaving such paths
+    // out biased L up by the fraction they are (0.1% in the paper's scene, 0.8% with β = 8°).
+    let (mut drawn, mut reached, mut iteration) = (0usize, 0usize, 0u64);
+    while drawn < n {
+        cameras.regenerate(config, seed, iteration);
         iteration += 1;
-        for camera in &cameras.paths {
-            let Some(x3) = camera.x3 else { continue };
-            if drawn == n {
-                break;
-            }
+        for camera in cameras.paths.iter().take(n - drawn) {
             drawn += 1;
-            sums.add(camera.x2, x3);
+            if let Some(x3) = camera.x3 {
+                reached += 1;
+                sums.add(camera.x2, x3);
+            }
         }
     }
     let scene = &config.scene;
     let edges = grid.r3_edges();
     if edges.len() > 1 {
         for block in 0..(n as u64).div_ceil(LIGHT_BLOCK) {
-            let mut rng = stream(EFFECTIVE_SEED, block, LIGHT_STREAM);
+            let mut rng = stream(seed, block, LIGHT_STREAM);
             for i in block * LIGHT_BLOCK..((block + 1) * LIGHT_BLOCK).min(n as u64) {
                 let k = (i % (edges.len() as u64 - 1)) as usize;
                 let (lo2, hi2) = (edges[k] * edges[k], edges[k + 1] * edges[k + 1]);
@@ -150,7 +164,7 @@ pub fn effective_weights(
         strategy: artifact.strategy.clone(),
         kind: kind.into(),
         paths_per_side: n as u64,
-        camera_paths_reaching_plane3: drawn as u64,
+        camera_paths_reaching_plane3: reached as u64,
         luminance: sums.total.iter().sum(),
         bins,
     })
@@ -220,7 +234,9 @@ impl<'a> Sums<'a> {
         }
         bin.c += c;
         bin.c2 += c * c;
+        let shift = *bin.shift.get_or_insert(v);
         for (m, v) in v.into_iter().enumerate() {
+            let v = v - shift[m];
             bin.cv[m] += c * v;
             bin.c2v[m] += c * c * v;
             bin.c2v2[m] += c * c * v * v;
@@ -260,9 +276,10 @@ impl<'a> Sums<'a> {
         if s.c <= 0.0 {
             return bin;
         }
-        let w: [f64; 3] = std::array::from_fn(|m| s.cv[m] / s.c);
+        let shift = s.shift.unwrap_or_default();
+        let w: [f64; 3] = std::array::from_fn(|m| shift[m] + s.cv[m] / s.c);
         let sampling: [f64; 3] = std::array::from_fn(|m| {
-            let r = w[m];
+            let r = s.cv[m] / s.c;
             (s.c2v2[m] - 2.0 * r * s.c2v[m] + r * r * s.c2).max(0.0).sqrt() / s.c
         });
         let fit = replicates.filter(|r| r.tables.len() >= 2).map(|r| {

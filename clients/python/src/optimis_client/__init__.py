@@ -10,11 +10,12 @@ DataFrames::
     client.wait(job["id"])
     print(client.noise_table(job["id"]))
 
-Weights artifacts (``optimis weights``) evaluate without a server, in numpy::
+Weights artifacts (``optimis weights``, ``client.weights_artifact(id)``) evaluate without a
+server, in numpy::
 
     from optimis_client import WeightFunction, model_path
 
-    f = WeightFunction.load("weights.json")
+    f = WeightFunction.load("weights.json")           # or client.weight_function(id)
     w1 = f.weight_of(1, model_path(f, x2, x3))
 
 Errors: every exception is an :class:`OptimisError` — :class:`ApiError` (the server's problem
@@ -24,7 +25,14 @@ request took longer than the client's ``timeout``), :class:`ResponseTooLarge` (a
 :class:`JobFailed` (:class:`SweepFailed`) and :class:`WaitTimeout` (a :class:`TimeoutError`).
 """
 
-from ._client import DEFAULT_MAX_RESPONSE_BYTES, DEFAULT_URL, FINAL_STATES, MAX_WAIT_SECONDS, Client
+from ._client import (
+    DEFAULT_MAX_RESPONSE_BYTES,
+    DEFAULT_URL,
+    FINAL_STATES,
+    MAX_WAIT_SECONDS,
+    Client,
+    effective_weights_frame,
+)
 from ._errors import (
     ApiError,
     JobFailed,
@@ -88,6 +96,7 @@ __all__ = [
     "cell_index",
     "check_vectors",
     "compare_frame",
+    "effective_weights_frame",
     "history_frame",
     "lobe_pdf",
     "model_path",

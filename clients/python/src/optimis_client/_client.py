@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import email.utils
 import math
+import numbers
 import os
+import re
 import time
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
@@ -24,8 +26,9 @@ from ._errors import (
     UnexpectedRedirect,
     WaitTimeout,
 )
-from ._frames import compare_frame, history_frame, noise_table_frame, sweep_table_frame, weights_frame
+from ._frames import _columns, _frame, compare_frame, history_frame, noise_table_frame, sweep_table_frame, weights_frame
 from ._transport import Deadline, WatchedAdapter
+from .weights import WeightFunction
 
 #: A JSON object as the server sends it.
 Json = Dict[str, Any]
@@ -52,6 +55,54 @@ _DOCUMENT_TIMEOUT = 200.0
 
 # Bytes of an answer read at a time.
 _CHUNK_BYTES = 64 * 1024
+
+# Seconds for a computation the server runs on its heavy pool: a refit of a row at its λ for an
+# artifact, the paths of effective weights (as long as a budget gets).
+_COMPUTE_TIMEOUT = 120.0
+
+#: What the server accepts as a noise-table row's name in a query (``?strategy=``).
+STRATEGY_PATTERN = re.compile(r"[a-z0-9_]{1,64}")
+
+#: The paths per side :meth:`Client.effective_weights` may ask for (the server's bounds; its
+#: default is 50,000).
+EFFECTIVE_PATHS_RANGE = (1000, 1_000_000)
+
+#: The columns of :func:`effective_weights_frame`, in order (any further member of a bin follows
+#: them): those of the server's effective-weights CSV (docs/csv.md) but ``table``,
+#: ``paths_per_side`` and ``note``.
+EFFECTIVE_COLUMNS = (
+    "strategy",
+    "kind",
+    "r2_lo",
+    "r2_hi",
+    "r3_lo",
+    "r3_hi",
+    "paths",
+    "luminance_share",
+    "w0",
+    "w0_stderr",
+    "w1",
+    "w1_stderr",
+    "w2",
+    "w2_stderr",
+    "w0_sampling_stderr",
+    "w1_sampling_stderr",
+    "w2_sampling_stderr",
+    "w0_fit_stderr",
+    "w1_fit_stderr",
+    "w2_fit_stderr",
+)
+
+# A bin's members holding (technique 0, 1, 2) triples, and the suffix of their columns.
+_EFFECTIVE_TRIPLES = (
+    ("w", ""),
+    ("stderr", "_stderr"),
+    ("sampling_stderr", "_sampling_stderr"),
+    ("fit_stderr", "_fit_stderr"),
+)
+
+# A bin's members that become the columns above.
+_EFFECTIVE_MEMBERS = ("r2", "r3", "paths", "luminance_share") + tuple(member for member, _ in _EFFECTIVE_TRIPLES)
 
 
 def _normalise_url(base_url: str) -> str:
@@ -142,6 +193,67 @@ def _mark(resource: Mapping[str, Any]) -> Tuple[Any, ...]:
         progress.get("iterations_total"),
         tuple(sorted(by_state.items())),
     )
+
+
+def _strategy_params(strategy: Optional[str]) -> Json:
+    """The query naming a noise-table row (none: the recommended row), checked as the server
+    checks it (:class:`ValueError` otherwise, before anything is sent)."""
+    if strategy is None:
+        return {}
+    if not isinstance(strategy, str) or not STRATEGY_PATTERN.fullmatch(strategy):
+        raise ValueError(
+            f"strategy must be a noise-table row's name (1 to 64 of a-z, 0-9 and _, e.g. 'optimal_stacked'), "
+            f"not {strategy!r}"
+        )
+    return {"strategy": strategy}
+
+
+def _effective_paths(paths: Any) -> int:
+    """`paths` checked against :data:`EFFECTIVE_PATHS_RANGE` (:class:`ValueError` otherwise)."""
+    low, high = EFFECTIVE_PATHS_RANGE
+    if isinstance(paths, bool) or not isinstance(paths, numbers.Integral) or not low <= paths <= high:
+        raise ValueError(f"paths must be an integer from {low} to {high}, not {paths!r}")
+    return int(paths)
+
+
+def effective_weights_frame(effective: Mapping[str, Any]) -> pd.DataFrame:
+    """Effective weights (``GET /v1/jobs/{id}/effective``, or the ``effective`` member of a result
+    made by ``optimis run --json``/``optimis report --json``) as a DataFrame: one row per (r2, r3)
+    bin, in the document's order (r2-major, then r3).
+
+    Columns: ``strategy`` and ``kind`` (``table``, ``heuristic`` or ``stack``) of the weight
+    function; the bin's bounds ``r2_lo``, ``r2_hi``, ``r3_lo``, ``r3_hi`` (an open upper bound, the
+    tail bin, is ``NaN``); ``paths`` (sampled paths in the bin) and ``luminance_share``; the
+    effective weights ``w0``, ``w1``, ``w2`` — the contribution-weighted averages of each
+    technique's weight over the bin's paths, summing to 1 — and their standard errors
+    ``w0_stderr`` … (sampling and fit combined), ``w0_sampling_stderr`` … and ``w0_fit_stderr`` …
+    (the fit's part; ``NaN`` for a per-path heuristic, which fits nothing). The weights and their
+    errors are ``NaN`` in a bin where no sampled path carries light. ``frame.attrs`` keeps the
+    document's other members: ``strategy``, ``kind``, ``paths_per_side``,
+    ``camera_paths_reaching_plane3`` and ``luminance`` (the paths' estimate of L).
+    """
+    attrs = {k: v for k, v in effective.items() if k != "bins"}
+    records = []
+    for b in effective.get("bins") or []:
+        record: Dict[str, Any] = {"strategy": effective.get("strategy"), "kind": effective.get("kind")}
+        for name in ("r2", "r3"):
+            bounds = list(b.get(name) or [None, None]) + [None, None]
+            record[f"{name}_lo"], record[f"{name}_hi"] = bounds[0], bounds[1]
+        record["paths"] = b.get("paths")
+        record["luminance_share"] = b.get("luminance_share")
+        for member, suffix in _EFFECTIVE_TRIPLES:
+            values = list(b.get(member) or [None, None, None]) + [None, None, None]
+            for m in range(3):
+                record[f"w{m}{suffix}"] = values[m]
+        record.update({k: v for k, v in b.items() if k not in _EFFECTIVE_MEMBERS})
+        records.append(record)
+    frame = _frame(records, _columns(records, EFFECTIVE_COLUMNS))
+    if records:
+        for column in EFFECTIVE_COLUMNS[2:]:
+            if column != "paths":
+                frame[column] = pd.to_numeric(frame[column], errors="coerce").astype("float64")
+    frame.attrs.update(attrs)
+    return frame
 
 
 class Client:
@@ -494,8 +606,61 @@ class Client:
         """A job's weights table as a DataFrame, one row per cell (empty for a per-path
         recommendation): ``cell``, ``r2_lo``, ``r2_hi``, ``r3_lo``, ``r3_hi``,
         ``phi_lo_rad``, ``phi_hi_rad``, ``w0``, ``w0_stderr``, ``w1``, … (docs/csv.md), ``samples``, ``status``. With `lam`,
-        the in-sample table at that λ (as :meth:`result`)."""
+        the in-sample table at that λ (as :meth:`result`). Only the table: a stack's per-path terms
+        and a per-path recommendation are in :meth:`weights_artifact`, their averages per bin in
+        :meth:`effective_weights`."""
         return weights_frame(self.result(id, lam=lam).get("weights") or [])
+
+    def weights_artifact(self, id: int, *, strategy: Optional[str] = None) -> Json:
+        """A job's weight function as a portable weights artifact (``GET /v1/jobs/{id}/weights``;
+        format ``optimis-weights``, version 1): the recommended row's, or `strategy`'s (any row of
+        the noise table, e.g. ``"optimal_stacked"``, ``"balance_planes23"``; a fitted row other
+        than the recommended one is refitted at its λ). The JSON document as the server sent it —
+        ``kind`` (``table``, ``heuristic`` or ``stack``), ``scene``, ``cells`` and ``table``,
+        ``heuristics`` with their β and formulas, ``provenance`` and, where the server signs, its
+        ``signature`` — ready to be written to a file for ``optimis evaluate --weights`` or a
+        renderer (docs/weights-lookup.md); :meth:`weight_function` evaluates it.
+
+        `strategy` must look like a row's name (``^[a-z0-9_]{1,64}$``, else :class:`ValueError`
+        before anything is sent); a row the server does not know is an :class:`ApiError` 422 whose
+        ``field`` is ``strategy``, a job without a checkpoint yet a 409.
+        """
+        params = _strategy_params(strategy)
+        return self._json(
+            "GET", f"/v1/jobs/{int(id)}/weights", params=params or None, timeout=max(self.timeout, _COMPUTE_TIMEOUT)
+        )
+
+    def weight_function(self, id: int, *, strategy: Optional[str] = None) -> WeightFunction:
+        """A job's weight function ready to evaluate in numpy: :meth:`weights_artifact` checked and
+        loaded by :meth:`optimis_client.WeightFunction.load` (``f.weights(**model_path(f, x2,
+        x3).inputs())``; see :mod:`optimis_client.weights`). A signing server's ``signature`` is
+        kept but not checked here (``optimis evaluate --weights`` checks it)."""
+        artifact = self.weights_artifact(id, strategy=strategy)
+        return WeightFunction.load(artifact)
+
+    def effective_weights(
+        self, id: int, *, strategy: Optional[str] = None, paths: Optional[int] = None
+    ) -> pd.DataFrame:
+        """A weight function's effective weights per (r2, r3) bin (``GET /v1/jobs/{id}/effective``)
+        as a DataFrame, one row per bin (see :func:`optimis_client.effective_weights_frame` for the
+        columns; ``frame.attrs`` keeps ``strategy``, ``kind``, ``paths_per_side``,
+        ``camera_paths_reaching_plane3`` and ``luminance``). In each bin, ``w0``, ``w1``, ``w2`` are
+        the contribution-weighted averages of each technique's weight over the bin's full paths —
+        what Fig. 2 shows, for a table, a per-path heuristic or a stack alike — with their sampling
+        and fit standard errors; ``NaN`` where no sampled path of the bin carries light.
+
+        Of the recommended row, or of `strategy`'s (as in :meth:`weights_artifact`); `paths` is the
+        number of paths each side draws (the server's default 50,000; 1,000 to 1,000,000, the work
+        is linear in it). A `strategy` or `paths` out of these bounds raises :class:`ValueError`
+        before anything is sent.
+        """
+        params = _strategy_params(strategy)
+        if paths is not None:
+            params["paths"] = _effective_paths(paths)
+        document = self._json(
+            "GET", f"/v1/jobs/{int(id)}/effective", params=params or None, timeout=max(self.timeout, _COMPUTE_TIMEOUT)
+        )
+        return effective_weights_frame(document)
 
     def history(self, id: int) -> pd.DataFrame:
         """Each strategy's figures at every checkpoint (``GET /v1/jobs/{id}/history``, at most

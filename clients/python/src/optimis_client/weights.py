@@ -396,7 +396,9 @@ class WeightFunction:
             artifact,
             "",
             ("format", "version", "strategy", "recommended", "kind", "scene", "provenance"),
-            ("cells", "table", "heuristics"),
+            # The signature is the server's, over the artifact's canonical bytes (`optimis
+            # evaluate --weights` and the server verify it); it does not change the weights.
+            ("cells", "table", "heuristics", "signature"),
         )
         if not isinstance(doc["strategy"], str):
             raise ValueError("weights artifact: strategy must be a string")
