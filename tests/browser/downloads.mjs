@@ -1,13 +1,16 @@
-// The download steps of the browser test, on the paper job's page: the noise table, Fig. 2's
-// weights and the history as CSV — their headers exactly docs/csv.md's columns, their numbers the
-// API's in full —, Fig. 2 as SVG (a vector figure of what the chart draws), a chart as a PNG fit for
-// print (at least 1,600 px wide), and the moments.
+// The download steps of the browser test, on the paper job's page: the noise table, the weights
+// (the recommended table where there is one, the effective weights Fig. 2 draws for any kind of
+// recommendation) and the history as CSV — their headers exactly docs/csv.md's columns, their
+// numbers the API's in full —, Fig. 2's two panels as
+// SVG (vector figures of what the charts draw), a chart as a PNG fit for print (at least 1,600 px
+// wide), and the moments.
 
-import { callApi, check } from './harness.mjs';
+import { callApi, check, r2Words } from './harness.mjs';
 import { PNG_SIGNATURE, csvContract, downloadFrom, parseCsv, pngSize } from './files.mjs';
 
 /** PNG charts are at least this wide: twice the 820 px figure, for print. */
 export const PNG_MIN_WIDTH = 1600;
+
 
 /** A CSV number cell as the API's value: empty is null. */
 const cell = (text) => (text === '' ? null : Number(text));
@@ -41,20 +44,29 @@ export async function checkDownloads(page, id, { result, figure }) {
   check(plane1[col('paper_case')] === '1' && Number(plane1[col('paper_luminance')]) === 26.484e-5 && plane1[col('paper_rms_percent')] === '208',
     'it carries the paper\'s case and values');
 
-  const weights = await downloadFrom(page, page.getByRole('button', { name: 'Weights (CSV)' }));
-  const [weightsHeader, ...weightRows] = parseCsv(weights.bytes.toString('utf8'));
-  // docs/csv.md: the dashboard's weights table has "`table`, `strategy`, `lambda` in front".
-  const front = [.../with (.*) in front/.exec(contract.weights.where)[1].matchAll(/`([a-z_]+)`/g)].map((m) => m[1]);
-  check(weightsHeader.join() === [...front, ...contract.weights.columns].join(),
-    `"Weights (CSV)" has docs/csv.md's weights columns with ${front.join(', ')} in front (${weightsHeader.length})`);
-  const w = (r, name) => r[weightsHeader.indexOf(name)];
-  const table = new Set(weightRows.map((r) => w(r, 'table')));
-  const expectedTable = figure.fig.kind === 'table-optimum' ? 'table_optimum_not_recommended' : 'recommended';
-  check(weightRows.length === figure.fig.weights.length && table.size === 1 && table.has(expectedTable),
-    `it saves the ${weightRows.length} cells Fig. 2 draws from, as "${expectedTable}"`);
-  check(weightRows.every((r, k) => Number(w(r, 'cell')) === k && cell(w(r, 'phi_hi_rad')) === figure.fig.weights[k].phi[1]
-    && cell(w(r, 'r3_hi')) === figure.fig.weights[k].r3[1] && cell(w(r, 'w1_stderr')) === (figure.fig.weights[k].w1_stderr ?? null)),
-  'each row is its cell (index in the document\'s order), φ in radians, an open edge empty, w₁\'s SE as the API gives it');
+  // The recommended table, offered only when there is one (a per-path heuristic has none).
+  const weightsButton = page.getByRole('button', { name: 'Weights (CSV)', exact: true });
+  check((await weightsButton.isVisible()) === (result.weights.length > 0),
+    result.weights.length ? '"Weights (CSV)" is offered: the recommendation has a table' : `"Weights (CSV)" is not offered: ${result.recommended.strategy} has no table`);
+  if (result.weights.length > 0) {
+    const weights = await downloadFrom(page, weightsButton);
+    const [weightsHeader, ...weightRows] = parseCsv(weights.bytes.toString('utf8'));
+    // docs/csv.md's weights columns, `table`, `strategy`, `lambda` first, as the server writes them.
+    check(weightsHeader.join() === contract.weights.columns.join() && weightRows.length === result.weights.length,
+      `"Weights (CSV)" has docs/csv.md's weights columns, a row per cell (${weightRows.length})`);
+  }
+  // The effective weights Fig. 2 draws, for any kind of recommendation.
+  const { eff } = figure;
+  const effective = await downloadFrom(page, page.getByRole('button', { name: 'Effective weights (CSV)' }));
+  const [effHeader, ...effRows] = parseCsv(effective.bytes.toString('utf8'));
+  const e = (r, name) => r[effHeader.indexOf(name)];
+  check(effective.name === `optimis-job-${id}-effective-weights.csv` && effHeader.join() === contract.effective.columns.join() && effRows.length === eff.bins.length,
+    `"Effective weights (CSV)" saves ${effective.name}: ${effRows.length} bins under docs/csv.md's effective columns`);
+  check(effRows.every((r, k) => e(r, 'strategy') === eff.strategy && e(r, 'kind') === eff.kind && Number(e(r, 'paths_per_side')) === eff.paths_per_side
+    && cell(e(r, 'r3_hi')) === eff.bins[k].r3[1] && cell(e(r, 'r2_lo')) === eff.bins[k].r2[0] && Number(e(r, 'paths')) === eff.bins[k].paths
+    && cell(e(r, 'w1')) === (eff.bins[k].w?.[1] ?? null) && cell(e(r, 'w1_stderr')) === (eff.bins[k].stderr?.[1] ?? null)
+    && cell(e(r, 'w2')) === (eff.bins[k].w?.[2] ?? null) && cell(e(r, 'luminance_share')) === eff.bins[k].luminance_share),
+  `each row is its bin: the API's w and SE in full, empty where no path carries light (${effRows.filter((r) => e(r, 'w1') === '').length} bins), an open edge empty`);
 
   const history = (await callApi(`/v1/jobs/${id}/history`)).json;
   const historyCsv = await downloadFrom(page, page.getByRole('button', { name: 'History (CSV)' }));
@@ -65,21 +77,29 @@ export async function checkDownloads(page, id, { result, figure }) {
 
   const svg = await downloadFrom(page, page.locator('[data-ref="weights-downloads"] button[data-download="svg"]'));
   const text = svg.bytes.toString('utf8');
-  const count = (needle) => text.split(needle).length - 1;
+  const count = (doc, needle) => doc.split(needle).length - 1;
   check(svg.name === `optimis-job-${id}-fig2-w1.svg` && text.startsWith('<svg xmlns="http://www.w3.org/2000/svg"'),
-    `Fig. 2's "SVG" saves ${svg.name}, an SVG document`);
-  const { marks, fig } = figure;
-  check(count('class="series"') === 2 && count('class="error-bar"') === marks.bars && count('class="guide" data-axis="x" data-value="0.02"') === 1
-    && count('class="marker-open"') === marks.open && count('class="marker"') === marks.filled
-    && text.includes(`${fig.prefix}, r₂ ∈ [0.5, ∞)`) && text.includes('<title>Job') && count('class="axis-label"') === 2,
-  `the SVG draws the 2 series as paths, ${marks.filled} filled and ${marks.open} open markers, ${marks.bars} error bars, the r₃ = a marker, both axis labels and a legend`);
-  check((fig.kind !== 'table-optimum' || /<title>[^<]*not recommended[^<]*<\/title>/.test(text)) && (marks.open === 0 || text.includes('open: no data SE')),
-    'its title says when it is the table optimum, not the recommendation, and its legend explains the open markers');
-  const wellFormed = await page.evaluate((doc) => {
+    `Fig. 2's effective panel "SVG" saves ${svg.name}, an SVG document`);
+  const { marks, zero } = figure;
+  const lines = 2 * marks.lit.length;
+  check(count(text, 'class="series"') === lines && count(text, 'class="marker"') === marks.drawn && count(text, 'class="marker-open"') === marks.drawn
+    && count(text, 'class="error-bar"') === marks.bars && count(text, 'class="guide" data-axis="x" data-value="0.02"') === 1
+    && marks.lit.every((r2) => text.includes(`w₁, ${r2Words(r2)}`) && text.includes(`w₂, ${r2Words(r2)}`)) && count(text, 'class="axis-label"') === 2,
+  `the SVG draws the ${lines} series as paths, ${marks.drawn} filled w₁ and ${marks.drawn} hollow w₂ markers, ${marks.bars} error bars, the r₃ = a marker, both axis labels and a legend`);
+  check(/<title>Job [^<]*effective weights of the recommended [^<]*<\/title>/.test(text)
+    && marks.dark.every((r2) => text.includes(`${r2Words(r2)}: no light path reaches it`)),
+  `its title says these are the recommended row's effective weights${marks.dark.length ? ', its legend notes the r₂ bins without light' : ''}`);
+  const zeroSvg = await downloadFrom(page, page.locator('[data-ref="lambda0-downloads"] button[data-download="svg"]'));
+  const zeroText = zeroSvg.bytes.toString('utf8');
+  check(zeroSvg.name === `optimis-job-${id}-fig2-lambda0.svg` && /<title>[^<]*λ = 0[^<]*not recommended[^<]*<\/title>/.test(zeroText)
+    && count(zeroText, 'class="marker"') + count(zeroText, 'class="marker-open"') === zero.markers
+    && count(zeroText, 'class="off-scale-mark"') === zero.off.length && zeroText.includes('in-sample fit: not an honest estimate, not recommended'),
+  `the λ = 0 panel's "SVG" saves ${zeroSvg.name}: ${zero.markers} markers, ${zero.off.length} edge marks, labelled not recommended`);
+  const wellFormed = await page.evaluate((docs) => docs.every((doc) => {
     const parsed = new DOMParser().parseFromString(doc, 'image/svg+xml');
     return parsed.documentElement.nodeName === 'svg' && parsed.getElementsByTagName('parsererror').length === 0;
-  }, text);
-  check(wellFormed, 'the SVG is well-formed XML');
+  }), [text, zeroText]);
+  check(wellFormed, 'both SVGs are well-formed XML');
 
   const png = await downloadFrom(page, page.locator('[data-ref="luminance-downloads"] button[data-download="png"]'));
   const size = pngSize(png.bytes);

@@ -13,6 +13,9 @@ export const STRATEGIES = ['plane1', 'plane2', 'plane3', 'switch', 'optimal', 'o
   'balance_planes23_corrected', 'power_planes23_corrected', 'correlation_aware_planes23_corrected'];
 // Cells whose weights the server copied from a neighbour: gaps in the weight charts, without a bar.
 export const UNFITTED = new Set(['empty', 'uninformative']);
+// The y range of the job page's λ = 0 panel (plots.js's WEIGHT_FRAME): a cell beyond it is marked
+// at the frame's edge with its value.
+export const WEIGHT_FRAME = [-0.5, 1.5];
 
 export const [base, outDir] = process.argv.slice(2);
 if (!base || !outDir) {
@@ -116,6 +119,8 @@ export async function readPlot(container) {
       openMarkers: el.dataset.openMarkers === undefined ? null : Number(el.dataset.openMarkers),
       bands: el.dataset.bands === undefined ? null : Number(el.dataset.bands),
       guides: el.dataset.guides ?? null,
+      offScale: el.dataset.offScale === undefined ? null : Number(el.dataset.offScale),
+      offScaleText: el.dataset.offScaleText ?? null,
     };
   });
 }
@@ -133,7 +138,7 @@ export async function checkPlot(page, ref, what, expectedLabels) {
 
 
 /**
- * The weights table a job's Fig. 2 (and the compare overlay) should draw for its `result`: the
+ * The weights table the compare overlay should draw for a job's `result`: the
  * recommended table, or — a per-path strategy recommended — the table optimum at optimal_cv's λ,
  * fetched as the page does. `prefix` starts the series' legend labels.
  */
@@ -148,7 +153,7 @@ export async function expectedFigure(id, result) {
 }
 
 /**
- * The markers Fig. 2 draws for `weights` in the r₂ bins `r2s` (lower edges), first φ bin, tail and
+ * The markers the compare overlay draws for `weights` in the r₂ bins `r2s` (lower edges), first φ bin, tail and
  * copied cells left out: `open` those without a data SE (smoothed), `filled` the others, `bars` the
  * filled ones with an SE above 0.
  */
@@ -157,6 +162,56 @@ export function figureMarks(weights, r2s) {
   const drawn = weights.filter((w) => r2s.includes(w.r2[0]) && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status));
   const open = drawn.filter((w) => w.status === 'smoothed' || w.w1_stderr === null);
   return { open: open.length, filled: drawn.length - open.length, bars: drawn.filter((w) => !open.includes(w) && w.w1_stderr > 0).length };
+}
+
+/** An r₂ bin as the page names it: `r₂ ∈ [0, 0.5)`, `r₂ ≥ 0.5` for the open one. */
+export const r2Words = (r2) => (r2[1] === null ? `r₂ ≥ ${r2[0]}` : `r₂ ∈ [${r2[0]}, ${r2[1]})`);
+
+/** A value marked at a chart's edge as the page writes it: three significant digits, a real minus. */
+export const edgeText = (v, e) => {
+  const n = (x) => String(Number(x.toPrecision(3))).replace('-', '−');
+  return `${n(v)}${e === null || e === undefined ? '' : ` ± ${n(e)}`}`;
+};
+
+/** The r₂ bins of `rows` (effective bins or weight cells), in order. */
+const r2Bins = (rows) => [...new Map(rows.map((b) => [b.r2[0], b.r2])).values()].sort((a, b) => a[0] - b[0]);
+
+/**
+ * What the job page's effective panel draws from an /effective document `eff`: the r₂ bins with a
+ * light-carrying path (`lit`: a w₁ and a w₂ series each) and without (`dark`: a caption note
+ * instead), the bins with weights (`drawn`: a filled w₁ and a hollow w₂ marker each) and the error
+ * bars (an SE above 0).
+ */
+export function effectiveMarks(eff) {
+  const r2s = r2Bins(eff.bins);
+  const lit = r2s.filter((r2) => eff.bins.some((b) => b.r2[0] === r2[0] && b.w));
+  const withW = eff.bins.filter((b) => b.w);
+  return {
+    lit, dark: r2s.filter((r2) => !lit.includes(r2)), drawn: withW.length,
+    bars: withW.reduce((n, b) => n + (b.stderr[1] > 0) + (b.stderr[2] > 0), 0),
+  };
+}
+
+/**
+ * What the job page's λ = 0 panel draws from the table `weights` (first φ bin, the tail cell
+ * included): per r₂ bin with data a series (`lit`; `dark`: every cell copied), a marker per cell
+ * fitted to data within WEIGHT_FRAME (`open` those without a data SE), a bar per such filled cell
+ * with an SE above 0, an edge mark per cell beyond the frame (`off`), and `copied` the cells copied
+ * from a neighbour in the bins with data (gaps).
+ */
+export function lambdaZeroMarks(weights) {
+  const phi = Math.min(...weights.map((w) => w.phi[0]));
+  const cells = weights.filter((w) => w.phi[0] === phi);
+  const data = cells.filter((w) => !UNFITTED.has(w.status));
+  const inside = data.filter((w) => w.w1 >= WEIGHT_FRAME[0] && w.w1 <= WEIGHT_FRAME[1]);
+  const noSe = (w) => w.status === 'smoothed' || w.w1_stderr === null;
+  const lit = r2Bins(cells).filter((r2) => data.some((w) => w.r2[0] === r2[0]));
+  return {
+    lit, dark: r2Bins(cells).filter((r2) => !lit.includes(r2)),
+    markers: inside.length, open: inside.filter(noSe).length, bars: inside.filter((w) => !noSe(w) && w.w1_stderr > 0).length,
+    off: data.filter((w) => !inside.includes(w)),
+    copied: cells.filter((w) => UNFITTED.has(w.status) && lit.some((r2) => r2[0] === w.r2[0])).length,
+  };
 }
 
 /**

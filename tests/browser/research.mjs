@@ -1,18 +1,20 @@
 // The research steps of the browser test: a job in the paper's configuration and one under uniform
 // light, submitted through the API (2000 iterations of the restricted engine: about a second each);
 // the spot job's page — Table 1 with the paper's column, case numbers and z against each row's
-// expectation at R, Fig. 2 (checkFigure2: the recommended table, or when a per-path strategy is
-// recommended the table optimum labelled as not recommended; ± 1 SE bars, open markers without bars
-// for smoothed cells, the r₃ = a marker), the luminance chart with SE bands and the reference
-// line —, their axes and legends (checkAxes), a kept solve, and the compare page of the two jobs,
-// reached from the list's checkboxes, with its CSVs. (The job's downloads: downloads.mjs.)
+// expectation at R, Fig. 2 (checkFigure2: its two panels — the recommended row's effective weights,
+// w₁ and w₂ with ± 1 SE bars per r₂ bin with light, whatever the kind of recommendation, and the
+// in-sample λ = 0 table with its off-scale cells marked at the frame's edge and its copied cells
+// left out —, the r₃ = a marker), the luminance chart with SE bands and the reference line —, their
+// axes and legends (checkAxes), a kept solve, and the compare page of the two jobs, reached from
+// the list's checkboxes, with its CSVs. (The job's downloads: downloads.mjs.)
 //
 // With OPTIMIS_SCREENSHOT_DIR set, also writes the README's dashboard-job.png and dashboard-compare.png there.
 
 import { PNG_MIN_WIDTH } from './downloads.mjs';
 import { csvContract, docScreenshot, downloadFrom, parseCsv, pngSize } from './files.mjs';
 import {
-  STRATEGIES, callApi, check, checkAxes, expectedFigure, figureMarks, parseWithError, readPlot, screenshot, sleep, waitFor,
+  STRATEGIES, callApi, check, checkAxes, edgeText, effectiveMarks, expectedFigure, figureMarks, lambdaZeroMarks, parseWithError,
+  r2Words, readPlot, screenshot, sleep, waitFor,
 } from './harness.mjs';
 import { checkZ, readNoiseRows } from './jobs.mjs';
 
@@ -23,11 +25,10 @@ const PAPER = {
   plane1: ['1', '26.484', '208'], plane2: ['2', '26.352', '254'], plane3: ['3', '25.997', '146'],
   switch: ['4', '26.352', '61'], optimal: ['5', '25.961', '54'],
 };
-// Jobs whose recommendation is a weights table (the paper's scene at a larger merge radius, 10⁴
-// iterations: a few seconds each): at R = 0.01 the correlation-aware heuristic over planes 2–3
-// corrected by a table (Fig. 2 draws its table part, the caption its β), at R = 0.02 optimal_cv's
-// table (cells fitted to their own samples, with bars, beside smoothed ones). Seeded, so the
-// recommendations are reproducible; a solver change that turns them per-path fails checkTableJobs.
+// Jobs whose recommendation is fitted (the paper's scene at a larger merge radius, 10⁴ iterations:
+// a few seconds each): at R = 0.01 a heuristic corrected by a table (a stack: Fig. 2 draws it whole,
+// the caption its β), at R = 0.02 a table. Seeded, so the recommendations are reproducible; a
+// solver change that turns them both per-path fails checkTableJobs.
 const TABLE_JOBS = [
   { preset: 'paper-table1', iterations: 10000, merge_radius: 0.01 },
   { preset: 'paper-table1', iterations: 10000, merge_radius: 0.02 },
@@ -62,9 +63,8 @@ export async function submitTableJobs() {
 }
 
 /**
- * The pages of TABLE_JOBS: each recommends a table, marked in the noise table; Fig. 2 draws it (a
- * table with a heuristic stacked on it as its table part, β in the caption), filled markers with
- * bars where a cell has a data SE and open ones without where it is smoothed.
+ * The pages of TABLE_JOBS: each recommends a fitted row, marked in the noise table; Fig. 2's
+ * effective panel draws it whole (a stack's caption gives β), and "Weights (CSV)" offers its table.
  */
 export async function checkTableJobs(page, ids) {
   await waitFor('the table jobs to succeed', async () => {
@@ -72,7 +72,8 @@ export async function checkTableJobs(page, ids) {
     if (states.some((s) => s === 'failed' || s === 'cancelled')) throw new Error(`a table job ended ${states}`);
     return states.every((s) => s === 'succeeded');
   }, 120_000);
-  const seen = [];
+  const kinds = [];
+  const offScale = [];
   for (const id of ids) {
     await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
     await waitFor(`job ${id}'s final results`, async () =>
@@ -80,58 +81,87 @@ export async function checkTableJobs(page, ids) {
       && (await page.locator('[data-ref="weights-plot"] canvas').count()) > 0);
     const result = (await callApi(`/v1/jobs/${id}/result`)).json;
     const { recommended } = result;
-    check(result.weights.length > 0 && recommended.lambda !== null,
-      `job ${id} (R = ${TABLE_JOBS[ids.indexOf(id)].merge_radius}) recommends a weights table: ${recommended.strategy}, λ = ${recommended.lambda}`);
     const rows = await readNoiseRows(page);
     check(rows.filter((r) => r.recommendedRow).map((r) => r.strategy).join() === recommended.strategy,
-      `its noise table marks ${recommended.strategy}, a fitted row, as recommended`);
-    const { marks } = await checkFigure2(page, id, result);
-    if (recommended.heuristics.length) {
+      `job ${id} (R = ${TABLE_JOBS[ids.indexOf(id)].merge_radius}) marks its recommended row, ${recommended.strategy}, in the noise table`);
+    const { eff, zero } = await checkFigure2(page, id, result);
+    kinds.push(eff.kind);
+    offScale.push(zero.off.length);
+    if (eff.kind === 'stack') {
       const note = await page.locator('[data-ref="weights-note"]').textContent();
       const row = rows.find((r) => r.strategy === recommended.strategy);
-      check(note.includes('Drawn: its table part T₁') && recommended.heuristics.every((b) => note.includes(`${b.strategy} `)) && row.betas.startsWith('β: '),
-        `a table with ${recommended.heuristics.map((b) => b.strategy).join(', ')} stacked on it: Fig. 2 draws its table part, its caption and row give β`);
+      check(note.includes('Drawn whole') && recommended.heuristics.every((b) => note.includes(`${b.strategy} `)) && row.betas.startsWith('β: '),
+        `a table with ${recommended.heuristics.map((b) => b.strategy).join(', ')} stacked on it: Fig. 2 draws it whole, its caption and row give β`);
     }
-    seen.push({ part: recommended.heuristics.length > 0, mixed: marks.bars > 0 && marks.open > 0 });
+    const weights = page.getByRole('button', { name: 'Weights (CSV)', exact: true });
+    check((await weights.isVisible()) === (result.weights.length > 0),
+      `"Weights (CSV)" is offered exactly when there is a recommended table (${result.weights.length} cells)`);
   }
-  check(seen.some((s) => s.part), 'a recommendation with a heuristic stacked on its table was drawn as its table part');
-  check(seen.some((s) => s.mixed), 'a recommended table was drawn with filled markers and bars beside open markers without');
+  check(kinds.some((k) => k !== 'heuristic'), `a fitted recommendation's effective weights were drawn (${kinds.join(', ')})`);
+  // Seeded: at 10⁴ iterations some cells' in-sample λ = 0 fits are noise far outside [0, 1].
+  check(offScale.some((n) => n > 0), `a λ = 0 panel had cells beyond its frame to mark at the edge (${offScale.join(', ')} per job)`);
 }
 
 /**
- * Fig. 2 of job `id` (its page open): the table expectedFigure says — the recommended one, or the
- * table optimum at optimal_cv's λ labelled "not recommended" —, one series per r₂ bin, a bar per
- * cell with a data SE, an open marker and no bar per smoothed cell, the spot's r₃ = a. Returns the
- * figure and its marks.
+ * Fig. 2 of job `id` (its page open), both panels. (a) the recommended row's effective weights (as
+ * GET …/effective serves them): a w₁ and a w₂ series per r₂ bin with light, a filled w₁ and a hollow
+ * w₂ marker per bin with weights, its bars, a caption naming the row, its kind and paths_per_side,
+ * and a note for each r₂ bin without light instead of an empty series. (b) the λ = 0 table (GET
+ * …/result?lambda=0): a series per r₂ bin with data, a marker per cell fitted to data within the
+ * frame, none for a copied cell, an edge mark with its value per cell beyond the frame, labelled
+ * not recommended. Both mark r₃ = a. Returns the documents and their marks.
  */
 export async function checkFigure2(page, id, result) {
-  const fig = await expectedFigure(id, result);
-  const marks = figureMarks(fig.weights, [0, 0.5]);
+  const eff = (await callApi(`/v1/jobs/${id}/effective`)).json;
+  check(eff.strategy === result.recommended.strategy && ['heuristic', 'table', 'stack'].includes(eff.kind),
+    `GET /v1/jobs/${id}/effective averages the recommended ${eff.strategy} (${eff.kind})`);
+  const marks = effectiveMarks(eff);
   const slot = page.locator('[data-ref="weights-plot"]');
-  const plot = await waitFor('Fig. 2 with its markers', async () => {
+  const plot = await waitFor('Fig. 2\'s effective panel with its markers', async () => {
     const p = await readPlot(slot);
-    return p?.markers === marks.open + marks.filled && p;
-  }, 10_000);
-  check(JSON.stringify(plot.labels) === JSON.stringify([`${fig.prefix}, r₂ ∈ [0, 0.5)`, `${fig.prefix}, r₂ ∈ [0.5, ∞)`]),
-    `Fig. 2 has one series per r₂ bin, labelled as what it is (${plot.labels.join(' | ')})`);
+    return p?.markers !== null && p?.markers + p?.offScale === 2 * marks.drawn && p;
+  }, 15_000);
+  const labels = marks.lit.flatMap((r2) => [`w₁, ${r2Words(r2)}`, `w₂, ${r2Words(r2)}`]);
+  check(JSON.stringify(plot.labels) === JSON.stringify(labels),
+    `the effective panel has a w₁ and a w₂ series per r₂ bin with light (${plot.labels.join(' | ')})`);
+  check(plot.markers > 0 && plot.markers - plot.openMarkers > 0 && plot.inked > 1000,
+    `they have points: ${plot.markers - plot.openMarkers} filled w₁ and ${plot.openMarkers} hollow w₂ markers, one per bin with weights (${marks.drawn})`);
+  check(plot.offScale > 0 || plot.errorBars === marks.bars, `with ${plot.errorBars} error bars of ± 1 SE`);
   const kind = await page.locator('[data-ref="weights-kind"]').textContent();
+  const kindAttr = await page.locator('[data-ref="weights-kind"]').getAttribute('data-kind');
   const note = await page.locator('[data-ref="weights-note"]').textContent();
-  if (fig.kind === 'table-optimum') {
-    check(kind.startsWith('table optimum (optimal_cv, λ = ') && kind.endsWith('), not recommended')
-      && note.includes(`the recommendation is ${result.recommended.strategy}, a per-path strategy`),
-    `a per-path strategy (${result.recommended.strategy}) is recommended: Fig. 2 is labelled "${kind}" and its caption says why`);
-  } else {
-    check(kind.startsWith(`recommended: ${fig.strategy}`) && note.startsWith(`Recommended: ${fig.strategy}`),
-      `Fig. 2 shows the recommended ${fig.strategy}'s table ("${kind}")`);
-  }
-  check(plot.errorBars === marks.bars && plot.openMarkers === marks.open && plot.markers === marks.open + marks.filled && marks.open + marks.filled > 20,
-    `Fig. 2 draws ${plot.markers} markers, ${plot.openMarkers} of them open (smoothed: no data SE) and ${plot.errorBars} error bars, none on an open one`);
-  check(marks.open === 0 || note.includes(`Open markers (${marks.open === plot.markers ? `all ${marks.open}` : marks.open}): cells without a data standard error`),
-    marks.open ? 'its caption explains the open markers' : 'no cell is smoothed here, so no open markers to explain');
-  check(plot.guides === 'x=0.02', `Fig. 2 marks r₃ = a = 0.02 (${plot.guides})`);
-  return { fig, marks };
-}
+  check(kind.startsWith(`recommended: ${eff.strategy} (`) && kindAttr === eff.kind && note.startsWith(`Recommended: ${eff.strategy}`),
+    `Fig. 2 is labelled "${kind}"`);
+  check(note.includes('effective weights') && note.includes(`paths_per_side = ${eff.paths_per_side.toLocaleString('en-US')}`) && note.includes('± 1 standard error'),
+    'its caption says these are effective weights, with their SE, over paths_per_side paths');
+  check(marks.dark.every((r2) => note.includes(`${r2Words(r2)}: no light path reaches it`)),
+    marks.dark.length ? `its caption notes the r₂ bins without light instead of drawing them (${marks.dark.map(r2Words).join(', ')})`
+      : 'every r₂ bin has light');
+  check(plot.guides === 'x=0.02', `the effective panel marks r₃ = a = 0.02 (${plot.guides})`);
 
+  const lz = (await callApi(`/v1/jobs/${id}/result?lambda=0`)).json;
+  const zero = lambdaZeroMarks(lz.weights);
+  const lzSlot = page.locator('[data-ref="lambda0-plot"]');
+  const lzPlot = await waitFor('Fig. 2\'s λ = 0 panel', async () => {
+    const p = await readPlot(lzSlot);
+    return p?.markers === zero.markers && p;
+  }, 15_000);
+  const lzNote = await page.locator('[data-ref="lambda0-note"]').textContent();
+  check(JSON.stringify(lzPlot.labels) === JSON.stringify(zero.lit.map((r2) => `w₁ (λ = 0), ${r2Words(r2)}`))
+    && lzNote.includes('in-sample fit: not an honest estimate, not recommended'),
+  `the λ = 0 panel has a series per r₂ bin with data and says it is an in-sample fit, not recommended (${lzPlot.labels.join(' | ')})`);
+  check(lzPlot.openMarkers === zero.open && lzPlot.errorBars === zero.bars,
+    `it draws ${lzPlot.markers} markers (${lzPlot.openMarkers} open) and ${lzPlot.errorBars} error bars, none for the ${zero.copied} copied cells`);
+  check(zero.dark.every((r2) => lzNote.includes(`${r2Words(r2)}: every cell is a copy of a neighbour`)),
+    zero.dark.length ? `its caption says ${zero.dark.map(r2Words).join(', ')} has only copied cells` : 'every r₂ bin has data');
+  const biggest = zero.off.reduce((a, w) => (a && Math.abs(a.w1) >= Math.abs(w.w1) ? a : w), null);
+  check(lzPlot.offScale === zero.off.length && (!biggest || (lzPlot.offScaleText.includes(edgeText(biggest.w1, biggest.w1_stderr))
+    && lzNote.includes('beyond the axis'))),
+  zero.off.length ? `it marks the ${zero.off.length} cells beyond [−0.5, 1.5] at the frame's edge with their value (${lzPlot.offScaleText})`
+    : 'no cell lies beyond [−0.5, 1.5] here, so there is no edge mark');
+  check(lzPlot.guides === 'x=0.02', `the λ = 0 panel marks r₃ = a too (${lzPlot.guides})`);
+  return { eff, marks, lz, zero };
+}
 /** The spot job's page: Table 1 with the paper's column, Fig. 2 and the luminance chart. */
 export async function checkPaperJob(page, id) {
   await page.goto(`${page.url().split('#')[0]}#/jobs/${id}`);
@@ -163,7 +193,8 @@ export async function checkPaperJob(page, id) {
   const shown = new Set(['plane1', 'plane2', 'plane3', 'switch', 'optimal_cv', result.recommended.strategy]).size;
   check(lum.bands === shown, `it shades ± 1 SE bands under the ${lum.bands} series shown at first (cases 1–4, optimal_cv, the recommended row)`);
   check(lum.guides === `y=${result.reference_luminance * 1e5}`, `it draws the quadrature reference as a horizontal line (${lum.guides})`);
-  for (const [ref, what] of [['weights-plot', 'Fig. 2'], ['luminance-plot', 'the luminance chart'], ['history-plot', 'the RMS history']]) {
+  for (const [ref, what] of [['weights-plot', 'Fig. 2 (effective)'], ['lambda0-plot', 'Fig. 2 (λ = 0)'], ['luminance-plot', 'the luminance chart'],
+    ['history-plot', 'the RMS history']]) {
     await checkAxes(page, page.locator(`[data-ref="${ref}"]`), what);
   }
   await screenshot(page, 'paper-job.png');
@@ -251,7 +282,7 @@ export async function checkCompare(page, { spot, uniform }, results) {
   `"Compare table (CSV)" saves ${csv.name}: docs/csv.md's compare columns (the job's, then the noise table's), ${rows.length} rows, one per job and strategy`);
   const weights = await downloadFrom(page, page.getByRole('button', { name: 'Weights (CSV)' }));
   const [weightsHeader, ...weightRows] = parseCsv(weights.bytes.toString('utf8'));
-  check(weightsHeader.join() === ['job_id', 'table', 'strategy', 'lambda', ...contract.weights.columns].join()
+  check(weightsHeader.join() === ['job_id', ...contract.weights.columns].join()
     && weightRows.length === figures.reduce((n, f) => n + f.weights.length, 0),
   `its "Weights (CSV)" has job_id, table, strategy, lambda, then docs/csv.md's weights columns: ${weightRows.length} rows, one per job and cell`);
   const png = await downloadFrom(page, page.locator('[data-ref="w1-downloads"] button[data-download="png"]'));
@@ -292,11 +323,19 @@ export async function checkSolves(page, id) {
   const recommended = page.locator('table.noise-table tbody tr.recommended');
   await waitFor('the kept solve\'s recommendation marked', async () => (await recommended.getAttribute('data-strategy')) === keptResult.recommended.strategy);
   check(true, `the kept solve's recommended row, ${keptResult.recommended.strategy}, is marked`);
-  if (keptResult.weights.length === 0) {
-    // The table optimum (?lambda=) exists for the job's own options only.
+  const keptRec = keptResult.recommended;
+  if (keptRec.lambda === null && !keptRec.heuristics.length) {
+    // A per-path heuristic is the same function under any options: its effective weights are drawn.
+    await waitFor('Fig. 2 of the kept solve\'s heuristic', async () =>
+      (await page.locator('[data-ref="weights-note"]').textContent()).includes('The kept solve\'s recommendation'));
+    check((await page.locator('[data-ref="weights-kind"]').textContent()).startsWith(`recommended: ${keptRec.strategy}`)
+      && (await readPlot(page.locator('[data-ref="weights-plot"]'))).markers > 0,
+    `under kept options recommending the heuristic ${keptRec.strategy} Fig. 2 draws its effective weights`);
+  } else {
+    // A kept solve's fitted row: the effective weights exist for the job's own options only.
     const message = await waitFor('Fig. 2\'s message', () => page.locator('[data-ref="weights-plot"] .empty').textContent().catch(() => null));
-    check(message.includes(`${keptResult.recommended.strategy}, is per-path`) && message.includes('job\'s own solver options only'),
-      `with a per-path recommendation under kept options Fig. 2 says why it draws no table ("${message.slice(0, 80)}…")`);
+    check(message.includes(`recommends ${keptRec.strategy}`) && message.includes('job\'s own solver options only'),
+      `with a fitted recommendation under kept options Fig. 2 says why it draws no effective weights ("${message.slice(0, 80)}…")`);
   }
   const listed = (await callApi(`/v1/jobs/${id}/solves`)).json.solves;
   check(listed.length === 2 && listed[0].default && listed[1].name === 'free-w0' && listed[1].solver.fixed.w0 === undefined,

@@ -1,18 +1,18 @@
 // The sweep steps of the browser test: a 2 × 2 sweep created through the API and followed on its
-// page to the end — its summary, points, CSV, charts (their axes and legends; the recommended w₁
-// as small multiples, one panel per point on shared axes, and their one SVG/PNG) and links — and a
-// long one cancelled.
+// page to the end — its summary, points, CSV, charts (their axes and legends; the effective w₁ of
+// each point's recommended row as small multiples, one panel per point on shared axes, every one
+// with points whatever the kind of recommendation, and their one SVG/PNG) and links — a predicted
+// sweep, whose panels draw too, and a long one cancelled.
 
 import { readFile } from 'node:fs/promises';
 
 import { PNG_MIN_WIDTH } from './downloads.mjs';
 import { downloadFrom, pngSize } from './files.mjs';
-import { UNFITTED, base, callApi, check, checkAxes, readPlot, waitFor } from './harness.mjs';
+import { base, callApi, check, checkAxes, r2Words, readPlot, waitFor } from './harness.mjs';
 
 // A 2 × 2 grid of the paper's scene at merge radii where the weights tables are informative (about
-// 3 s per run on two cores): seeded, three of its points recommend a table, the fourth
-// (R = 0.01, l3 = 3) a per-path strategy — both kinds of panel. A solver change that turns every
-// point per-path fails checkSweepCharts.
+// 3 s per run on two cores): seeded; its points recommend per-path heuristics and fitted rows, and
+// every panel draws its effective weights whatever the kind.
 const SWEEP = {
   base: { iterations: 4000, seed: 3 },
   axes: [{ field: 'merge_radius', values: [0.01, 0.02] }, { field: 'scene.l3', values: [1, 3] }],
@@ -64,19 +64,38 @@ export async function checkPredictedSweep(page) {
   const note = await card.locator('p.hint').last().textContent();
   check(note.includes(`${hidden} predicted ${hidden === 1 ? 'figure is' : 'figures are'} not drawn: the run does not support them`),
     `its note says so ("${note.slice(note.indexOf('predicted figure') - 3, note.indexOf('predicted figure') + 60)}…")`);
+  // Its points share one run: their weight panels draw that run's effective weights of each point's row.
+  const panels = page.locator('[data-ref="w1-grid"] figure.w1-panel .plot');
+  const markers = await waitFor('the predicted sweep\'s weight panels', async () => {
+    const got = await panels.evaluateAll((plots) => plots.map((p) => Number(p.dataset.markers ?? 0)));
+    return got.length === sweep.points.length && got.every((m) => m > 0) && got;
+  }, 30_000);
+  const w1Note = await page.locator('[data-ref="w1-note"]').textContent();
+  check(w1Note.includes('A predicted point draws its recommended row as its run weights it'),
+    `every predicted point's weight panel has points (${markers.join(', ')} markers), and the caption says whose weights they are`);
 }
 
 /**
- * The error bars of the w₁(r₃) chart: per point that recommends a table, the cells of the first r₂
- * and φ bins, tail and copied cells left out, with a data SE above 0 (a smoothed cell has none).
+ * What each point's panel should draw: its recommended row's effective weights (as the page asks
+ * for them: 10,000 paths per side), in the first r₂ bin where some point's paths carry light — the
+ * bins with a w₁ (a marker each) and those with an SE above 0 (a bar each) — and the point's
+ * strategy and kind.
  */
-function expectedW1Bars(sweep) {
-  return sweep.points.filter((p) => p.figures.weights.length > 0).map(({ figures: { weights } }) => {
-    const r2 = Math.min(...weights.map((w) => w.r2[0]));
-    const phi = Math.min(...weights.map((w) => w.phi[0]));
-    return weights.filter((w) => w.r2[0] === r2 && w.phi[0] === phi && w.r3[1] !== null && !UNFITTED.has(w.status)
-      && w.status !== 'smoothed' && w.w1_stderr > 0).length;
-  }).reduce((a, b) => a + b, 0);
+async function expectedW1Panels(sweep) {
+  const docs = [];
+  for (const p of sweep.points) {
+    docs.push((await callApi(`/v1/jobs/${p.job_id}/effective?paths=10000&strategy=${p.figures.recommended.strategy}`)).json);
+  }
+  const r2s = [...new Map(docs.flatMap((d) => d.bins.map((b) => [b.r2[0], b.r2]))).values()].sort((a, b) => a[0] - b[0]);
+  const r2 = r2s.find((bin) => docs.some((d) => d.bins.some((b) => b.r2[0] === bin[0] && b.w)));
+  return {
+    r2,
+    dark: r2s.filter((bin) => !docs.some((d) => d.bins.some((b) => b.r2[0] === bin[0] && b.w))),
+    panels: docs.map((d) => {
+      const lit = d.bins.filter((b) => b.r2[0] === r2[0] && b.w);
+      return { strategy: d.strategy, kind: d.kind, markers: lit.length, bars: lit.filter((b) => b.stderr[1] > 0).length };
+    }),
+  };
 }
 
 /** Waits until the open sweep page's state badge reads succeeded (throws if it ends otherwise). */
@@ -174,51 +193,50 @@ export async function checkSweepCharts(page, sweep) {
     check(after.labels.length === strategies.length, `with ${other.field} = ${other.values[1]} it redraws ${moved} bars, same series`);
     await checkAxes(page, card.locator('.plot'), `the RMS chart of ${axis.field}`);
   }
-  // Only points that recommend a weights table are drawn; the others recommend a per-path strategy.
-  const tabled = sweep.points.filter((p) => p.figures.weights.length > 0);
-  const perPath = sweep.points.filter((p) => p.figures.weights.length === 0);
-  check(perPath.every((p) => p.figures.recommended.lambda === null),
-    `the API's points without weights recommend a per-path strategy (λ null): ${perPath.map((p) => p.figures.recommended.strategy).join(', ') || 'none'}`);
-  const note = await page.locator('[data-ref="w1-note"]').textContent();
-  check(perPath.length === 0 || (note.includes(`${perPath.length} of ${sweep.points.length} points recommend a per-path strategy`)
-    && perPath.every((p) => note.includes(`${describePoint(sweep, p)}: ${p.figures.recommended.strategy}`))),
-  `the w₁(r₃) chart's note names the points that recommend a per-path strategy, which has no table ("${note.slice(0, 80)}…")`);
-  check(tabled.length > 0, `${tabled.length} of ${sweep.points.length} points recommend a weights table`);
-  await checkW1Grid(page, sweep, tabled);
+  await checkW1Grid(page, sweep);
 }
 
 /**
- * The recommended w₁(r₃) as small multiples: a panel per point in the sweep's grid (a column per
- * value of its last axis), each named by its point; a chart in each that recommends a table, with
- * its bars, on the same x and y ranges as the others; a line in each that does not; one SVG of the
- * grid with a panel per chart, and its PNG at print resolution.
+ * The effective w₁(r₃) as small multiples: a panel per point in the sweep's grid (a column per
+ * value of its last axis), each named by its point and its recommended row; a chart with points
+ * and bars in every one — a per-path heuristic's as much as a table's —, all on the same x and y
+ * ranges; one SVG of the grid with a panel per chart, and its PNG at print resolution.
  */
-async function checkW1Grid(page, sweep, tabled) {
+async function checkW1Grid(page, sweep) {
+  const expected = await expectedW1Panels(sweep);
+  const kinds = [...new Set(expected.panels.map((p) => p.kind))];
   const grid = page.locator('[data-ref="w1-grid"]');
-  const panels = await grid.locator('figure.w1-panel').evaluateAll((figs) => figs.map((f) => ({
+  const read = () => grid.locator('figure.w1-panel').evaluateAll((figs) => figs.map((f) => ({
     point: Number(f.dataset.point), caption: f.querySelector('figcaption').textContent,
-    canvas: Boolean(f.querySelector('canvas')), bars: Number(f.querySelector('.plot').dataset.errorBars ?? 0), text: f.textContent,
+    canvas: Boolean(f.querySelector('canvas')), markers: Number(f.querySelector('.plot').dataset.markers ?? 0),
+    bars: Number(f.querySelector('.plot').dataset.errorBars ?? 0), text: f.textContent,
   })));
+  const panels = await waitFor('every panel drawn', async () => {
+    const got = await read();
+    return got.length === sweep.points.length && got.every((p, k) => p.canvas && p.markers === expected.panels[k].markers) && got;
+  }, 30_000);
   const columns = Number(await grid.getAttribute('data-columns'));
-  check(panels.length === sweep.points.length && panels.every((p, k) => p.point === sweep.points[k].index && p.caption.startsWith(describePoint(sweep, sweep.points[k])))
-    && columns === sweep.spec.axes.at(-1).values.length,
+  check(panels.every((p, k) => p.point === sweep.points[k].index && p.caption.startsWith(describePoint(sweep, sweep.points[k]))
+    && p.caption.includes(`${expected.panels[k].strategy} (${expected.panels[k].kind})`)) && columns === sweep.spec.axes.at(-1).values.length,
   `the w₁(r₃) card has a panel per point, in the sweep's grid of ${columns} columns (${panels.map((p) => p.caption).join(' | ')})`);
-  const drawn = panels.filter((p) => p.canvas);
-  check(drawn.map((p) => p.point).join() === tabled.map((p) => p.index).join()
-    && panels.filter((p) => !p.canvas).every((p) => p.text.includes(`Recommends ${sweep.points[p.point].figures.recommended.strategy}, a per-path strategy`)),
-  `${drawn.length} panels draw a chart, one per point that recommends a table; the others say which per-path strategy they recommend`);
-  const bars = drawn.reduce((n, p) => n + p.bars, 0);
-  check(bars === expectedW1Bars(sweep), `they draw ${bars} error bars (± jackknife SE of w₁; none on smoothed cells)`);
+  check(panels.every((p) => p.markers > 0),
+    `every panel draws its point's effective w₁ with points (${panels.map((p) => p.markers).join(', ')} markers), recommendations of kind ${kinds.join(', ')}`);
+  const bars = panels.reduce((n, p) => n + p.bars, 0);
+  check(bars === expected.panels.reduce((n, p) => n + p.bars, 0), `they draw ${bars} error bars (± 1 SE of the effective w₁)`);
+  const note = await page.locator('[data-ref="w1-note"]').textContent();
+  check(note.includes(`effective w₁ of its recommended row`) && note.includes(r2Words(expected.r2))
+    && expected.dark.every((b) => note.includes(`${r2Words(b)}: no light path reaches it at any point`)),
+  `the card's caption says what is drawn, in ${r2Words(expected.r2)}${expected.dark.length ? `, and that no light reaches ${expected.dark.map(r2Words).join(', ')}` : ''}`);
   const scales = await grid.locator('figure.w1-panel .plot').evaluateAll(async (plots) => {
     const { plotOf } = await import('/assets/plots.js');
     return plots.map(plotOf).filter(Boolean).map((u) => JSON.stringify([u.scales.x.min, u.scales.x.max, u.scales.y.min, u.scales.y.max]));
   });
-  check(scales.length === drawn.length && new Set(scales).size === 1, `every panel has the same x and y ranges (${scales[0]})`);
+  check(scales.length === panels.length && new Set(scales).size === 1, `every panel has the same x and y ranges (${scales[0]})`);
   await checkAxes(page, grid.locator('figure.w1-panel .plot').first(), 'a w₁(r₃) panel');
   const card = page.locator('[data-chart="w1"]');
   const svg = (await downloadFrom(page, card.locator('button[data-download="svg"]'))).bytes.toString('utf8');
-  check(svg.split('class="panel"').length - 1 === drawn.length && svg.includes('w₁ of the panel'),
-    `its SVG holds the ${drawn.length} panels and one legend`);
+  check(svg.split('class="panel"').length - 1 === panels.length && svg.includes('effective w₁ of the panel'),
+    `its SVG holds the ${panels.length} panels and one legend`);
   const png = await downloadFrom(page, card.locator('button[data-download="png"]'));
   check(pngSize(png.bytes).width >= PNG_MIN_WIDTH, `its PNG is ${pngSize(png.bytes).width} × ${pngSize(png.bytes).height} px`);
 }

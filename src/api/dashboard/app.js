@@ -13,7 +13,7 @@
 //   chartkit.js   uPlot plugins: error bars, SE bands, guide lines    (imports nothing of ours)
 //   chartfiles.js a chart's SVG (a serialiser) and PNG downloads      (api, chartkit, format)
 //   plots.js      the job's history charts: luminance, RMS; shared    (chartkit, format, paper)
-//   fig2.js       Fig. 2: which table, w₁ per r₂ band, open markers   (chartkit, format, plots)
+//   fig2.js       Fig. 2: effective weights, the λ = 0 table; tables  (axes, chartkit, format, plots)
 //   noisetable.js the noise table: paper column, case numbers, z, CSV (format, paper)
 //   solves.js     a job's kept solves: selector and keep form         (api, format)
 //   results.js    a job's results: loading, table, charts, downloads  (api, chartfiles, csv, fig2, format, noisetable, paper, plots, solves)
@@ -22,8 +22,9 @@
 //   compare.js    the compare page of 2 to 8 jobs                     (api, chartkit, chartfiles, csv, fig2, format, list, plots)
 //   sweepdata.js  a sweep's chart data (no DOM)                       (plots)
 //   sweepplots.js a sweep's charts, with error bars                   (chartkit, format, plots, sweepdata)
+//   sweepw1.js    a sweep's effective w₁ per point, small multiples   (api, axes, chartkit, chartfiles, format, plots, sweepdata)
 //   sweeps.js     the sweep list page                                 (api, format)
-//   sweep.js      the sweep page                                      (api, chartfiles, format, plots, sweepdata, sweepplots)
+//   sweep.js      the sweep page                                      (api, format, sweepdata, sweepplots, sweepw1)
 
 import { saveToken, whenUnauthorized } from './api.js';
 import { showCompare } from './compare.js';

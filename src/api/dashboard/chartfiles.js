@@ -7,7 +7,7 @@
 // fit for print. (The vendored uPlot 1.6.32 has no per-chart pixel ratio to redraw its canvas at.)
 
 import { saveBlob } from './api.js';
-import { chartSvg, textWidth, wrap } from './chartsvg.js';
+import { chartSvg, noteSymbol, textWidth, wrap } from './chartsvg.js';
 import { h } from './format.js';
 
 /** How many PNG pixels per SVG px. */
@@ -74,8 +74,7 @@ export function gridSvg(panels, { title, columns, panelWidth = Math.max(300, Mat
   });
   notes.forEach(({ marker, text }, n) => {
     const y = keyTop + (legend.length + n) * 20;
-    out.push(`<circle cx="35" cy="${y}" r="3" fill="${marker === 'open' ? '#fff' : '#444'}" stroke="#444" stroke-width="1.5"/>`,
-      `<text class="note" x="52" y="${y + 4}">${escapeXml(text)}</text>`);
+    out.push(noteSymbol(marker, 35, y), `<text class="note" x="52" y="${y + 4}">${escapeXml(text)}</text>`);
   });
   out.push('</g></svg>');
   return `${out.join('\n')}\n`;

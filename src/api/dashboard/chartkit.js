@@ -1,7 +1,8 @@
 // Chart kit: the uPlot plugins the charts share — error bars (± 1 standard error), shaded bands
 // around a line (± 1 SE), point markers that are filled or open (a value with or without a
-// standard error of its own), and guide lines (a vertical marker such as r₃ = a, a horizontal
-// reference such as the quadrature luminance) — and the y range that keeps all of them in view.
+// standard error of its own), guide lines (a vertical marker such as r₃ = a, a horizontal
+// reference such as the quadrature luminance) and edge marks (a value beyond the y range, marked
+// ▲/▼ at the frame's edge with its value) — and the y range that keeps all of them in view.
 //
 // A chart's extras live on its PlotSlot (plots.js), indexed like the y series (null: none for that
 // series), so that a redraw with new data needs no new plugin and the chart files (chartsvg.js) can
@@ -11,9 +12,12 @@
 //   slot.markers [{ open: [...], color }]      a marker at every value of series s + 1, open where
 //                                              open[i] (the series itself then shows no points)
 //   slot.guides  { x: [{ value, label }], y: [{ value, label }] }
+//   slot.edges   [{ s, i, x, value, text, color }]  values of series s + 1 beyond the y range
+//                                              (null in the series' data), marked at the edge
 //   slot.notes   [{ marker, text }]            legend lines of the chart files beside the series
+//                                              (marker: 'filled', 'open', 'edge' or 'none')
 // Every plugin writes what it drew to the container's data attributes (the browser test reads
-// them): data-error-bars, data-bands, data-markers, data-open-markers, data-guides.
+// them): data-error-bars, data-bands, data-markers, data-open-markers, data-guides, data-off-scale.
 
 /* global uPlot */
 
@@ -204,6 +208,82 @@ export function guides(slot) {
     }
     ctx.restore();
     slot.container.dataset.guides = drawn.join(' ');
+  };
+  return { hooks: { draw: [draw] } };
+}
+
+/**
+ * Where edgeMarks (and the chart files) put the marks of `edges` on a y range [min, max]: per value
+ * beyond it its `side` ('top' above the range, 'bottom' below), its x position `px` (`xPos`), where
+ * its label starts (`lx`, just left of the mark) and the `row` of its label. The labels lie inside
+ * the frame beyond the triangles (which stay on the edge), so no triangle covers a label; one that
+ * would overlap the label before it on the same edge moves to the next row (at most three, then the
+ * least crowded); a label that would run past the frame's right end `right` ends there instead.
+ * `gap`, `right` and `labelWidth` in the units of `xPos`.
+ */
+export function edgeLayout(edges, min, max, xPos, labelWidth, gap, right = Infinity) {
+  const ends = { top: [], bottom: [] }; // per edge, the right end of the last label in each row
+  return edges
+    .filter((e) => e.value > max || e.value < min)
+    .map((e) => ({ ...e, px: xPos(e.x) }))
+    .filter((e) => Number.isFinite(e.px))
+    .sort((a, b) => a.px - b.px)
+    .map((e) => {
+      const side = e.value > max ? 'top' : 'bottom';
+      const rows = ends[side];
+      const width = labelWidth(e.text);
+      const lx = Math.min(e.px - gap, right - width);
+      let row = rows.findIndex((end) => end + gap < lx);
+      if (row < 0) row = rows.length < 3 ? rows.length : rows.indexOf(Math.min(...rows));
+      rows[row] = lx + width;
+      return { ...e, side, row, lx };
+    });
+}
+
+/** How far from the frame's edge (CSS px) the centre of an edge mark's label in `row` lies: past the triangle. */
+export const edgeLabelOffset = (row) => 16 + 13 * row;
+
+/** The edge marks' text size in CSS px. */
+export const EDGE_FONT = 11;
+
+/**
+ * Marks `slot.edges` — values of shown series beyond the y range, which the series' data leave out
+ * (null) so that no line runs off the frame — as a triangle at the frame's edge, ▲ at the top for
+ * a value above the range and ▼ at the bottom for one below, in the series' colour, with the value
+ * as text just inside the frame past it (edgeLayout): an off-scale cell is seen with its value,
+ * not silently clipped.
+ */
+export function edgeMarks(slot) {
+  const draw = (u) => {
+    const { ctx } = u;
+    const { left, top, width, height } = u.bbox;
+    const px = devicePixelRatio;
+    const half = 5 * px;
+    const shown = (slot.edges ?? []).filter((e) => u.series[e.s + 1]?.show);
+    ctx.save();
+    ctx.font = `${EDGE_FONT * px}px system-ui, sans-serif`;
+    ctx.textBaseline = 'middle';
+    ctx.textAlign = 'left';
+    const layout = edgeLayout(shown, u.scales.y.min, u.scales.y.max, (x) => u.valToPos(x, 'x', true),
+      (text) => ctx.measureText(text).width, 4 * px, left + width);
+    for (const m of layout) {
+      const down = m.side === 'bottom';
+      const edge = down ? top + height - px : top + px;
+      const base = down ? edge - 1.6 * half : edge + 1.6 * half;
+      ctx.fillStyle = m.color;
+      ctx.beginPath();
+      ctx.moveTo(m.px, edge);
+      ctx.lineTo(m.px - half, base);
+      ctx.lineTo(m.px + half, base);
+      ctx.closePath();
+      ctx.fill();
+      const offset = edgeLabelOffset(m.row) * px;
+      ctx.fillStyle = '#1d2430';
+      ctx.fillText(m.text, m.lx, down ? edge - offset : edge + offset);
+    }
+    ctx.restore();
+    slot.container.dataset.offScale = layout.length;
+    slot.container.dataset.offScaleText = layout.map((m) => m.text).join(' | ');
   };
   return { hooks: { draw: [draw] } };
 }

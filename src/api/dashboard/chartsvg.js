@@ -1,12 +1,13 @@
 // Chart SVG: the chart of a PlotSlot (plots.js) as a vector figure — its shown series (lines,
-// points, filled and open markers, error bars, bands, guide lines) redrawn from the uPlot
+// points, filled and open markers, error bars, bands, guide lines, the edge marks of values beyond
+// the y range) redrawn from the uPlot
 // instance's data and current scales and the slot's extras (chartkit.js), ticked by the page's
 // rules (axes.js), with its title, axis labels and legend (the series, then the slot's notes) laid
 // out by measuring their text, so that nothing is cut or overlaps whatever the labels. The PNG
 // (chartfiles.js) is this SVG rasterised at twice its size: both files show the same figure.
 
 import { linearLabels, linearTicks, logLabel, logTicks } from './axes.js';
-import { MARKER_RADIUS } from './chartkit.js';
+import { EDGE_FONT, MARKER_RADIUS, edgeLabelOffset, edgeLayout } from './chartkit.js';
 
 const FONT = 'system-ui, Helvetica, Arial, sans-serif';
 const LEGEND_ROW = 20;
@@ -144,6 +145,7 @@ export function chartSvg(slot, { width = 820, plotHeight = 320, title = slot.tit
   out.push(`<text class="axis-label" x="${num(left + plotW / 2)}" y="${top + plotH + 42}" text-anchor="middle" ${axisLabel(xText, plotW)}>${escapeXml(xText)}</text>`);
   out.push(`<text class="axis-label" transform="translate(16 ${num(top + plotH / 2)}) rotate(-90)" text-anchor="middle" ${axisLabel(yText, plotH)}>${escapeXml(yText)}</text>`);
   out.push(`<g clip-path="url(#${clip})">`, ...dataMarks(slot, series, X, Y, top + plotH), ...guideMarks(slot, X, Y, { left, top, plotW, plotH }), '</g>');
+  out.push(...edgeSvg(slot, X, top, plotH, left + plotW));
   if (legend) out.push(...legendMarks(lay, left, legendTop));
   out.push('</svg>');
   return `${out.join('\n')}\n`;
@@ -213,6 +215,32 @@ function guideMarks(slot, X, Y, { left, top, plotW, plotH }) {
   return out;
 }
 
+/** The slot's edge marks (chartkit.js's edgeMarks): ▲/▼ at the frame's edge with the value beside it. */
+function edgeSvg(slot, X, top, plotH, right) {
+  const u = slot.plot;
+  const shown = (slot.edges ?? []).filter((e) => u.series[e.s + 1]?.show);
+  const layout = edgeLayout(shown, u.scales.y.min, u.scales.y.max, X, (text) => textWidth(text, EDGE_FONT), 4, right);
+  if (layout.length === 0) return [];
+  const out = [`<g class="off-scale" font-size="${EDGE_FONT}">`];
+  for (const m of layout) {
+    const down = m.side === 'bottom';
+    const edge = down ? top + plotH - 1 : top + 1;
+    const base = down ? edge - 8 : edge + 8;
+    const offset = edgeLabelOffset(m.row);
+    out.push(`<path class="off-scale-mark" d="M${num(m.px)} ${num(edge)} L${num(m.px - 5)} ${num(base)} L${num(m.px + 5)} ${num(base)} Z" fill="${m.color}"/>`,
+      `<text x="${num(m.lx)}" y="${num((down ? edge - offset : edge + offset) + 4)}" fill="#1d2430">${escapeXml(m.text)}</text>`);
+  }
+  out.push('</g>');
+  return out;
+}
+
+/** A legend note's symbol at (x, y): a filled or open marker, an edge mark's triangle, or none. */
+export function noteSymbol(marker, x, y) {
+  if (marker === 'none') return '';
+  if (marker === 'edge') return `<path d="M${num(x)} ${num(y - 5)} L${num(x - 5)} ${num(y + 3)} L${num(x + 5)} ${num(y + 3)} Z" fill="#444"/>`;
+  return `<circle cx="${num(x)}" cy="${y}" r="${MARKER_RADIUS}" fill="${marker === 'open' ? '#fff' : '#444'}" stroke="#444" stroke-width="1.5"/>`;
+}
+
 /** The legend: a swatch (the series' line, dashed like it) and its label per entry, then the notes. */
 function legendMarks(lay, left, legendTop) {
   const out = ['<g class="legend" fill="#1d2430">'];
@@ -224,7 +252,7 @@ function legendMarks(lay, left, legendTop) {
   }
   for (const note of lay.notes) {
     const y = legendTop + note.row * LEGEND_ROW;
-    out.push(`<circle cx="${num(left + 11)}" cy="${y}" r="${MARKER_RADIUS}" fill="${note.marker === 'open' ? '#fff' : '#444'}" stroke="#444" stroke-width="1.5"/>`);
+    out.push(noteSymbol(note.marker, left + 11, y));
     out.push(`<text class="note" x="${num(left + SWATCH + 6)}" y="${y + 4}">${escapeXml(note.text)}</text>`);
   }
   out.push('</g>');

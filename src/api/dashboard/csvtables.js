@@ -1,8 +1,9 @@
 // The CSV tables the page builds from the API's JSON, in the one vocabulary of docs/csv.md (the
-// server's and the command line's CSVs use the same names): a job's noise table, the weights table
-// Fig. 2 draws and its history, and the compare page's two tables, which put their context columns
-// (the job and its parameters; which table) in front of the same columns and never rename one.
-// Units: luminance in the model's units (not × 10⁵), RMS in percent, angles in radians.
+// server's and the command line's CSVs use the same names): a job's noise table, its recommended
+// weights table, the effective weights Fig. 2 draws (any kind of recommendation: the one CSV a
+// per-path heuristic has) and its history, and the compare page's two tables, which put their
+// context columns (the job and its parameters; which table) in front of the same columns and never
+// rename one. Units: luminance in the model's units (not × 10⁵), RMS in percent, angles in radians.
 
 import { tableColumns } from './fig2.js';
 import { CASES, published } from './noisetable.js';
@@ -71,13 +72,40 @@ const weightRows = (weights) => weights.map((w, cell) => ({
 const figureRows = (figure) => weightRows(figure.weights).map((row) => ({ ...tableColumns(figure), lambda: figure.lambda, ...row }));
 
 /**
- * Every cell's weights of the table Fig. 2 shows (`figure`): `table` says whether it is the
- * recommended table (of a stacked row: its table part) or the table optimum drawn for reference;
- * no rows when there is no table.
+ * Every cell's weights of the table `figure` (fig2.js's figureSource): `table` says whether it is
+ * the recommended table (of a stacked row: its table part) or the table optimum the compare page
+ * draws for reference; no rows when there is no table.
  */
 export const weightsCsv = (figure) => ({
   columns: ['table', 'strategy', 'lambda', ...WEIGHT_COLUMNS],
   rows: figure?.weights ? figureRows(figure) : [],
+});
+
+/**
+ * The effective weights' columns (GET /v1/jobs/{id}/effective): which row and what kind of weight
+ * function, the paths each side drew, then per (r₂, r₃) bin its bounds (an open edge empty), its
+ * sampled paths and luminance share, and w₀, w₁, w₂ with their total standard errors (empty where
+ * no sampled path of the bin carries light). Named as the weights table's columns where they mean
+ * the same.
+ */
+export const EFFECTIVE_COLUMNS = ['table', 'strategy', 'kind', 'paths_per_side', 'r2_lo', 'r2_hi', 'r3_lo', 'r3_hi', 'paths',
+  'luminance_share', 'w0', 'w0_stderr', 'w1', 'w1_stderr', 'w2', 'w2_stderr', 'w0_sampling_stderr', 'w1_sampling_stderr',
+  'w2_sampling_stderr', 'w0_fit_stderr', 'w1_fit_stderr', 'w2_fit_stderr', 'note'];
+
+/**
+ * The effective weights Fig. 2 draws (`doc`, null while there are none) as CSV rows, one per bin in
+ * the document's order: the columns of the server's `?format=csv&table=effective` (docs/csv.md).
+ */
+export const effectiveCsv = (doc) => ({
+  columns: EFFECTIVE_COLUMNS,
+  rows: (doc?.bins ?? []).map((b) => ({
+    table: 'effective', strategy: doc.strategy, kind: doc.kind, paths_per_side: doc.paths_per_side,
+    r2_lo: b.r2[0], r2_hi: b.r2[1], r3_lo: b.r3[0], r3_hi: b.r3[1], paths: b.paths, luminance_share: b.luminance_share,
+    w0: b.w?.[0], w0_stderr: b.stderr?.[0], w1: b.w?.[1], w1_stderr: b.stderr?.[1], w2: b.w?.[2], w2_stderr: b.stderr?.[2],
+    w0_sampling_stderr: b.sampling_stderr?.[0], w1_sampling_stderr: b.sampling_stderr?.[1], w2_sampling_stderr: b.sampling_stderr?.[2],
+    w0_fit_stderr: b.fit_stderr?.[0], w1_fit_stderr: b.fit_stderr?.[1], w2_fit_stderr: b.fit_stderr?.[2],
+    note: b.w ? '' : 'no sampled path of this bin carries light',
+  })),
 });
 
 /** The history, one row per checkpoint and strategy, with SE(L) = L · (RMS/100) / √M. */

@@ -19,7 +19,8 @@ export function showJob(app, id) {
   document.title = `Job ${id} · optimis`;
 
   const plots = {
-    weights: new PlotSlot(refs['weights-plot'], `Job ${id}: recommended w₁ against r₃ (Fig. 2)`),
+    weights: new PlotSlot(refs['weights-plot'], `Job ${id}: effective weights of the recommended row against r₃ (Fig. 2)`),
+    lambdaZero: new PlotSlot(refs['lambda0-plot'], `Job ${id}: w₁ fitted in-sample at λ = 0 (the paper's procedure)`),
     luminance: new PlotSlot(refs['luminance-plot'], `Job ${id}: luminance against iterations (± 1 SE)`),
     history: new PlotSlot(refs['history-plot'], `Job ${id}: RMS error against iterations`),
   };

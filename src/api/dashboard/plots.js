@@ -1,6 +1,7 @@
 // Plots: the uPlot charts of a job's history — the luminance against iterations (± 1 SE bands, the
 // quadrature reference) and the RMS against iterations — and what every chart shares (the chart
-// slot, the strategies' order and colours, the weights' range and cells; Fig. 2 is fig2.js's).
+// slot, the strategies' order and colours, the weights' range, cells and effective-weight bins as
+// chart data; Fig. 2 is fig2.js's, the sweep's weight panels sweepw1.js's).
 // uPlot is the vendored library, loaded before this module as a classic script (a global); the
 // plugins are chartkit.js's, the axes' ticks and sizes and the legend's values axes.js's.
 
@@ -43,6 +44,11 @@ export function strategiesIn(lists) {
 // in the hundreds, which would flatten every other cell to a line.
 export const WEIGHT_RANGE = [-1, 2];
 
+// The frame of the job page's Fig. 2 panels and the sweep's weight panels: every sensible weight
+// with room around [0, 1]. A value beyond it (an in-sample cell fitted to noise, 94.6 ± 84) is not
+// cut off silently: chartkit.js's edgeMarks marks it at the frame's edge with its value.
+export const WEIGHT_FRAME = [-0.5, 1.5];
+
 // The chart drawn in each container, for the browser test (plotOf).
 const drawn = new WeakMap();
 
@@ -84,6 +90,8 @@ export class PlotSlot {
     this.plot?.destroy();
     this.plot = null;
     this.signature = '';
+    // What the chart kit's plugins reported drawing (data-markers, …) is no longer on the page.
+    for (const key of Object.keys(this.container.dataset)) if (key !== 'ref') delete this.container.dataset[key];
     this.container.replaceChildren(...(message ? [h('p', { class: 'empty' }, message)] : []));
   }
 
@@ -100,11 +108,63 @@ export const UNFITTED = new Set(['empty', 'uninformative']);
  * Fits the data, but never beyond WEIGHT_RANGE, and always shows `shown` (0 and 1 for weights;
  * 0 alone for a table part, whose cells sum to 1 − Σβ and may all be small).
  */
-export function weightRange(u, min, max, shown = [0, 1]) {
-  const lo = Math.max(WEIGHT_RANGE[0], Math.min(min ?? shown[0], ...shown));
-  const hi = Math.min(WEIGHT_RANGE[1], Math.max(max ?? shown.at(-1), ...shown));
+export function weightRange(u, min, max, shown = [0, 1], limits = WEIGHT_RANGE) {
+  const lo = Math.max(limits[0], Math.min(min ?? shown[0], ...shown));
+  const hi = Math.min(limits[1], Math.max(max ?? shown.at(-1), ...shown));
   const pad = 0.05 * (hi - lo) || 0.05;
   return [lo - pad, hi + pad];
+}
+
+/**
+ * Where each r₃ bin (`bins`: [lo, hi] in order) sits on a chart's x axis: its midpoint; the open
+ * tail bin [lo, ∞) at lo + the previous bin's width — it has no midpoint, and there it reads as
+ * "one step beyond the grid" rather than as a point inside the last finite bin.
+ */
+export const r3Positions = (bins) => bins.map((b, k) => {
+  if (b[1] !== null) return (b[0] + b[1]) / 2;
+  return b[0] + (k > 0 ? b[0] - bins[k - 1][0] : Math.max(b[0], 1e-3));
+});
+
+/** The right end of an x axis over `bins` (r3Positions): the last finite edge, or half a step past the tail bin. */
+export function r3AxisEnd(bins, x) {
+  const last = bins.at(-1);
+  if (!last) return 1;
+  return last[1] !== null ? last[1] : x.at(-1) + (x.at(-1) - last[0]) / 2;
+}
+
+/**
+ * An effective-weights document (GET /v1/jobs/{id}/effective) as chart data: the r₃ bins and their
+ * x positions (r3Positions), and per r₂ bin w₀, w₁, w₂ with their total standard errors, null where
+ * no sampled path of the bin carries light (its `w` is null: no weight matters there), `drawn` how
+ * many of its bins have weights.
+ */
+export function effectiveSeries(doc) {
+  const r3 = binsOf(doc.bins, 'r3');
+  const x = r3Positions(r3);
+  const series = binsOf(doc.bins, 'r2').map((r2) => {
+    const at = new Map(doc.bins.filter((b) => b.r2[0] === r2[0]).map((b) => [b.r3[0], b]));
+    const bins = r3.map((b) => at.get(b[0]) ?? null);
+    const w = (m) => bins.map((b) => (b?.w ? b.w[m] : null));
+    const err = (m) => bins.map((b) => (b?.w && b.stderr ? b.stderr[m] : null));
+    return { r2, bins, w0: w(0), w1: w(1), w2: w(2), err1: err(1), err2: err(2), drawn: bins.filter((b) => b?.w).length };
+  });
+  return { r3, x, end: r3AxisEnd(r3, x), series };
+}
+
+/** An r₂ bin in words: `r₂ ∈ [0, 0.5)`, `r₂ ≥ 0.5` for the open one. */
+export const r2Words = (r2) => (r2[1] === null ? `r₂ ≥ ${formatParameter(r2[0])}` : `r₂ ∈ ${formatInterval(r2)}`);
+
+/**
+ * Splits the values `y` of a series at the y range [lo, hi]: `inside` keeps the values within it
+ * (null beyond: the line breaks there rather than running off the frame), `outside` lists the
+ * others with their index, for chartkit.js's edgeMarks.
+ */
+export function splitAtRange(y, [lo, hi]) {
+  const beyond = (v) => v !== null && v !== undefined && (v < lo || v > hi);
+  return {
+    inside: y.map((v) => (beyond(v) ? null : v)),
+    outside: y.flatMap((v, i) => (beyond(v) ? [{ i, value: v }] : [])),
+  };
 }
 
 /** An interval of a cell coordinate in words: `[0, 0.5)`, `[0.5, ∞)`. */

@@ -1,29 +1,35 @@
 // Results of a job: fetching its result (or a kept solve's, solves.js) and history as checkpoints
-// arrive — and, when a per-path strategy is recommended, the table optimum for Fig. 2 — and showing
-// them: the noise table (noisetable.js), Fig. 2 (fig2.js) and the history charts (plots.js), with
-// the CSV downloads of the noise table, the weights and the history, and the SVG/PNG downloads of
-// the charts (chartfiles.js).
+// arrive — then Fig. 2's data, the recommended row's effective weights (GET …/effective) and the
+// in-sample λ = 0 table (GET …/result?lambda=0), each fetched once per checkpoint — and showing
+// them: the noise table (noisetable.js), Fig. 2's two panels (fig2.js) and the history charts
+// (plots.js), with the CSV downloads of the noise table, the recommended weights table, the
+// effective weights and the history, and the SVG/PNG downloads of the charts (chartfiles.js).
 
 import { TERMINAL, api } from './api.js';
 import { chartDownloads } from './chartfiles.js';
 import { csvButton } from './csv.js';
-import { historyCsv, noiseCsv, weightsCsv } from './csvtables.js';
+import { effectiveCsv, historyCsv, noiseCsv, weightsCsv } from './csvtables.js';
 import { fixed, formatCount, h, showMessage, withError } from './format.js';
-import { drawWeights, figureSource, tableOptimumLambda } from './fig2.js';
+import { drawEffective, drawLambdaZero, effectiveQuery, figureSource } from './fig2.js';
 import { noiseRows, paperNote, recommendedNote, referenceNote } from './noisetable.js';
 import { drawHistory, drawLuminance } from './plots.js';
 import { SolvesPanel } from './solves.js';
 
 /**
  * Fetches the result and history whenever a new checkpoint is written or the job ends, one fetch
- * at a time (a change during a fetch triggers one more). `plots`: the PlotSlots of the weights,
+ * at a time (a change during a fetch triggers one more), then Fig. 2's two documents. `plots`: the
+ * PlotSlots of Fig. 2's panels (weights: the effective weights, lambdaZero: the λ = 0 table), the
  * luminance and history charts.
  */
 export class ResultsLoader {
   constructor(id, refs, plots) {
     Object.assign(this, { id, refs, plots, shownKey: null, busy: false, again: false, stopped: false, result: null, history: null });
-    this.optimum = null; // the table optimum fetched last: { key, value }
-    this.figure = null; // what Fig. 2 shows (fig2.js's figureSource)
+    // Fig. 2's documents fetched last, { key, value }: the server computes each afresh (paths drawn,
+    // a re-solve), so they are fetched again only when the checkpoint or what is asked changes.
+    this.effective = null; // value: { effective } or { error }
+    this.lambdaZero = null; // value: { result } or { error }
+    this.figure = null; // the recommended weights table, for "Weights (CSV)" (fig2.js's figureSource)
+    this.effectiveShown = null; // the effective weights drawn, for "Effective weights (CSV)"
     this.solve = 'default';
     this.addDownloads();
     this.solves = new SolvesPanel(id, refs.solves, (name) => {
@@ -34,11 +40,17 @@ export class ResultsLoader {
 
   addDownloads() {
     const { refs, plots, id } = this;
+    // "Weights (CSV)" is the recommended table, offered only when there is one (a per-path
+    // heuristic has none); "Effective weights (CSV)" is what Fig. 2's first panel draws, for any kind.
+    this.weightsButton = csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.figure));
+    this.effectiveButton = csvButton('Effective weights (CSV)', `optimis-job-${id}-effective-weights.csv`, () => effectiveCsv(this.effectiveShown));
+    this.effectiveButton.hidden = true; // until the effective weights are drawn
     refs['noise-downloads'].append(
       csvButton('Noise table (CSV)', `optimis-job-${id}-noise.csv`, () => noiseCsv(this.result)),
-      csvButton('Weights (CSV)', `optimis-job-${id}-weights.csv`, () => weightsCsv(this.figure)),
+      this.weightsButton, this.effectiveButton,
       csvButton('History (CSV)', `optimis-job-${id}-history.csv`, () => historyCsv(this.history)));
     refs['weights-downloads'].append(chartDownloads(plots.weights, `optimis-job-${id}-fig2-w1`));
+    refs['lambda0-downloads'].append(chartDownloads(plots.lambdaZero, `optimis-job-${id}-fig2-lambda0`));
     refs['luminance-downloads'].append(chartDownloads(plots.luminance, `optimis-job-${id}-luminance`));
     refs['history-downloads'].append(chartDownloads(plots.history, `optimis-job-${id}-rms-history`));
   }
@@ -71,8 +83,12 @@ export class ResultsLoader {
         api(this.solve === 'default' ? `/v1/jobs/${this.id}/result` : `/v1/jobs/${this.id}/solves/${encodeURIComponent(this.solve)}`),
         api(`/v1/jobs/${this.id}/history`),
       ]);
-      const optimum = this.solve === 'default' ? await this.tableOptimum(result) : null;
-      if (!this.stopped) this.show(result, history, optimum);
+      if (this.stopped) return;
+      this.show(result, history);
+      // Fig. 2 after the table: the noise table need not wait for the paths and the re-solve.
+      const own = this.solve === 'default';
+      const [effective, lambdaZero] = await Promise.all([this.effectiveOf(result, own), this.lambdaZeroOf(result)]);
+      if (!this.stopped && this.result === result) this.showFigure(result, effective, lambdaZero, own);
     } catch (error) {
       // 409: no checkpoint yet (or it is unreadable); the detail says which.
       // The next checkpoint tries again (not the next progress event: that would be 4 requests/s).
@@ -89,20 +105,32 @@ export class ResultsLoader {
   }
 
   /**
-   * The table optimum at optimal_cv's λ when `result` recommends a per-path strategy (Fig. 2 draws
-   * it for reference): { result } or { error }; null when not wanted. Fetched again only when the
-   * iterations or λ change (the server re-solves for every request).
+   * Panel (a)'s source for `result` (`own`: the job's own solver options): { effective,
+   * recommended, kept }, or { message } / { error } (fig2.js's drawEffective). Fetched again only
+   * when the checkpoint or the query changes.
    */
-  async tableOptimum(result) {
-    const lambda = tableOptimumLambda(result);
-    if (lambda === null) return null;
-    const key = `${result.iterations}:${result.partial}:${lambda}`;
-    if (this.optimum?.key !== key) {
-      const value = await api(`/v1/jobs/${this.id}/result?lambda=${lambda}`)
-        .then((optimum) => ({ result: optimum }), (error) => ({ error: error.message }));
-      this.optimum = { key, value };
+  async effectiveOf(result, own) {
+    const query = effectiveQuery(this.id, result, own);
+    if (!query.path) return { message: query.message, recommended: result.recommended };
+    const key = `${result.iterations}:${result.partial}:${query.path}`;
+    if (this.effective?.key !== key) {
+      const value = await api(query.path).then((effective) => ({ effective }), (error) => ({ error: error.message }));
+      this.effective = { key, value };
     }
-    return this.optimum.value;
+    return { ...this.effective.value, recommended: result.recommended, kept: !own };
+  }
+
+  /**
+   * Panel (b)'s source: the result at λ = 0 under the job's own solver options (whatever solve the
+   * table shows), { result } or { error }; fetched again only when the checkpoint changes.
+   */
+  async lambdaZeroOf(result) {
+    const key = `${result.iterations}:${result.partial}`;
+    if (this.lambdaZero?.key !== key) {
+      const value = await api(`/v1/jobs/${this.id}/result?lambda=0`).then((r) => ({ result: r }), (error) => ({ error: error.message }));
+      this.lambdaZero = { key, value };
+    }
+    return this.lambdaZero.value;
   }
 
   showNothing(text) {
@@ -120,13 +148,19 @@ export class ResultsLoader {
     refs.warnings.hidden = true;
     refs.merges.textContent = '';
     this.plots.weights.clear('The weights appear after the first checkpoint.');
+    this.plots.lambdaZero.clear('The λ = 0 table appears after the first checkpoint.');
+    showMessage(refs['weights-note'], '');
+    showMessage(refs['lambda0-note'], '');
     refs['weights-kind'].textContent = '';
     this.figure = null;
+    this.effectiveShown = null;
+    this.weightsButton.hidden = true;
+    this.effectiveButton.hidden = true;
     this.plots.luminance.clear('The luminance appears after the first checkpoint.');
     this.plots.history.clear('The RMS history appears after the first checkpoint.');
   }
 
-  show(result, history, optimum) {
+  show(result, history) {
     this.result = result;
     this.history = history;
     const refs = this.refs;
@@ -150,10 +184,22 @@ export class ResultsLoader {
       h('code', {}, w.code), ` ${w.message}`, w.cells?.length ? ` (cells ${w.cells.join(', ')})` : '')));
     refs.warnings.hidden = result.warnings.length === 0;
     refs.merges.textContent = describeMerges(result.merges_per_iteration);
-    this.figure = figureSource(result, optimum, this.solve === 'default');
-    drawWeights(this.plots.weights, { note: refs['weights-note'], kind: refs['weights-kind'] }, this.figure, this.job.spec, `Job ${this.id}`);
+    this.figure = figureSource(result, null, this.solve === 'default');
+    this.weightsButton.hidden = this.figure.kind !== 'recommended';
+    // Until the first figure arrives, say that it is coming; later ones replace the last in place.
+    if (!this.plots.weights.plot) this.plots.weights.clear('Computing the effective weights…');
+    if (!this.plots.lambdaZero.plot) this.plots.lambdaZero.clear('Fitting the λ = 0 table…');
     drawLuminance(this.plots.luminance, refs['luminance-note'], history.points, result.reference_luminance, result.recommended?.strategy);
     drawHistory(this.plots.history, refs['history-note'], history.points);
+  }
+
+  /** Fig. 2's two panels, once their documents for `result` are in. */
+  showFigure(result, effective, lambdaZero, own) {
+    const refs = this.refs;
+    this.effectiveShown = effective.effective ?? null;
+    this.effectiveButton.hidden = !this.effectiveShown;
+    drawEffective(this.plots.weights, { note: refs['weights-note'], kind: refs['weights-kind'] }, effective, this.job.spec, `Job ${this.id}`);
+    drawLambdaZero(this.plots.lambdaZero, refs['lambda0-note'], lambdaZero, this.job.spec, `Job ${this.id}`, !own);
   }
 }
 

@@ -1,9 +1,10 @@
 // Sweep data: what the sweep page's charts show, read from a sweep resource (GET /v1/sweeps/{id}):
 // which value of every axis a point takes, the RMS of every strategy against one swept field (the
-// other axes fixed), and the recommended w₁ against r₃ of every point that recommends a table. No
-// DOM and no uPlot here.
+// other axes fixed), and the effective w₁ against r₃ of every point's recommended row, from the
+// documents the page fetched for the points' jobs (GET /v1/jobs/{job}/effective). No DOM and no
+// uPlot here.
 
-import { UNFITTED, strategiesIn } from './plots.js';
+import { effectiveSeries, strategiesIn } from './plots.js';
 
 /**
  * Which value (an index into the axis's values) of every axis point `index` takes, as the server
@@ -82,50 +83,38 @@ export function rmsAgainst(sweep, a, fixed) {
   };
 }
 
-/** The lower edge of a coordinate's first bin among `rows` (`r2` or `phi`). */
-const firstBin = (rows, key) => Math.min(...rows.map((w) => w[key][0]));
-
 /**
- * The recommended w₁ of every point that recommends a weights table, against r₃, in the first r₂
- * bin and the first φ bin: x is the union of the cells' midpoints (the open tail cell [lo, ∞) is
- * left out); per point, w₁ (null in cells whose weights the server copied from a neighbour, as on
- * the job page), its jackknife standard error and whether the cell has none (`open`: smoothed).
- * A table with heuristics stacked on it is its table part (`part`; its label says so). `bins` tells
- * whether there were several r₂ or φ bins, and which were taken; `perPath` lists the points that
- * recommend a per-path strategy (no table) and `missing` counts those without figures yet.
+ * The effective w₁ against r₃ of the points with a document in `docs` (point index → its
+ * /effective document), all in one r₂ bin — the first in which some point's paths carry light —
+ * so that the small panels compare like with like (in the paper's scenes r₂ < 0.5, where the
+ * spot's step in w₁ at r₃ = a is; beyond it only the open tail bin of r₃ carries light). x is the
+ * union of the documents' bin positions (plots.js's r3Positions: the open tail bin one step past
+ * the grid), `end` the right end of the axis, `tail` the tail bin's edge and position; per point
+ * its label, strategy and kind, w₁ and its total standard error (null where the bin has no
+ * light-carrying path) and `drawn`, how many bins have weights. `lit` lists the other r₂ bins
+ * where some point has light (not drawn), `dark` those where none has.
  */
-export function w1AgainstR3(sweep) {
-  const cellsOf = (point) => {
-    const weights = point.figures?.weights ?? [];
-    if (weights.length === 0) return [];
-    const r2 = firstBin(weights, 'r2');
-    const phi = firstBin(weights, 'phi');
-    return weights.filter((w) => w.r2[0] === r2 && w.phi[0] === phi && w.r3[1] !== null);
-  };
-  const cells = sweep.points.map(cellsOf);
-  const mid = (w) => (w.r3[0] + w.r3[1]) / 2;
-  const x = [...new Set(cells.flat().map(mid))].sort((m, n) => m - n);
-  const open = (w) => w.status === 'smoothed' || w.w1_stderr === null || w.w1_stderr === undefined;
-  const series = sweep.points.flatMap((point, i) => {
-    if (cells[i].length === 0) return [];
-    const at = new Map(cells[i].filter((w) => !UNFITTED.has(w.status)).map((w) => [mid(w), w]));
-    const part = point.figures.recommended?.heuristics?.length > 0;
-    return [{
-      point: point.index,
-      part,
-      label: `${describePoint(point, sweep.fields)}${part ? ` (${point.figures.recommended.strategy}: table part)` : ''}`,
-      y: x.map((v) => at.get(v)?.w1 ?? null),
-      err: x.map((v) => (at.has(v) && !open(at.get(v)) ? at.get(v).w1_stderr : null)),
-      open: x.map((v) => (at.has(v) ? open(at.get(v)) : false)),
-    }];
+export function effectiveW1(sweep, docs) {
+  const data = new Map([...docs].map(([index, doc]) => [index, effectiveSeries(doc)]));
+  const bins = [...new Map([...data.values()].flatMap((d) => d.series.map((b) => [b.r2[0], b.r2]))).values()].sort((a, b) => a[0] - b[0]);
+  const hasLight = (r2) => [...data.values()].some((d) => d.series.some((b) => b.r2[0] === r2[0] && b.drawn > 0));
+  const r2 = bins.find(hasLight) ?? null;
+  const x = [...new Set([...data.values()].flatMap((d) => d.x))].sort((a, b) => a - b);
+  const series = sweep.points.filter((p) => data.has(p.index)).map((p) => {
+    const d = data.get(p.index);
+    const doc = docs.get(p.index);
+    const bin = r2 ? d.series.find((b) => b.r2[0] === r2[0]) : null;
+    const at = new Map(d.x.map((v, i) => [v, i]));
+    const pick = (list) => x.map((v) => (bin && at.has(v) ? list[at.get(v)] : null));
+    return {
+      point: p.index, label: describePoint(p, sweep.fields), strategy: doc.strategy, kind: doc.kind, paths: doc.paths_per_side,
+      y: bin ? pick(bin.w1) : x.map(() => null), err: bin ? pick(bin.err1) : x.map(() => null), drawn: bin ? bin.drawn : 0,
+    };
   });
-  const perPath = sweep.points.filter((p, i) => cells[i].length === 0 && p.figures?.recommended && p.figures.recommended.lambda === null)
-    .map((p) => ({ point: p.index, label: describePoint(p, sweep.fields), strategy: p.figures.recommended.strategy }));
-  const first = sweep.points.find((p) => p.figures?.weights?.length)?.figures.weights ?? [];
-  const count = (key) => new Set(first.map((w) => w[key][0])).size;
-  const bins = {
-    r2: count('r2') > 1 ? first.find((w) => w.r2[0] === firstBin(first, 'r2')).r2 : null,
-    phi: count('phi') > 1 ? first.find((w) => w.phi[0] === firstBin(first, 'phi')).phi : null,
+  const ends = [...data.values()].map((d) => d.end);
+  const tail = [...data.values()].map((d) => d.r3.at(-1)).find((b) => b?.[1] === null) ?? null;
+  return {
+    x, r2, series, end: ends.length ? Math.max(...ends) : 1, tail: tail ? { lo: tail[0], x: x.at(-1) } : null,
+    lit: bins.filter((b) => b !== r2 && hasLight(b)), dark: bins.filter((b) => !hasLight(b)),
   };
-  return { x, series, bins, perPath, missing: sweep.points.filter((p) => !p.figures).length };
 }
