@@ -83,5 +83,10 @@ async fn spot_against_uniform_with_standard_errors() {
     let local: Value = serde_json::from_slice(&out.stdout).unwrap();
     let local_switch = local["strategies"].as_array().unwrap().iter().find(|s| s["strategy"] == "switch").unwrap();
     assert_eq!(local_switch["runs"], switch["runs"], "the same figures from the documents as from the server");
+    // Issue 42: what differs between the runs is named, not left to the reader.
+    let notes = local["notes"].as_array().unwrap();
+    let named =
+        notes.iter().filter_map(Value::as_str).find(|n| n.starts_with("uniform.json differs from spot.json in "));
+    assert!(named.is_some_and(|n| n.contains("scene.illumination")), "{notes:?}");
     server.stop().await;
 }

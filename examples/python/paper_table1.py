@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Reproduce Table 1 and Fig. 2 of Ershov et al. (2020) with an optimis server.
+"""Reproduce Table 1 and Fig. 2 of the paper with an optimis server:
+S. V. Ershov, A. G. Voloboy, D. D. Zhdanov, A. D. Zhdanov, V. A. Frolov, "Direct calculation of the optimal weight for MIS", GraphiCon 2020 (CEUR Workshop Proceedings).
 
 Submits the paper's run (preset ``paper-table1``: three planes, β = 3°, the bright
 spot a = 0.02, R = 0.003, N_F = 10^7, N_B = 100) to a running ``optimis serve``,

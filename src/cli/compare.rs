@@ -10,6 +10,7 @@ use clap::Args;
 
 use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, table};
+use crate::sim::configuration::configuration_differences;
 use crate::sim::solve::compare::{Compared, Comparison, MAX_COMPARED, compare as compare_runs};
 use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
 
@@ -47,9 +48,11 @@ pub fn compare(args: CompareArgs) -> Result<(), CliError> {
 /// Documents, each reported with its own solver options.
 fn local(paths: &[String]) -> Result<Comparison, CliError> {
     let mut reports: Vec<RunReport> = Vec::with_capacity(paths.len());
+    let mut specs = Vec::with_capacity(paths.len());
     for path in paths {
         let path = PathBuf::from(path);
         let doc = read_document(&path)?;
+        specs.push(doc.spec.clone());
         let job = document_job(&doc, &path)?;
         let solver = solver_options(&doc.spec.solver, None)?;
         let inputs = ReportInputs { reference: None, expected: None, weights: None };
@@ -60,7 +63,23 @@ fn local(paths: &[String]) -> Result<Comparison, CliError> {
         .zip(paths)
         .map(|(r, label)| Compared { label, rows: &r.noise_table, fingerprint: &r.fingerprint, coverage: &r.coverage })
         .collect();
-    Ok(compare_runs(&runs))
+    let mut comparison = compare_runs(&runs);
+    // What differs between the runs, named (issue 42: "other seeds or other configurations" left
+    // the reader to find out which).
+    for (spec, label) in specs.iter().zip(paths).skip(1) {
+        let mut fields = configuration_differences(&specs[0], spec);
+        for (name, a, b) in [("seed", spec.seed, specs[0].seed), ("iterations", spec.iterations, specs[0].iterations)] {
+            if a != b {
+                fields.push(format!("{name}: {a} vs {b}"));
+            }
+        }
+        comparison.notes.push(if fields.is_empty() {
+            format!("{label} has the configuration, seed and iterations of {}", paths[0])
+        } else {
+            format!("{label} differs from {} in {}", paths[0], fields.join(", "))
+        });
+    }
+    Ok(comparison)
 }
 
 /// Jobs of a server, compared by the server.

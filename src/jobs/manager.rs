@@ -348,7 +348,9 @@ impl JobManager {
                 row.state
             )));
         }
-        let new_total = target_total(row.iterations_done, row.iterations_total, more, total)?;
+        // `total` is checked against what the job holds, not the target it had: a job cancelled at 34
+        // of 500 resumes to 500 with `total` = 500 (issue 42).
+        let new_total = target_total(row.iterations_done, row.iterations_done, more, total)?;
         let mut spec = parse_stored_spec(&row)?;
         refuse_shard_extension(id, &spec)?;
         check_budget(&self.inner.policy, &spec, new_total)?;
