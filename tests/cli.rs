@@ -575,3 +575,40 @@ fn counts_take_the_json_forms_and_negative_ones_name_the_flag() {
     let stderr = String::from_utf8_lossy(&negative.stderr);
     assert!(stderr.contains("--iterations") && stderr.contains("non-negative whole number"), "{stderr}");
 }
+
+/// Issue 42: an interrupted run exited silently. Now Ctrl-C (SIGINT) stops it after its batch,
+/// keeps its iterations in --out, says so with how to continue, and exits with 130; `--resume`
+/// then gives the document an uninterrupted run writes, byte for byte.
+#[test]
+fn an_interrupted_run_keeps_its_iterations_and_says_how_to_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["run", "--preset", "paper-table1", "--iterations", "60000", "--seed", "9", "--quiet"];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_optimis"))
+        .current_dir(dir.path())
+        .args(args)
+        .args(["--out", "cut.json", "--checkpoint-seconds", "0.1"])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Interrupted once it has written its first checkpoint (it has iterations to keep).
+    while !dir.path().join("cut.json").exists() {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before it could be interrupted");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(
+        stderr.contains("interrupted at ") && stderr.contains("of 60000 iterations; they are in cut.json"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--resume"), "{stderr}");
+    ok(optimis(dir.path(), &[&args[..], &["--out", "cut.json", "--resume"]].concat(), &[]));
+    ok(optimis(dir.path(), &[&args[..], &["--out", "whole.json"]].concat(), &[]));
+    let (cut, whole) =
+        (std::fs::read(dir.path().join("cut.json")).unwrap(), std::fs::read(dir.path().join("whole.json")).unwrap());
+    assert!(cut == whole, "the resumed run's document is the uninterrupted run's");
+}

@@ -129,7 +129,9 @@ fn table1_and_fig2_as_svg_png_and_pdf() {
         (vec!["--out", "x.png", "--width", "20000"], "--width"),
         (vec!["--out", "x.gif"], "FILE.svg, FILE.png or FILE.pdf"),
         (vec!["--out", "x.svg", "--strategies", "switch"], "--strategies"),
-        (vec!["--out", "x.svg", "--lambda", "-1"], "--lambda"),
+        (vec!["--out", "x.svg", "--weights-lambda", "-1"], "--weights-lambda"),
+        // The old name is an alias of the one `report` has.
+        (vec!["--out", "x.svg", "--lambda", "-1"], "--weights-lambda"),
         // Table 1's fitted rows each have their own λ: a λ would change nothing, so it is refused.
         (vec!["--out", "x.svg", "--lambda", "0.1"], "applies to fig2 only"),
     ] {

@@ -41,7 +41,8 @@ use crate::sim::spec::SpecError;
     after_help = "Exit status: 0 success; 2 usage (a flag or argument); 3 invalid input (a job or sweep \
                   specification, a JSON file, a moments document, the configuration); 4 conflict (documents \
                   of other configurations or with iterations already counted); 5 I/O (a file that cannot \
-                  be read or written); 1 anything else."
+                  be read or written); 130 interrupted (`optimis run` keeps its iterations in --out: \
+                  --resume continues); 1 anything else."
 )]
 pub struct Cli {
     /// What to do.
@@ -160,6 +161,17 @@ pub enum CliError {
         path: PathBuf,
         /// The I/O error.
         source: std::io::Error,
+    },
+    /// The run was interrupted (SIGINT, SIGTERM; exit status 130): what it did is kept where it
+    /// says, and how to continue.
+    #[error("interrupted at {done} of {total} iterations; {what}")]
+    Interrupted {
+        /// Iterations done.
+        done: u64,
+        /// Iterations asked for.
+        total: u64,
+        /// Where the iterations are and how to continue, or that nothing was kept.
+        what: String,
     },
     /// Standard output could not be written (exit status 5; a closed pipe is not an error).
     #[error("cannot write the output: {0}")]
@@ -282,6 +294,7 @@ impl CliError {
             | CliError::Unusable { .. }
             | CliError::Config(_) => 3,
             CliError::Read { .. } | CliError::Write { .. } | CliError::Output(_) => 5,
+            CliError::Interrupted { .. } => 130,
             #[cfg(feature = "server")]
             CliError::Unreachable { .. } => 5,
             #[cfg(feature = "server")]

@@ -3,6 +3,7 @@
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
@@ -237,8 +238,23 @@ fn own_stream(_: &Path) -> Option<Box<dyn Write>> {
 
 /// Runs every iteration of `job` on `pool` into fresh moments, reporting progress on stderr.
 pub(super) fn run_moments(job: &ValidJob, pool: &rayon::ThreadPool, progress: &ProgressArgs, label: &str) -> Moments {
-    run_moments_from(job, pool, progress, label, Moments::new(job.config()), None)
+    let never = AtomicBool::new(false);
+    run_moments_from(job, pool, progress, label, Moments::new(job.config()), None, &never)
         .expect("a fresh run writes no checkpoints")
+        .0
+}
+
+/// A flag the first SIGINT or SIGTERM sets (the run then stops after its batch and keeps what it
+/// did); a second one ends the process at once, as the signal would without a handler.
+pub(super) fn interruption() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    #[cfg(all(unix, feature = "server"))]
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // Best effort: without the handlers the signal ends the run as it always did.
+        let _ = signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&flag));
+        let _ = signal_hook::flag::register(signal, Arc::clone(&flag));
+    }
+    flag
 }
 
 /// A document written while the run goes on: where, and how often.
@@ -248,7 +264,8 @@ struct Checkpoints<'a> {
 }
 
 /// Runs the iterations of `job` that `moments` (the first ones, or none) does not hold, writing
-/// the partial document every so often when asked.
+/// the partial document every so often when asked; until `stop` is set, and then with whether it
+/// was (the moments hold a prefix of the iterations either way).
 fn run_moments_from(
     job: &ValidJob,
     pool: &rayon::ThreadPool,
@@ -256,7 +273,8 @@ fn run_moments_from(
     label: &str,
     mut moments: Moments,
     checkpoints: Option<Checkpoints<'_>>,
-) -> Result<Moments, CliError> {
+    stop: &AtomicBool,
+) -> Result<(Moments, bool), CliError> {
     let config = &job.config();
     let range = job.spec().iteration_range();
     let total = range.end - range.start;
@@ -266,10 +284,15 @@ fn run_moments_from(
     let started = Instant::now();
     let mut last_write = Instant::now();
     let mut written = Ok(());
+    // The engine is never cancelled mid-batch (a cancelled batch's iterations are dropped, and the
+    // restricted engine hands its sums over only when asked): `stop` is read between batches.
     let never = AtomicBool::new(false);
-    pool.install(|| {
+    let outcome = pool.install(|| {
         run_iterations(config, job.spec().seed, range.start + resumed..range.end, &mut moments, &never, |m, next| {
             shown.update(next - range.start - resumed, started, config.light_paths);
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return std::ops::ControlFlow::Break(());
+            }
             if let Some(c) = &checkpoints
                 && last_write.elapsed() >= c.every
             {
@@ -282,11 +305,15 @@ fn run_moments_from(
             }
             std::ops::ControlFlow::Continue(())
         })
-    })
-    .expect("the run is neither cancelled nor overlapping (a resumed document holds only its first iterations)");
+    });
+    let done = outcome
+        .expect("the run is neither cancelled nor overlapping (a resumed document holds only its first iterations)");
+    let interrupted = done < range.end;
     written?;
-    shown.finish();
-    Ok(moments)
+    if !interrupted {
+        shown.finish();
+    }
+    Ok((moments, interrupted))
 }
 
 fn checkpoint_seconds(text: &str) -> Result<f64, String> {
@@ -346,10 +373,22 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
         .as_deref()
         .zip(args.checkpoint_seconds)
         .map(|(path, s)| Checkpoints { path, every: Duration::from_secs_f64(s) });
-    let moments = run_moments_from(&job, &pool, &args.progress, "", resumed, checkpoints)?;
+    let stop = interruption();
+    let (moments, interrupted) = run_moments_from(&job, &pool, &args.progress, "", resumed, checkpoints, &stop)?;
     let seconds = started.elapsed().as_secs_f64();
     if let Some(path) = &out {
         write_atomically(path, &MomentsDocument::new(job.spec().clone(), moments.clone()).to_json())?;
+    }
+    if interrupted {
+        let what = match &out {
+            Some(path) => format!(
+                "they are in {}: run the same command with --resume to continue (bit-identical to an uninterrupted run)",
+                path.display()
+            ),
+            None => "nothing was kept (with --out FILE a run keeps its iterations, and --resume continues it)".into(),
+        };
+        let range = job.spec().iteration_range();
+        return Err(CliError::Interrupted { done: moments.iterations(), total: range.end - range.start, what });
     }
     // On the run's pool: the quadrature evaluates its nodes in parallel there.
     let expected = pool.install(|| expected_luminances(config));

@@ -4,7 +4,7 @@
 //!   colour per r₂ bin, ± 1 SE — the contribution-weighted average of each technique's weight over
 //!   the bin's full paths (`sim::weights::effective`), so a heuristic, a table and a stack are drawn
 //!   alike, with the sampling and fit errors combined. `--strategy` draws another row's.
-//! * **The paper's procedure** (right): the in-sample table optimum at λ (`--lambda`, default 0,
+//! * **The paper's procedure** (right): the in-sample table optimum at λ (`--weights-lambda`, default 0,
 //!   as the paper fits it) cell by cell, labelled as an in-sample fit. Its cells can be noise far
 //!   outside [0, 1]: the axis is fixed to [−0.5, 1.5] and an off-scale cell is a triangle at the
 //!   frame's edge with its value written beside it, never clipped silently. Cells whose weights were

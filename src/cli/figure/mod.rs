@@ -51,8 +51,9 @@ pub struct FigureArgs {
     #[arg(long, value_name = "PX")]
     pub width: Option<u32>,
     /// fig2 only: the λ of the right panel, the in-sample table optimum (default 0: the paper's
-    /// procedure). (Table 1's rows do not depend on it: each fitted row has its own λ.)
-    #[arg(long, allow_hyphen_values = true)]
+    /// procedure). (Table 1's rows do not depend on it: each fitted row has its own λ.) The same
+    /// name as `optimis report --weights-lambda`; `--lambda` is kept as an alias.
+    #[arg(long = "weights-lambda", alias = "lambda", allow_hyphen_values = true)]
     pub lambda: Option<f64>,
     /// fig2 only: the noise-table row whose effective weights the left panel draws (default: the
     /// recommended row).
@@ -102,11 +103,11 @@ pub fn figure(args: FigureArgs) -> Result<(), CliError> {
     check(args.which == "convergence" || args.strategies.is_empty(), "--strategies", || {
         "applies to the convergence figure only".into()
     })?;
-    check(args.which == "fig2" || args.lambda.is_none(), "--lambda", || {
+    check(args.which == "fig2" || args.lambda.is_none(), "--weights-lambda", || {
         "applies to fig2 only (table1's fitted rows each have their own λ; a history holds no moments to solve)".into()
     })?;
     check(args.which == "fig2" || args.strategy.is_none(), "--strategy", || "applies to fig2 only".into())?;
-    lambda_flag("--lambda", args.lambda)?;
+    lambda_flag("--weights-lambda", args.lambda)?;
     let strategy = args
         .strategy
         .as_deref()
