@@ -435,13 +435,19 @@ fn set_progress_csv_and_exit_codes() {
         if rows.is_empty() {
             // A per-path recommendation has no table: its effective weights, labelled, one row per
             // (r2, r3) bin — never an empty file.
-            let bins = report["effective"]["bins"].as_array().expect("a per-path recommendation has effective weights");
-            assert_eq!(weights.lines().count(), 1 + bins.len());
-            for (line, bin) in weights.lines().skip(1).zip(bins) {
+            // (The paper's grid: 2 r2 bins × 26 r3 bins, one φ bin.)
+            assert_eq!(weights.lines().count(), 1 + 52);
+            let recommended = report["recommended"]["strategy"].as_str().unwrap();
+            for line in weights.lines().skip(1) {
                 let cells: Vec<&str> = line.split(',').collect();
                 assert_eq!(cells.len(), 23, "{line}");
-                assert_eq!((cells[0], cells[1]), ("effective", report["recommended"]["strategy"].as_str().unwrap()));
-                assert_eq!(cells[12].parse::<f64>().ok(), bin["w"][1].as_f64(), "{line}");
+                assert_eq!((cells[0], cells[1], cells[2]), ("effective", recommended, "heuristic"), "{line}");
+                // A heuristic over planes 2–3: w0 = 0 and w1 + w2 = 1 wherever a path carries light.
+                if let (Ok(w0), Ok(w1), Ok(w2)) =
+                    (cells[10].parse::<f64>(), cells[12].parse::<f64>(), cells[14].parse::<f64>())
+                {
+                    assert!(w0 == 0.0 && (w1 + w2 - 1.0).abs() < 1e-12, "{line}");
+                }
             }
             return;
         }

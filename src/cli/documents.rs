@@ -21,7 +21,6 @@ use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
 use crate::sim::spec::{SpecError, ValidJob};
-use crate::sim::weights::effective::{EFFECTIVE_PATHS, attach_effective};
 
 #[derive(Debug, Args)]
 pub struct MergeArgs {
@@ -170,11 +169,10 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-    let mut report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
-    attach_effective(&mut report, job.config(), EFFECTIVE_PATHS);
+    let report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
     let mut spec = doc.spec.clone();
     spec.solver = solver.clone();
-    write_csv(&spec, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
+    write_csv(&spec, job.config(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.nested_cv {
         let cf = CrossFitting::new(&doc.moments, &doc.moments.pooled());

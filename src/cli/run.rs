@@ -19,13 +19,14 @@ use crate::sim::checks::published::{applicable, paper_columns};
 use crate::sim::checks::quadrature::reference_luminance;
 use crate::sim::checks::references::expected_luminances;
 use crate::sim::document::MomentsDocument;
+use crate::sim::model::config::SimConfig;
 use crate::sim::model::params::{merge_patch, path_patch};
 use crate::sim::runner::run_iterations;
 use crate::sim::solve::export::{effective_csv, noise_table_csv, weights_csv};
 use crate::sim::solve::report::{ReportInputs, RunReport, build_report};
 use crate::sim::spec::{JobSpec, Shard, SpecError, ValidJob, parse_job_spec};
 use crate::sim::stats::moments::Moments;
-use crate::sim::weights::effective::{EFFECTIVE_PATHS, attach_effective};
+use crate::sim::weights::effective::{EFFECTIVE_PATHS, recommended_effective};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -100,6 +101,7 @@ pub struct RunArgs {
 /// Writes the report's tables as CSV where asked.
 pub(super) fn write_csv(
     spec: &JobSpec,
+    config: &SimConfig,
     report: &RunReport,
     noise: Option<&Path>,
     weights: Option<&Path>,
@@ -112,17 +114,19 @@ pub(super) fn write_csv(
     if let Some(path) = weights {
         // A per-path recommendation has no table: its effective weights, labelled, rather than an
         // empty file a renderer would read as "no weights".
-        let csv = match &report.effective {
-            Some(effective) if report.weights.is_empty() => {
+        let effective =
+            report.weights.is_empty().then(|| recommended_effective(report, config, EFFECTIVE_PATHS)).flatten();
+        let csv = match effective {
+            Some(effective) => {
                 eprintln!(
                     "{}: {} is a per-path weight function with no table: wrote its effective weights per (r2, r3) bin \
                      (`optimis weights` writes the function itself)",
                     path.display(),
                     effective.strategy
                 );
-                effective_csv(effective)
+                effective_csv(&effective)
             }
-            _ => weights_csv(report),
+            None => weights_csv(report),
         };
         write_atomically(path, csv.as_bytes())?;
     }
@@ -394,9 +398,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let expected = pool.install(|| expected_luminances(config));
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
-    let mut report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
-    attach_effective(&mut report, config, EFFECTIVE_PATHS);
-    write_csv(job.spec(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
+    let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
+    write_csv(job.spec(), config, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).map_err(std::io::Error::from)?;

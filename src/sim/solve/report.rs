@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::effective::{EffectiveWeights, FitReplicates};
+use super::effective::FitReplicates;
 pub use super::expectation::ExpectedLuminance;
 use super::expectation::apply_expectation;
 use super::noise::{HeuristicWeight, MergeRate, NoiseRow, merge_rates_of, noise_table_with, weights_at};
@@ -147,13 +147,8 @@ pub struct RunReport {
     pub fingerprint: String,
     /// The (seed, iteration range) pairs the moments hold.
     pub coverage: Coverage,
-    /// The recommended weights' effective weights per (r2, r3) bin, with standard errors (Fig. 2
-    /// of any kind of recommendation; `solve::effective`); absent from a result made without its
-    /// scene at hand or by an earlier optimis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub effective: Option<EffectiveWeights>,
-    /// The fold fits of the fitted row `weights` shows, for the fit errors of `effective`; not
-    /// part of the document.
+    /// The fold fits of the fitted row `weights` shows, for the fit errors of its effective
+    /// weights (`solve::effective`, a document of its own); not part of the document.
     #[serde(skip)]
     pub replicates: Option<FitReplicates>,
 }
@@ -291,7 +286,6 @@ pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, 
         merges_per_iteration: MergesPerIteration { plane1, plane2, plane3 },
         fingerprint: moments.fingerprint.clone(),
         coverage: moments.coverage.clone(),
-        effective: None,
         replicates,
     }
 }

@@ -340,18 +340,14 @@ fn table_by_cell(config: &SimConfig, artifact: &WeightsArtifact) -> Result<Optio
         .map(Some)
 }
 
-/// Sets `report.effective` to its recommended row's effective weights over `paths` camera paths
-/// (nothing when it recommends nothing). The fit errors come from the report's fold fits when its
-/// weights table is the recommended row's.
-pub fn attach_effective(report: &mut RunReport, config: &SimConfig, paths: usize) {
-    report.effective = None;
-    let Some(row) = recommended_row(report) else { return };
+/// The recommended row's effective weights over `paths` paths per side (none when the report
+/// recommends nothing). The fit errors come from the report's fold fits when its weights table is
+/// the recommended row's.
+pub fn recommended_effective(report: &RunReport, config: &SimConfig, paths: usize) -> Option<EffectiveWeights> {
+    let row = recommended_row(report)?;
     let own = report.weights_fit.as_ref().is_some_and(|f| Some(f.lambda) == row.lambda && f.strategy == row.strategy);
-    let effective = artifact(config, report, &row).and_then(|a| {
-        let replicates = if own { report.replicates.as_ref() } else { None };
-        effective_weights(config, &a, replicates, paths)
-    });
-    report.effective = effective.ok();
+    let replicates = if own { report.replicates.as_ref() } else { None };
+    artifact(config, report, &row).and_then(|a| effective_weights(config, &a, replicates, paths)).ok()
 }
 
 /// The effective weights of row `strategy` (none: the recommended row) of the run `moments` of
