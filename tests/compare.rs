@@ -54,6 +54,22 @@ async fn spot_against_uniform_with_standard_errors() {
         assert!(problem.to_string().contains("ids"), "{bad}: {problem}");
     }
     assert_problem(server.get(&format!("/v1/compare?ids={spot},999")).await, 404);
+    // Issue 42: the compare table as CSV from the API, as the dashboard writes it: each job's
+    // parameters in front of its noise table's rows (docs/csv.md, "compare").
+    let csv = server.get(&format!("/v1/compare?ids={spot},{uniform}&format=csv")).await.text();
+    let lines: Vec<&str> = csv.lines().collect();
+    let noise = server.get(&format!("/v1/jobs/{spot}/result?format=csv")).await.text();
+    let job_columns = "job_id,preset,illumination,spot_a,engine,light_paths,camera_paths,merge_radius,iterations,seed";
+    assert_eq!(lines[0], format!("{job_columns},{}", noise.lines().next().unwrap()));
+    let (a, b) = (server.result(spot).await, server.result(uniform).await);
+    let rows = |r: &Value| r["noise_table"].as_array().unwrap().len();
+    assert_eq!(lines.len(), 1 + rows(&a) + rows(&b), "one row per job and strategy");
+    assert!(lines[1].starts_with(&format!("{spot},")) && lines[1].contains(",spot,0.02,"), "{}", lines[1]);
+    assert!(lines.last().unwrap().starts_with(&format!("{uniform},")) && lines.last().unwrap().contains(",uniform,,"));
+    // Each job's rows are its own noise table's, after its parameters.
+    for (line, own) in lines[1..].iter().zip(noise.lines().skip(1)) {
+        assert!(line.ends_with(own), "{line} / {own}");
+    }
 
     // The CLI: the server's comparison as a table, ratios with their SEs.
     let dir = tempfile::tempdir().unwrap();

@@ -55,6 +55,43 @@ pub struct PaperColumns {
 /// The report's noise table as CSV, one row per strategy; `paper` gives a row's published columns.
 pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperColumns) -> String {
     let mut csv = Csv::new(NOISE_COLUMNS);
+    for row in noise_rows(report, paper) {
+        csv.row(row);
+    }
+    csv.finish()
+}
+
+/// The columns that say which job a row of a comparison is (docs/csv.md, "compare").
+pub const JOB_COLUMNS: [&str; 10] = [
+    "job_id",
+    "preset",
+    "illumination",
+    "spot_a",
+    "engine",
+    "light_paths",
+    "camera_paths",
+    "merge_radius",
+    "iterations",
+    "seed",
+];
+
+/// Jobs' noise tables as one CSV, one row per job and strategy, each job's [`JOB_COLUMNS`] cells
+/// (already formatted) in front: the dashboard's compare table, from the server.
+pub fn compare_csv<'a>(
+    jobs: impl IntoIterator<Item = ([String; 10], &'a RunReport, Box<dyn Fn(&Strategy) -> PaperColumns + 'a>)>,
+) -> String {
+    let mut csv = Csv::new(JOB_COLUMNS.into_iter().chain(NOISE_COLUMNS));
+    for (job, report, paper) in jobs {
+        for row in noise_rows(report, paper) {
+            csv.row(job.iter().cloned().chain(row));
+        }
+    }
+    csv.finish()
+}
+
+/// The cells of each row of the report's noise table, in [`NOISE_COLUMNS`]' order.
+fn noise_rows(report: &RunReport, paper: impl Fn(&Strategy) -> PaperColumns) -> Vec<Vec<String>> {
+    let mut rows = Vec::with_capacity(report.noise_table.len());
     let chosen = report.recommended.as_ref().map(|r| r.strategy);
     for r in &report.noise_table {
         let published = paper(&r.strategy);
@@ -64,7 +101,7 @@ pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperCol
         } else {
             serde_json::to_string(&r.heuristics).map(|s| quoted(&s)).unwrap_or_default()
         };
-        csv.row([
+        rows.push(vec![
             json_cell(&r.strategy),
             published.case.map(|c| c.to_string()).unwrap_or_default(),
             number(r.luminance),
@@ -92,7 +129,7 @@ pub fn noise_table_csv(report: &RunReport, paper: impl Fn(&Strategy) -> PaperCol
             r.error.as_deref().map(quoted).unwrap_or_default(),
         ]);
     }
-    csv.finish()
+    rows
 }
 
 /// The weights table's columns: which table it is first (as the dashboard writes them), then the
