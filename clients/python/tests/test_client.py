@@ -331,7 +331,7 @@ def test_sweep(client: Client) -> None:
         "base": {**FAST, "labels": {"suite": "sweep"}},
         "axes": [{"field": "merge_radius", "values": [0.01, 0.02]}],
         "mode": "grid",
-    })
+    }, name="R", labels={"owner": "ana"}, notes="two radii")
     assert len(sweep["points"]) == 2
     seen: List[Dict[str, Any]] = []
     final = client.wait_sweep(sweep["id"], timeout=120, progress=seen.append)
@@ -343,7 +343,12 @@ def test_sweep(client: Client) -> None:
     assert sorted(set(table["merge_radius"])) == [0.01, 0.02]
     assert [(r["point"], r["strategy"]) for r in rows] == list(zip(table["point"], table["strategy"]))
     assert all(same(v, r["rms_percent"]) for v, r in zip(table["rms_percent"], rows))
-    assert len(client.jobs(sweep=sweep["id"])) == 2
+    runs = client.jobs(sweep=sweep["id"])
+    assert len(runs) == 2
+    # name=, labels= and notes= reach every run, as submit's reach a job.
+    assert sorted(r["spec"]["name"] for r in runs) == ["R: merge_radius=0.01", "R: merge_radius=0.02"]
+    assert all(r["spec"]["labels"] == {"suite": "sweep", "owner": "ana"} for r in runs)
+    assert all(r["spec"]["notes"] == "two radii" for r in runs)
 
 
 def test_predict_and_budget(client: Client) -> None:

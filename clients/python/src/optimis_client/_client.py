@@ -772,12 +772,32 @@ class Client:
 
     # -- sweeps ---------------------------------------------------------------------------------
 
-    def sweep(self, doc: Mapping[str, Any]) -> Json:
+    def sweep(
+        self,
+        doc: Mapping[str, Any],
+        *,
+        name: Optional[str] = None,
+        labels: Optional[Mapping[str, str]] = None,
+        notes: Optional[str] = None,
+    ) -> Json:
         """Create a sweep (``POST /v1/sweeps``): ``{"base": job document, "axes": [{"field":
         "merge_radius", "values": [...]}, ...], "mode": "grid" | "zip"}``; every run is queued as a
         job. Returns the sweep resource (``id``, ``state``, ``progress``, ``points``). A bad axis
-        is an :class:`ApiError` 422 whose ``field`` names it (``axes[1].values[2]``)."""
-        return self._json("POST", "/v1/sweeps", json=dict(doc))
+        is an :class:`ApiError` 422 whose ``field`` names it (``axes[1].values[2]``).
+
+        `name`, `labels` (merged over the base's own) and `notes` describe the runs as
+        :meth:`submit`'s do a job: they go into the base, so every run carries the labels and is
+        named after the name and its swept values (``"R: merge_radius=0.01"``)."""
+        document = dict(doc)
+        base = dict(document.get("base") or {})
+        if name is not None:
+            base["name"] = name
+        if labels is not None:
+            base["labels"] = {**(base.get("labels") or {}), **dict(labels)}
+        if notes is not None:
+            base["notes"] = notes
+        document["base"] = base
+        return self._json("POST", "/v1/sweeps", json=document)
 
     def get_sweep(self, id: int) -> Json:
         """A sweep's resource as it is now (``GET /v1/sweeps/{id}``): progress and, per point, the
