@@ -120,6 +120,8 @@ async fn optimis_wait_succeeds_fails_and_gives_up_as_it_says() {
     .unwrap();
     assert_eq!(out.status.code(), Some(5), "{out:?}");
     assert!(String::from_utf8_lossy(&out.stderr).contains("does not answer"), "{out:?}");
+    // Issue 42: and says that the job is not lost.
+    assert!(String::from_utf8_lossy(&out.stderr).contains("resumes them from their last checkpoint"), "{out:?}");
 
     // Nothing listens: exit 5 at once.
     let url = format!("127.0.0.1:{}/v1/jobs/1", free_port());

@@ -47,7 +47,18 @@ async fn follow(server: &Server, target: &str, args: &WaitArgs) -> Result<(), Cl
     let shown = target.split('?').next().unwrap_or_default().to_string();
     let mut last = String::new();
     loop {
-        let answer = server.get(target).await?;
+        let answer = server.get(target).await.map_err(|e| match e {
+            // A stopped server keeps what it accepted: say so, rather than leave "failed?" open.
+            CliError::Unreachable { url, detail } => CliError::Unreachable {
+                url,
+                detail: format!(
+                    "{detail}; {} — a server keeps the jobs it accepted and resumes them from their last \
+                     checkpoint when it starts again: run `optimis wait` again then",
+                    if last.is_empty() { "nothing was heard yet".to_string() } else { format!("last seen: {last}") }
+                ),
+            },
+            other => other,
+        })?;
         if answer.status == reqwest::StatusCode::TOO_MANY_REQUESTS {
             // Too many waiters on the server: come back when it says.
             tokio::time::sleep(Duration::from_secs(answer.retry_after.unwrap_or(5).clamp(1, 60))).await;
