@@ -10,7 +10,7 @@ use super::statistics::{Latest, Statistics};
 use crate::sim::solve::effective::EffectiveWeights;
 use crate::sim::solve::report::ReportInputs;
 use crate::sim::solve::strategy::Strategy;
-use crate::sim::spec::SpecError;
+use crate::sim::spec::{SpecError, ValidJob};
 use crate::sim::weights::artifact::WeightsArtifact;
 use crate::sim::weights::build::artifact_of_moments;
 use crate::sim::weights::effective::effective_of_moments;
@@ -24,15 +24,7 @@ impl Statistics {
         let provenance = self.provenance.clone();
         self.jobs
             .compute_heavy(move |_| -> Result<WeightsArtifact, JobError> {
-                let config = job.config();
-                let expected = expected_luminances(config);
-                let inputs = ReportInputs {
-                    reference: scene_reference(&config.scene),
-                    expected: Some(&expected),
-                    weights: None,
-                };
-                let mut artifact = artifact_of_moments(&moments, &job, &inputs, strategy)
-                    .map_err(|e| JobError::from(SpecError::new("strategy", e)))?;
+                let mut artifact = as_result(&job, |inputs| artifact_of_moments(&moments, &job, inputs, strategy))?;
                 artifact.provenance.job_id = Some(id);
                 if let Some(attests) = attests {
                     artifact = provenance.sign_artifact(artifact, attests);
@@ -41,9 +33,7 @@ impl Statistics {
             })
             .await?
     }
-}
 
-impl Statistics {
     /// The effective weights per (r2, r3) bin of job `id`'s row `strategy` (none: its recommended
     /// row) over `paths` paths per side, from its latest checkpoint (Fig. 2 of any recommendation,
     /// `sim::weights::effective`). CPU work (a report, maybe a refit, the paths): on the heavy
@@ -57,16 +47,18 @@ impl Statistics {
         let Latest { job, moments, .. } = self.latest(id).await?;
         self.jobs
             .compute_heavy(move |_| -> Result<EffectiveWeights, JobError> {
-                let config = job.config();
-                let expected = expected_luminances(config);
-                let inputs = ReportInputs {
-                    reference: scene_reference(&config.scene),
-                    expected: Some(&expected),
-                    weights: None,
-                };
-                effective_of_moments(&moments, &job, &inputs, strategy, paths)
-                    .map_err(|e| JobError::from(SpecError::new("strategy", e)))
+                as_result(&job, |inputs| effective_of_moments(&moments, &job, inputs, strategy, paths))
             })
             .await?
     }
+}
+
+/// `make` given the report inputs a job's result is built with (its scene's reference and each
+/// per-path row's expectation), so that the row chosen is the result's; its error names the
+/// strategy asked for.
+fn as_result<T>(job: &ValidJob, make: impl FnOnce(&ReportInputs<'_>) -> Result<T, String>) -> Result<T, JobError> {
+    let config = job.config();
+    let expected = expected_luminances(config);
+    let inputs = ReportInputs { reference: scene_reference(&config.scene), expected: Some(&expected), weights: None };
+    make(&inputs).map_err(|e| JobError::from(SpecError::new("strategy", e)))
 }

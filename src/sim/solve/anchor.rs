@@ -14,7 +14,7 @@
 //! standard errors — the same paired test a fitted row must pass.
 
 use super::crossfit::jackknife_se;
-use super::rms_error::FoldSums;
+use super::rms_error::{FoldSums, total};
 use super::row::{NoiseRow, sample_variance};
 use crate::sim::engines::strategies::PathStrategy;
 
@@ -102,11 +102,7 @@ fn is_prior(strategy: Option<PathStrategy>) -> bool {
 pub(crate) fn paired_ratio(numerator: &FoldSums, denominator: &FoldSums) -> Option<(f64, Option<f64>)> {
     let folds: Vec<usize> =
         numerator.iter().map(|(f, _)| *f).filter(|f| denominator.iter().any(|(g, _)| g == f)).collect();
-    let total = |sums: &FoldSums, left_out: Option<usize>| {
-        sums.iter()
-            .filter(|(f, _)| folds.contains(f) && Some(*f) != left_out)
-            .fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]])
-    };
+    let total = |sums: &FoldSums, left_out: Option<usize>| total(sums, &folds, left_out);
     let variance = |[m, s1, s2]: [f64; 3]| (m >= 2.0).then(|| sample_variance(m, s1, s2));
     let ratio = |left_out: Option<usize>| {
         let den = variance(total(denominator, left_out))?;

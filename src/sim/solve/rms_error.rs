@@ -69,7 +69,7 @@ pub fn references(moments: &Moments) -> Vec<RmsReference> {
 }
 
 /// (M, Σ C, Σ C²) of `sums` over the folds in `folds`, leaving out `left_out`.
-fn total(sums: &FoldSums, folds: &[usize], left_out: Option<usize>) -> [f64; 3] {
+pub(crate) fn total(sums: &FoldSums, folds: &[usize], left_out: Option<usize>) -> [f64; 3] {
     sums.iter()
         .filter(|(f, _)| folds.contains(f) && Some(*f) != left_out)
         .fold([0.0; 3], |t, (_, s)| [t[0] + s[0], t[1] + s[1], t[2] + s[2]])
