@@ -545,12 +545,38 @@ async fn budget_plans_the_ray_budget_as_the_cli_does() {
     }
     let best = plan["best"].as_array().unwrap();
     assert!(best.iter().any(|b| b["speedup"].is_number() && b["speedup_stderr"].is_number()), "{plan}");
+    assert_eq!(plan["costs"]["source"], "given");
+
+    // Issue 42, item 4: with no costs given, the API, the CLI (and the dashboard, whose blank costs
+    // send none: tests/browser/budget.mjs) take the same reference costs and give the same plan;
+    // the CLI times this machine only when asked (--measure-costs).
+    let reply = server.post(&format!("/v1/jobs/{id}/budget"), &json!({ "target_rms": 1.0 })).await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    let api_default = reply.json();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_optimis"))
+        .current_dir(dir.path())
+        .args(["budget", "m.json", "--target-rms", "1", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("measuring"), "no timing unless asked: {out:?}");
+    let cli_default: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["best", "headline", "headline_note", "search", "costs", "recommended", "paper", "points", "fixed_time"]
+    {
+        assert_eq!(api_default[key], cli_default[key], "{key}");
+    }
+    assert_eq!(
+        api_default["costs"],
+        json!({ "light_path": 7.3e-9, "camera_path": 4.1e-6, "iteration": 1.9e-4, "pixels": 1e6, "source": "reference" })
+    );
+    let mixed = server.post(&format!("/v1/jobs/{id}/budget"), &json!({ "target_rms": 1.0, "light_cost": 2e-8 })).await;
+    assert_eq!(mixed.json()["costs"]["source"], "mixed", "{}", mixed.text());
 
     for (body, field) in [
         (json!({ "target_rms": 0, "light_cost": 0, "camera_cost": 0, "iteration_cost": 0 }), "target_rms"),
         (json!({ "target_rms": 1, "light_cost": -1, "camera_cost": 0, "iteration_cost": 0 }), "light_cost"),
         (json!({ "target_rms": 1, "light_cost": 0, "camera_cost": 0, "iteration_cost": 0, "pixels": 0.5 }), "pixels"),
-        (json!({ "target_rms": 1, "light_cost": 0, "camera_cost": 0 }), "iteration_cost"),
+        (json!({ "target_rms": 1, "iteration_cost": 1e7 }), "iteration_cost"),
     ] {
         let problem = assert_problem(server.post(&format!("/v1/jobs/{id}/budget"), &body).await, 422);
         assert_eq!(problem["field"], field, "{problem}");

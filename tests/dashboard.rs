@@ -13,8 +13,16 @@ use crate::common::{TestServer, assert_problem};
 use tokio::process::Command;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
-const SCREENSHOTS: [&str; 6] =
-    ["list.png", "job-running.png", "job-finished.png", "paper-job.png", "compare.png", "sweep.png"];
+const SCREENSHOTS: [&str; 8] = [
+    "list.png",
+    "job-running.png",
+    "job-finished.png",
+    "paper-job.png",
+    "compare.png",
+    "sweep.png",
+    "runs-table.png",
+    "sweep-compare.png",
+];
 /// The README's screenshots, written to `$OPTIMIS_SCREENSHOT_DIR` (e.g. `docs`) when it is set.
 const DOC_SCREENSHOTS: [&str; 2] = ["dashboard-job.png", "dashboard-compare.png"];
 /// Their size limit, to keep the repository small.
@@ -182,6 +190,7 @@ async fn every_dashboard_file_is_served() {
         "plots.js",
         "results.js",
         "solves.js",
+        "specfields.js",
         "sweep.js",
         "sweepdata.js",
         "sweepplots.js",

@@ -61,10 +61,47 @@ async fn the_papers_table_is_served_where_it_applies() {
     // OPTIMIS_REQUIRE_LATEX=1 makes its absence a failure).
     let md = server.get(&format!("/v1/jobs/{paper}/result?format=markdown")).await;
     assert_eq!(md.header("content-type"), Some("text/markdown; charset=utf-8"));
-    assert!(md.text().contains("| `switch` |") && md.text().contains("| 26.352 | 61 |"), "{}", md.text());
+    assert!(md.text().contains("| `switch` |") && md.text().contains("| 26.352 |"), "{}", md.text());
+    // Issue 42, item 8: every row (18 and the in-sample one) fits an article's text width — no
+    // overfull box —, under a caption, the recommended row marked, the paper's figures with z.
     let tex = server.get(&format!("/v1/jobs/{paper}/result?format=latex")).await.text();
-    assert!(tex.contains("optimal\\_cv") && tex.contains("\\end{tabular}"), "{tex}");
+    assert!(
+        tex.contains("optimal\\_\\allowbreak cv") && tex.contains("\\end{tabular}") && tex.contains("\\caption{"),
+        "{tex}"
+    );
+    let recommended =
+        server.result(paper).await["recommended"]["strategy"].as_str().unwrap().replace('_', "\\_\\allowbreak ");
+    assert!(tex.contains(&format!("\\textbf{{{recommended}}}*")), "the recommended row is marked: {tex}");
+    assert!(tex.contains("& $z$ &") && tex.contains("Paper RMS"), "{tex}");
     compiles(&tex);
+    // Chosen rows, in the order given, under one's own caption (escaped); the bare tabular too.
+    let chosen = server
+        .get(&format!(
+            "/v1/jobs/{paper}/result?format=latex&rows=optimal_cv,switch&caption=Paper%20scene%2C%2050%25%20%26%20more"
+        ))
+        .await
+        .text();
+    let names: Vec<&str> = chosen
+        .lines()
+        .filter(|l| l.contains(" & ") && !l.starts_with("Strategy"))
+        .map(|l| l.split(" & ").next().unwrap())
+        .collect();
+    assert_eq!(names.len(), 2, "{chosen}");
+    assert!(names[0].contains("optimal\\_\\allowbreak cv") && names[1].contains("switch"), "{chosen}");
+    assert!(chosen.contains("\\caption{Paper scene, 50\\% \\& more}"), "{chosen}");
+    compiles(&chosen);
+    let bare = server.get(&format!("/v1/jobs/{paper}/result?format=latex&bare=true")).await.text();
+    assert!(!bare.contains("\\begin{table}") && bare.ends_with("\\end{tabular}\n}\n"), "{bare}");
+    compiles(&bare);
+    for (query, field) in [
+        ("format=latex&rows=nonsense", "rows"),
+        ("format=latex&rows=plane1,plane1x", "rows"),
+        ("rows=switch", "rows"),
+        ("format=csv&caption=x", "caption"),
+    ] {
+        let problem = assert_problem(server.get(&format!("/v1/jobs/{paper}/result?{query}")).await, 422);
+        assert_eq!(problem["field"], field, "{query}: {problem}");
+    }
     assert_problem(server.get(&format!("/v1/jobs/{paper}/result?format=latex&table=weights")).await, 422);
 
     // Another illumination: not the paper's figures.
@@ -134,8 +171,10 @@ fn compiles(table: &str) {
         .output();
     match run {
         Ok(out) => {
-            assert!(out.status.success(), "pdflatex refused the table:\n{}", String::from_utf8_lossy(&out.stdout));
+            let log = String::from_utf8_lossy(&out.stdout);
+            assert!(out.status.success(), "pdflatex refused the table:\n{log}");
             assert!(dir.path().join("table.pdf").exists());
+            assert!(!log.contains("Overfull"), "the table overflows the text width:\n{log}");
         }
         Err(e) => {
             assert!(std::env::var("OPTIMIS_REQUIRE_LATEX").is_err(), "pdflatex is required here: {e}");

@@ -34,6 +34,7 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
     ("budgetplan.js", JS, include_bytes!("dashboard/budgetplan.js")),
     ("solves.js", JS, include_bytes!("dashboard/solves.js")),
     ("form.js", JS, include_bytes!("dashboard/form.js")),
+    ("specfields.js", JS, include_bytes!("dashboard/specfields.js")),
     ("list.js", JS, include_bytes!("dashboard/list.js")),
     ("job.js", JS, include_bytes!("dashboard/job.js")),
     ("compare.js", JS, include_bytes!("dashboard/compare.js")),

@@ -23,7 +23,7 @@ use crate::sim::document::MomentsDocument;
 use crate::sim::solve::evaluate::GivenWeights;
 use crate::sim::solve::export::{effective_csv, noise_table_csv, weights_csv};
 use crate::sim::solve::strategy::Strategy;
-use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
+use crate::sim::solve::tables::{TextTable, noise_table_latex, noise_table_markdown, parse_rows};
 use crate::sim::weights::effective::EFFECTIVE_PATHS;
 
 /// Query of a job's result.
@@ -45,6 +45,16 @@ pub struct ResultQuery {
     /// weights, one row per (r2, r3) bin; its weight function itself: `GET /v1/jobs/{id}/weights`).
     #[param(pattern = "^(noise|weights|effective)$")]
     table: Option<String>,
+    /// With `markdown` or `latex`: the rows to show, in this order (`switch,optimal_cv`; default:
+    /// every row). The recommended row is marked either way.
+    #[param(max_length = 1000, pattern = "^[a-z0-9_, ]+$")]
+    rows: Option<String>,
+    /// With `markdown` or `latex`: the caption (default: one that says the units and the marks);
+    /// LaTeX's special characters are escaped.
+    #[param(max_length = 500)]
+    caption: Option<String>,
+    /// With `latex`: the bare `tabular`, without the `table` float and its caption.
+    bare: Option<bool>,
 }
 
 /// Query of a job's history.
@@ -83,6 +93,15 @@ pub async fn result(
         Some(f @ ("markdown" | "latex")) => Some(f.to_string()),
         _ => None,
     };
+    if text.is_none() {
+        let given = [("rows", q.rows.is_some()), ("caption", q.caption.is_some()), ("bare", q.bare.is_some())];
+        if let Some((field, _)) = given.into_iter().find(|(_, given)| *given) {
+            return Err(ApiError::Invalid {
+                field: field.into(),
+                message: "applies to the text tables only (format=markdown or format=latex)".into(),
+            });
+        }
+    }
     let csv = text.is_none() && wants_csv(&headers, q.format.as_deref())?;
     let result = match q.lambda {
         None => state.statistics.result(id).await?,
@@ -96,10 +115,30 @@ pub async fn result(
             });
         }
         let paper = |s: &Strategy| figures(&result.references, s.name());
+        let table = &result.report.noise_table;
+        let rows = match q.rows.as_deref() {
+            Some(list) => Some(
+                parse_rows(list, table)
+                    .map_err(|e| ApiError::Invalid { field: "rows".into(), message: e.to_string() })?,
+            ),
+            None => None,
+        };
+        if let Some(caption) = q.caption.as_deref().filter(|c| c.chars().count() > 500) {
+            return Err(ApiError::Invalid {
+                field: "caption".into(),
+                message: format!("at most 500 characters, got {}", caption.chars().count()),
+            });
+        }
+        let opts = TextTable {
+            rows,
+            recommended: result.report.recommended.as_ref().map(|r| r.strategy),
+            caption: q.caption.clone(),
+            bare: q.bare.unwrap_or(false),
+        };
         let (body, media) = if format == "latex" {
-            (noise_table_latex(&result.report.noise_table, paper), "application/x-latex; charset=utf-8")
+            (noise_table_latex(table, paper, &opts), "application/x-latex; charset=utf-8")
         } else {
-            (noise_table_markdown(&result.report.noise_table, paper), "text/markdown; charset=utf-8")
+            (noise_table_markdown(table, paper, &opts), "text/markdown; charset=utf-8")
         };
         return Ok(([(header::CONTENT_TYPE, HeaderValue::from_static(media))], body).into_response());
     }

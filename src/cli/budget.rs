@@ -1,6 +1,7 @@
 //! `optimis budget`: the ray budget that reaches a target RMS soonest, per strategy, from a moments
-//! document with noise components (`solve::budget`), with per-path costs measured here on the brute
-//! force unless given.
+//! document with noise components (`solve::budget`). A cost not given is the reference's
+//! (`Costs::REFERENCE`), as in the API and the dashboard, so one document and one set of costs give
+//! one plan everywhere; `--measure-costs` times the brute force on this machine instead.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -12,7 +13,7 @@ use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, thread_pool};
 use crate::sim::model::config::Engine;
 use crate::sim::model::params::check;
-use crate::sim::solve::budget::{BestBudget, Costs, SUPPORT_RELATIVE_SE, plan};
+use crate::sim::solve::budget::{BestBudget, BudgetPlan, CostSource, Costs, SUPPORT_RELATIVE_SE, plan};
 use crate::sim::solve::predict::Budget;
 use crate::sim::spec::JobSpec;
 
@@ -23,18 +24,22 @@ pub struct BudgetArgs {
     /// The RMS to reach, in percent.
     #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
     pub target_rms: f64,
-    /// Pixels P of the image the light paths serve.
-    #[arg(long, default_value_t = 1e6, allow_hyphen_values = true)]
-    pub pixels: f64,
-    /// Seconds per light path (default: measured on the brute force here).
+    /// Pixels P of the image the light paths serve (default 10^6).
+    #[arg(long, allow_hyphen_values = true)]
+    pub pixels: Option<f64>,
+    /// Seconds per light path of your renderer (default: the reference's, 7.3e-9, as in the API).
     #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub light_cost: Option<f64>,
-    /// Seconds per camera path and pixel (default: measured on the brute force here).
+    /// Seconds per camera path and pixel (default: the reference's, 4.1e-6, as in the API).
     #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub camera_cost: Option<f64>,
-    /// Seconds per iteration besides the paths (default: measured on the brute force here).
+    /// Seconds per iteration besides the paths (default: the reference's, 1.9e-4, as in the API).
     #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub iteration_cost: Option<f64>,
+    /// Time this crate's brute force on this machine (3 × 20 iterations) for the costs not given,
+    /// instead of taking the reference's: the plan then depends on the machine and the moment.
+    #[arg(long)]
+    pub measure_costs: bool,
     /// Print the plan (every point evaluated) as JSON.
     #[arg(long)]
     pub json: bool,
@@ -67,21 +72,25 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     check(args.target_rms.is_finite() && args.target_rms > 0.0, "--target-rms", || {
         format!("must be a positive percentage, got {}", args.target_rms)
     })?;
-    check(args.pixels.is_finite() && args.pixels >= 1.0, "--pixels", || format!("must be ≥ 1, got {}", args.pixels))?;
     let solver = solver_options(&doc.spec.solver, None)?;
-    let given = [args.light_cost, args.camera_cost, args.iteration_cost];
-    let [t_f, t_b, t_0] = match given {
-        [Some(a), Some(b), Some(c)] => [a, b, c],
-        _ => {
-            eprintln!("measuring the brute force's per-path costs (3 × 20 iterations)…");
-            let m = measure_costs(&doc.spec)?;
-            [given[0].unwrap_or(m[0]), given[1].unwrap_or(m[1]), given[2].unwrap_or(m[2])]
-        }
+    let base = if args.measure_costs {
+        eprintln!("measuring the brute force's per-path costs on this machine (3 × 20 iterations)…");
+        let [light_path, camera_path, iteration] = measure_costs(&doc.spec)?;
+        Costs { light_path, camera_path, iteration, source: CostSource::Measured, ..Costs::REFERENCE }
+    } else {
+        Costs::REFERENCE
     };
-    for (name, v) in [("--light-cost", t_f), ("--camera-cost", t_b), ("--iteration-cost", t_0)] {
-        check(v.is_finite() && v >= 0.0, name, || format!("must be ≥ 0 seconds, got {v}"))?;
+    let costs = base.with_given(args.light_cost, args.camera_cost, args.iteration_cost, args.pixels);
+    check(costs.pixels.is_finite() && (1.0..=1e10).contains(&costs.pixels), "--pixels", || {
+        format!("must be in [1, 10^10], got {}", costs.pixels)
+    })?;
+    for (name, v) in [
+        ("--light-cost", costs.light_path),
+        ("--camera-cost", costs.camera_path),
+        ("--iteration-cost", costs.iteration),
+    ] {
+        check(v.is_finite() && (0.0..=1e6).contains(&v), name, || format!("must be in [0, 10^6] seconds, got {v}"))?;
     }
-    let costs = Costs { light_path: t_f, camera_path: t_b, iteration: t_0, pixels: args.pixels };
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
     let p = plan(&doc.moments, &job.config().cells, &solver, measured, costs, args.target_rms)
         .map_err(|e| CliError::Unusable { path: args.document.clone(), detail: e.to_string() })?;
@@ -91,16 +100,45 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         writeln!(out)?;
         return Ok(());
     }
+    print_header(&mut out, &p, doc.moments.iterations(), measured)?;
+    print_headline(&mut out, &p)?;
+    print_table(&mut out, &p)?;
+    print_fixed_time(&mut out, &p)?;
+    Ok(())
+}
+
+/// Where the costs come from, in words.
+fn cost_source(source: CostSource) -> &'static str {
+    match source {
+        CostSource::Reference => {
+            "the reference costs: this crate's brute force on the paper's scene, 2 cores — give your renderer's with --light-cost, --camera-cost, --iteration-cost"
+        }
+        CostSource::Given => "your costs",
+        CostSource::Mixed => "your costs, the others the reference's",
+        CostSource::Measured => {
+            "measured on this machine now (--measure-costs): another machine or moment plans differently"
+        }
+    }
+}
+
+/// The costs and what was searched.
+fn print_header(out: &mut impl Write, p: &BudgetPlan, iterations: u64, measured: Budget) -> std::io::Result<()> {
+    let c = &p.costs;
     writeln!(
         out,
-        "time to {}% RMS with P = {} pixels, t_F = {:.3e} s per light path, t_B = {:.3e} s per camera path and pixel, t_0 = {:.3e} s per iteration",
-        args.target_rms, args.pixels, t_f, t_b, t_0
+        "time to {}% RMS with P = {} pixels, t_F = {:.3e} s per light path, t_B = {:.3e} s per camera path and pixel, t_0 = {:.3e} s per iteration ({})",
+        p.target_rms_percent,
+        c.pixels,
+        c.light_path,
+        c.camera_path,
+        c.iteration,
+        cost_source(c.source)
     )?;
     let s = &p.search;
     writeln!(
         out,
         "(predicted from {} iterations at N_F = {}, N_B = {}; searched N_F {}–{}, N_B {}–{} in half-decade steps{}; * = at the edge of that range, the optimum may lie beyond; † = no budget of that strategy is supported by this run: its RMS SE is above {:.0}% of the RMS)\n",
-        doc.moments.iterations(),
+        iterations,
         measured.light_paths,
         measured.camera_paths,
         s.light_paths[0],
@@ -109,31 +147,63 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         s.camera_paths[1],
         if s.at_limit { ", widened to the limit of what this run can predict" } else { "" },
         SUPPORT_RELATIVE_SE * 100.0
-    )?;
+    )
+}
+
+/// A speed-up ± SE over the paper's configuration, in words (empty without one).
+fn speed_words(b: &BestBudget) -> String {
+    match (b.speedup, b.speedup_stderr) {
+        (Some(x), Some(se)) => format!("{x:.1} ± {se:.1}× sooner than the paper's switch at (10⁷, 100)"),
+        (Some(x), None) => format!("{x:.1}× sooner than the paper's switch at (10⁷, 100)"),
+        _ => String::new(),
+    }
+}
+
+/// The headlined strategy — named the run's recommendation only when it is — its warnings, and the
+/// fastest ranked strategy when that is another (as the dashboard's card says it).
+fn print_headline(out: &mut impl Write, p: &BudgetPlan) -> std::io::Result<()> {
+    let target = p.target_rms_percent;
     if let Some(h) = p.headline.and_then(|h| p.best.iter().find(|b| b.point.strategy == h)) {
-        let speed = match (h.speedup, h.speedup_stderr) {
-            (Some(x), Some(se)) => format!("{x:.1} ± {se:.1}× sooner than the paper's switch at (10⁷, 100)"),
-            (Some(x), None) => format!("{x:.1}× sooner than the paper's switch at (10⁷, 100)"),
-            _ => String::new(),
-        };
+        let role = if p.recommended == p.headline { "the run's recommendation" } else { "headlined, see the note" };
         let edge = if h.at_edge {
             " (at the edge of what this run can predict: larger budgets may be faster still)"
         } else {
             ""
         };
+        let at = h.point.budget;
         writeln!(
             out,
-            "{} (recommended) at (N_F, N_B) = ({}, {}) reaches {}% {speed}{edge}",
-            h.point.strategy, h.point.budget.light_paths, h.point.budget.camera_paths, args.target_rms
+            "{} ({role}) at (N_F, N_B) = ({}, {}) reaches {target}% {}{edge}",
+            h.point.strategy,
+            at.light_paths,
+            at.camera_paths,
+            speed_words(h)
         )?;
         if let Some(warning) = support_warning(h) {
             writeln!(out, "warning: {warning}")?;
+        }
+        if let Some(fastest) =
+            p.best.iter().find(|b| b.point.respects_fixed).filter(|f| f.point.strategy != h.point.strategy)
+        {
+            let at = fastest.point.budget;
+            writeln!(
+                out,
+                "fastest of the strategies that keep the fixed weights: {} at ({}, {}), {}",
+                fastest.point.strategy,
+                at.light_paths,
+                at.camera_paths,
+                speed_words(fastest)
+            )?;
         }
     }
     if let Some(note) = &p.headline_note {
         writeln!(out, "note: {note}")?;
     }
-    writeln!(out)?;
+    writeln!(out)
+}
+
+/// Every strategy's fastest budget, ranked, and the paper's configuration.
+fn print_table(out: &mut impl Write, p: &BudgetPlan) -> std::io::Result<()> {
     writeln!(
         out,
         "{:<28} {:>12} {:>8} {:>14} {:>12} {:>14} {:>14}",
@@ -177,11 +247,16 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             paper.seconds_to_target
         )?;
     }
+    Ok(())
+}
+
+/// The RMS every ratio N_F/N_B reaches in the paper configuration's time.
+fn print_fixed_time(out: &mut impl Write, p: &BudgetPlan) -> std::io::Result<()> {
     if let Some(f) = &p.fixed_time {
         writeln!(
             out,
             "\nRMS % after T = {:.3e} s (the paper's switch at (10⁷, 100) to {}%), per ratio N_F/N_B at its best budget on the grid (‡ = not one iteration fits in T: extrapolated)\n",
-            f.seconds, args.target_rms
+            f.seconds, p.target_rms_percent
         )?;
         writeln!(out, "{:<28} {:>9} {:>20} {:>12}", "strategy", "N_F/N_B", "best (N_F, N_B)", "RMS % at T")?;
         for c in &f.curve {

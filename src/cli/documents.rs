@@ -19,7 +19,7 @@ use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::solve::report::{ReportInputs, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
-use crate::sim::solve::tables::{noise_table_latex, noise_table_markdown};
+use crate::sim::solve::tables::{TextTable, noise_table_latex, noise_table_markdown, parse_rows};
 use crate::sim::spec::{SpecError, ValidJob};
 
 #[derive(Debug, Args)]
@@ -53,10 +53,19 @@ pub struct ReportArgs {
     /// configuration is the paper's; otherwise say in which fields it differs.
     #[arg(long, conflicts_with = "json")]
     pub paper: bool,
-    /// Print the noise table only, as `markdown` or `latex` (a plain `tabular`, the paper's
-    /// columns where its Table 1 applies), instead of the tables.
+    /// Print the noise table only, as `markdown` or `latex` (a `table` float with a caption, the
+    /// paper's columns and z where its Table 1 applies, the recommended row marked), instead of the tables.
     #[arg(long, value_parser = ["markdown", "latex"], conflicts_with_all = ["json", "paper"])]
     pub format: Option<String>,
+    /// With --format: the rows to show, in this order (e.g. `switch,optimal_cv`; default: every row).
+    #[arg(long, value_name = "STRATEGIES", requires = "format")]
+    pub rows: Option<String>,
+    /// With --format: the table's caption (default: one that says the units and the marks).
+    #[arg(long, value_name = "TEXT", requires = "format")]
+    pub caption: Option<String>,
+    /// With --format latex: the bare `tabular`, without the `table` float and its caption.
+    #[arg(long, requires = "format")]
+    pub bare: bool,
     /// Solver options to change, as JSON (e.g. '{"lambda": 0.1}' or '{"fixed": {"w0": null}}').
     #[arg(long, value_name = "JSON")]
     pub solver: Option<String>,
@@ -191,10 +200,21 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     if let Some(format) = &args.format {
         let published = applicable(&spec);
         let paper = |s: &Strategy| figures(&published, s.name());
+        let table = &report.noise_table;
+        let rows = match args.rows.as_deref() {
+            Some(list) => Some(parse_rows(list, table).map_err(|e| SpecError::new("--rows", e.to_string()))?),
+            None => None,
+        };
+        let opts = TextTable {
+            rows,
+            recommended: report.recommended.as_ref().map(|r| r.strategy),
+            caption: args.caption.clone(),
+            bare: args.bare,
+        };
         let text = if format == "latex" {
-            noise_table_latex(&report.noise_table, paper)
+            noise_table_latex(table, paper, &opts)
         } else {
-            noise_table_markdown(&report.noise_table, paper)
+            noise_table_markdown(table, paper, &opts)
         };
         out.write_all(text.as_bytes())?;
     } else if args.json {

@@ -79,18 +79,22 @@ impl Predictions {
 }
 
 /// The ray budget to plan for: the target noise and the renderer's costs (the client's renderer:
-/// the server does not time one).
+/// the server does not time one). A cost left out is the reference's (`Costs::REFERENCE`, the same
+/// as `optimis budget` and the dashboard take), and the plan's `costs.source` says which were given.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BudgetRequest {
     /// The RMS to reach, in percent (e.g. 1).
     pub target_rms: f64,
-    /// t_F: the renderer's seconds per light path (≥ 0).
-    pub light_cost: f64,
-    /// t_B: seconds per camera path and pixel (≥ 0).
-    pub camera_cost: f64,
-    /// t_0: seconds per iteration besides the paths (≥ 0).
-    pub iteration_cost: f64,
+    /// t_F: the renderer's seconds per light path (≥ 0; default: the reference's, 7.3·10⁻⁹).
+    #[serde(default)]
+    pub light_cost: Option<f64>,
+    /// t_B: seconds per camera path and pixel (≥ 0; default: the reference's, 4.1·10⁻⁶).
+    #[serde(default)]
+    pub camera_cost: Option<f64>,
+    /// t_0: seconds per iteration besides the paths (≥ 0; default: the reference's, 1.9·10⁻⁴).
+    #[serde(default)]
+    pub iteration_cost: Option<f64>,
     /// P: pixels of the image the light paths serve (≥ 1; default 10^6).
     #[serde(default)]
     pub pixels: Option<f64>,
@@ -120,18 +124,21 @@ impl Predictions {
     /// Plans the ray budget that reaches `request.target_rms` soonest, per strategy, from the
     /// job's latest checkpoint (needs noise components); on the heavy pool, nothing stored.
     pub async fn budget(&self, id: i64, request: &BudgetRequest) -> Result<JobBudget, JobError> {
-        let pixels = request.pixels.unwrap_or(1e6);
+        let costs = Costs::REFERENCE.with_given(
+            request.light_cost,
+            request.camera_cost,
+            request.iteration_cost,
+            request.pixels,
+        );
         check(request.target_rms.is_finite() && request.target_rms > 0.0, "target_rms", || {
             format!("must be a positive percentage, got {}", request.target_rms)
         })?;
-        check(pixels.is_finite() && (1.0..=1e10).contains(&pixels), "pixels", || {
-            format!("must be in [1, 10^10], got {pixels}")
+        check(costs.pixels.is_finite() && (1.0..=1e10).contains(&costs.pixels), "pixels", || {
+            format!("must be in [1, 10^10], got {}", costs.pixels)
         })?;
-        for (field, v) in [
-            ("light_cost", request.light_cost),
-            ("camera_cost", request.camera_cost),
-            ("iteration_cost", request.iteration_cost),
-        ] {
+        for (field, v) in
+            [("light_cost", costs.light_path), ("camera_cost", costs.camera_path), ("iteration_cost", costs.iteration)]
+        {
             check(v.is_finite() && (0.0..=1e6).contains(&v), field, || {
                 format!("must be in [0, 10^6] seconds, got {v}")
             })?;
@@ -142,12 +149,6 @@ impl Predictions {
             None => job.spec().solver.clone(),
         };
         let measured = Budget { light_paths: job.spec().light_paths, camera_paths: job.spec().camera_paths };
-        let costs = Costs {
-            light_path: request.light_cost,
-            camera_path: request.camera_cost,
-            iteration: request.iteration_cost,
-            pixels,
-        };
         let target = request.target_rms;
         let plan = self
             .statistics

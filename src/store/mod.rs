@@ -24,11 +24,13 @@ mod sweeps;
 use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::Arc;
+use std::sync::LazyLock;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+use sqlx::SqlStr;
 use sqlx::SqlitePool;
-use sqlx::migrate::Migrator;
+use sqlx::migrate::{Migration, MigrationType, Migrator};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 pub use checkpoints::{Checkpoint, StoredResult};
@@ -38,8 +40,37 @@ pub use solves::SolveRow;
 pub use state::JobState;
 pub use sweeps::SweepRow;
 
-/// The schema migrations, embedded in the binary.
-pub static MIGRATOR: Migrator = sqlx::migrate!("./migrations");
+/// The schema migrations, embedded in the binary: `migrations/NNNN_words.sql`, version NNNN.
+///
+/// Listed here with `include_str!` rather than found by sqlx's `migrate!` macro, which made the
+/// compiler build a second SQLite and sqlx's macro crates for the build machine (issue 42, item 1:
+/// the build time). The checksum is the same SHA-384 of the file's text the macro computed, so
+/// databases it migrated stay valid; a test checks that every file of `migrations/` is here.
+pub static MIGRATOR: LazyLock<Migrator> = LazyLock::new(|| {
+    Migrator::with_migrations(
+        MIGRATIONS
+            .iter()
+            .map(|&(version, description, sql)| {
+                let no_tx = sql.starts_with("-- no-transaction");
+                Migration::new(version, description.into(), MigrationType::Simple, SqlStr::from_static(sql), no_tx)
+            })
+            .collect(),
+    )
+});
+
+/// Every migration: version, description (sqlx's: the file name's words), SQL.
+const MIGRATIONS: [(i64, &str, &str); 10] = [
+    (1, "jobs", include_str!("../../migrations/0001_jobs.sql")),
+    (2, "merged statistics", include_str!("../../migrations/0002_merged_statistics.sql")),
+    (3, "checkpoint history", include_str!("../../migrations/0003_checkpoint_history.sql")),
+    (4, "bounded work", include_str!("../../migrations/0004_bounded_work.sql")),
+    (5, "warnings", include_str!("../../migrations/0005_warnings.sql")),
+    (6, "sweeps", include_str!("../../migrations/0006_sweeps.sql")),
+    (7, "solves", include_str!("../../migrations/0007_solves.sql")),
+    (8, "readiness headroom", include_str!("../../migrations/0008_readiness_headroom.sql")),
+    (9, "provenance", include_str!("../../migrations/0009_provenance.sql")),
+    (10, "result checksum", include_str!("../../migrations/0010_result_checksum.sql")),
+];
 
 /// Database failures.
 #[derive(Debug, thiserror::Error)]
@@ -263,7 +294,27 @@ impl Store {
 
 #[cfg(test)]
 mod tests {
-    use super::{Inserted, NewJob, Store};
+    use super::{Inserted, MIGRATIONS, MIGRATOR, NewJob, Store};
+
+    /// Every file of `migrations/` is embedded, with its version and sqlx's description, and the
+    /// checksum is the SHA-384 of its text that `sqlx::migrate!` stored in databases it migrated.
+    #[test]
+    fn every_migration_file_is_embedded_as_sqlx_would_read_it() {
+        use sha2::Digest;
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("migrations");
+        let mut files: Vec<String> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+        files.sort();
+        assert_eq!(files.len(), MIGRATIONS.len(), "{files:?}");
+        for (file, (migration, embedded)) in files.iter().zip(MIGRATOR.iter().zip(MIGRATIONS)) {
+            let (number, rest) = file.split_once('_').unwrap();
+            let text = std::fs::read_to_string(dir.join(file)).unwrap();
+            assert_eq!(migration.version, number.parse::<i64>().unwrap(), "{file}");
+            assert_eq!(migration.description, rest.trim_end_matches(".sql").replace('_', " "), "{file}");
+            assert_eq!(embedded.2, text, "{file}");
+            assert_eq!(&*migration.checksum, sha2::Sha384::digest(text.as_bytes()).as_slice(), "{file}");
+        }
+    }
 
     fn job(seed: u64) -> NewJob {
         NewJob {

@@ -11,8 +11,9 @@ import { allowedHttpErrors, base, callApi, check, parseWithError, waitFor } from
 import { downloadFrom } from './files.mjs';
 
 const NOISE_JOB = { preset: 'paper-table1', iterations: 1000, noise_components: true };
-// The panel's costs as it fills them in (budget.js): the request the API is asked for beside it.
-const REQUEST = { target_rms: 1, light_cost: 7.3e-9, camera_cost: 4.1e-6, iteration_cost: 1.9e-4, pixels: 1e6 };
+// The panel's fields as it fills them in (budget.js): its costs left blank, the reference's — the
+// request the API is asked for beside it, and the plan `optimis budget` prints by default.
+const REQUEST = { target_rms: 1, pixels: 1e6 };
 
 const SUPERSCRIPT = { '⁻': '-', '⁰': '0', '¹': '1', '²': '2', '³': '3', '⁴': '4', '⁵': '5', '⁶': '6', '⁷': '7', '⁸': '8', '⁹': '9' };
 /** "3.16·10⁸" → 3.16e8, "10⁷" → 1e7, "1,000" → 1000. */
@@ -97,7 +98,10 @@ export async function checkBudget(page, id, plain) {
   check(near(parseScientific(paper.cells.seconds_to_target), plan.paper.seconds_to_target) && paper.cells.speedup === '1×',
     `the paper's switch at (10⁷, 100) closes the table (${paper.cells.seconds_to_target} s to ${REQUEST.target_rms} %)`);
   const search = await panel.locator('[data-ref="budget-search"]').textContent();
-  check(search.includes('half-decade steps') && search.includes('t_F = 7.3·10⁻⁹ s'), `the panel says what was searched and with which costs ("${search.slice(0, 80)}…")`);
+  check(search.includes('half-decade steps') && search.includes('t_F = 7.3·10⁻⁹ s') && search.includes('the reference costs') && plan.costs.source === 'reference',
+    `the panel says what was searched and with which costs, the reference's ("${search.slice(0, 80)}…")`);
+  const placeholder = await panel.locator('input[name="light_cost"]').getAttribute('placeholder');
+  check(placeholder === 'reference 7.3·10⁻⁹', `a blank cost says which reference value it took ("${placeholder}")`);
   const json = await downloadFrom(page, panel.getByRole('button', { name: 'Plan (JSON)' }));
   const saved = JSON.parse(json.bytes.toString('utf8'));
   check(json.name === `optimis-job-${id}-budget.json` && saved.job_id === id && JSON.stringify(saved.best) === JSON.stringify(plan.best),

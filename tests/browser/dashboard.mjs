@@ -16,7 +16,8 @@
 // The steps are in harness.mjs (checks, waiting, the API, charts and their axes), files.mjs
 // (downloads, CSV, PNG, docs/csv.md's columns, the README's screenshots), jobs.mjs (the list, the
 // form, a job followed live), research.mjs (the paper's Table 1, Fig. 2, the compare page),
-// downloads.mjs (a job's CSV, SVG and PNG files), budget.mjs (the ray-budget panel) and sweeps.mjs;
+// downloads.mjs (a job's CSV, SVG and PNG files), budget.mjs (the ray-budget panel), sweeps.mjs and
+// runs.mjs (the runs table's varying columns, the list's state in the URL, a sweep's compare page);
 // this module signs in and runs them in order.
 
 import { mkdir } from 'node:fs/promises';
@@ -35,6 +36,7 @@ import { checkDownloads } from './downloads.mjs';
 import {
   checkCompare, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
 } from './research.mjs';
+import { checkRunsTable } from './runs.mjs';
 import { checkCsv, checkPredictedSweep, checkSweepCancel, checkSweepCharts, checkSweepLinks, checkSweepSummary, openSweep } from './sweeps.mjs';
 
 const OVERALL_TIMEOUT_MS = 240_000;
@@ -85,6 +87,7 @@ async function run(browser) {
   await screenshot(page, 'sweep.png');
   await checkCsv(page, sweep);
   await checkSweepLinks(page, sweep);
+  await checkRunsTable(page, sweep);
   await checkPredictedSweep(page);
   await checkSweepCancel(page);
   await sleep(500); // let late console messages arrive

@@ -224,8 +224,8 @@ export async function checkCompare(page, { spot, uniform }, results) {
   const params = await page.locator('.compare-table tbody.params tr').evaluateAll((trs) => Object.fromEntries(
     trs.map((tr) => [tr.dataset.param, [...tr.querySelectorAll('td')].map((td) => td.textContent)])));
   check(params.preset.join() === 'paper-table1,uniform-illumination' && params.illumination.join() === 'spot a = 0.02,uniform'
-    && params.light_paths.join('|') === '10,000,000|10,000,000' && params.camera_paths.join() === '100,100'
-    && params.merge_radius.join() === '0.003,0.003' && params.iterations.join('|') === '2,000|2,000' && params.seed.join() === '1,1',
+    && params.light_paths.join('|') === '10⁷|10⁷' && params.camera_paths.join() === '100,100'
+    && params.merge_radius.join() === '0.003,0.003' && params.iterations_done.join('|') === '2,000|2,000' && params.seed.join() === '1,1',
   `the compare table heads each job's column with its parameters (${params.illumination.join(' | ')})`);
   const table = await page.locator('.compare-table tbody:not(.params) tr').evaluateAll((trs) => trs.map((tr) => ({
     strategy: tr.dataset.strategy, cells: [...tr.querySelectorAll('td')].map((td) => td.textContent),

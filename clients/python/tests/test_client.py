@@ -362,6 +362,11 @@ def test_predict_and_budget(client: Client) -> None:
     assert any(row["strategy"] == "switch" and row["rms_percent"] for row in prediction["noise_table"])
     plan = client.budget(job["id"], target_rms=1, light_cost=2e-8, camera_cost=1e-7, iteration_cost=0.001)
     assert plan["job_id"] == job["id"] and plan["partial"] is False
+    assert plan["costs"]["source"] == "given"
+    # No costs: the reference's, as `optimis budget` and the dashboard take them.
+    reference = client.budget(job["id"], target_rms=1)
+    assert reference["costs"] == {"light_path": 7.3e-9, "camera_path": 4.1e-6, "iteration": 1.9e-4,
+                                  "pixels": 1e6, "source": "reference"}
     # A job without noise components cannot predict: 409.
     plain = client.submit({**FAST, "seed": 31})
     client.wait(plain["id"], timeout=120)

@@ -17,14 +17,15 @@
 //   noisetable.js the noise table: paper column, case numbers, z, CSV (format, paper)
 //   solves.js     a job's kept solves: selector and keep form         (api, format)
 //   results.js    a job's results: loading, table, charts, downloads  (api, chartfiles, csv, fig2, format, noisetable, paper, plots, solves)
-//   list.js       the job list page, its selection to compare        (api, format, form)
-//   job.js        the job page                                        (api, format, plots, results)
-//   compare.js    the compare page of 2 to 8 jobs                     (api, chartkit, chartfiles, csv, fig2, format, list, plots)
+//   specfields.js a spec's fields, which differ between jobs           (format)
+//   list.js       the job list page (a runs table), selection to compare (api, format, form, specfields)
+//   job.js        the job page                                        (api, format, plots, results, specfields)
+//   compare.js    the compare page of 2 to 8 jobs                     (api, chartkit, chartfiles, csv, fig2, format, list, plots, specfields)
 //   sweepdata.js  a sweep's chart data (no DOM)                       (plots)
 //   sweepplots.js a sweep's charts, with error bars                   (chartkit, format, plots, sweepdata)
 //   sweepw1.js    a sweep's effective w₁ per point, small multiples   (api, axes, chartkit, chartfiles, format, plots, sweepdata)
 //   sweeps.js     the sweep list page                                 (api, format)
-//   sweep.js      the sweep page                                      (api, format, sweepdata, sweepplots, sweepw1)
+//   sweep.js      the sweep page                                      (api, format, list, sweepdata, sweepplots, sweepw1)
 
 import { saveToken, whenUnauthorized } from './api.js';
 import { showCompare } from './compare.js';
@@ -37,19 +38,21 @@ import { showSweeps } from './sweeps.js';
 const app = document.getElementById('app');
 let leavePage = () => {};
 
-// Hash routes: #/jobs/ID, #/compare?ids=1,2,…, #/sweeps, #/sweeps/ID; anything else is the job list.
+// Hash routes: #/jobs/ID, #/compare?ids=1,2,…, #/sweeps, #/sweeps/ID; anything else is the job list
+// (#/?state=…&label=…: its filters, sort and page, list.js).
 function route() {
   leavePage();
   const hash = location.hash;
   const job = /^#\/jobs\/(\d+)$/.exec(hash);
   const compare = /^#\/compare(\?.*)?$/.exec(hash);
   const sweep = /^#\/sweeps\/(\d+)$/.exec(hash);
+  const list = /^#\/(\?.*)?$/.exec(hash);
   if (job) leavePage = showJob(app, Number(job[1]));
   else if (compare) leavePage = showCompare(app, compare[1] ?? '');
   else if (sweep) leavePage = showSweep(app, Number(sweep[1]));
   else if (hash === '#/sweeps') leavePage = showSweeps(app);
-  else leavePage = showList(app);
-  const section = job || compare || /^#\/$|^$/.test(hash) ? 'jobs' : sweep || hash === '#/sweeps' ? 'sweeps' : '';
+  else leavePage = showList(app, list?.[1] ?? '');
+  const section = job || compare || list || hash === '' ? 'jobs' : sweep || hash === '#/sweeps' ? 'sweeps' : '';
   for (const link of document.querySelectorAll('.topnav a[data-nav]')) {
     if (link.dataset.nav === section) link.setAttribute('aria-current', 'page');
     else link.removeAttribute('aria-current');

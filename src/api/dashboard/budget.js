@@ -5,16 +5,18 @@
 // re-fits the weights at every budget of its grid (a fraction of a second to seconds).
 
 import { api, saveBlob } from './api.js';
-import { formatCount, h, showMessage } from './format.js';
+import { formatCount, formatScientific, h, showMessage } from './format.js';
 import { headlineOf, planTable, searchNote } from './budgetplan.js';
 
-// The costs filled in at first: the brute force's on the paper's scene, measured on a 2-core
-// machine (docs/results.md §7, "Ray budget") — placeholders for the user's own renderer's.
+// The target and P filled in at first; the costs left blank take the server's reference costs
+// (the brute force on the paper's scene, 2 cores: docs/results.md §7), as `optimis budget` and the
+// API do — one document and one set of costs give one plan in every front end. The placeholders
+// show the reference's values once a plan has said them.
 const FIELDS = [
   { name: 'target_rms', label: 'Target RMS (%)', value: '1', title: 'The RMS noise of the pixel to reach, in percent' },
-  { name: 'light_cost', label: ['t', h('sub', {}, 'F'), ' (s per light path)'], value: '7.3e-9', title: "Your renderer's seconds per light path" },
-  { name: 'camera_cost', label: ['t', h('sub', {}, 'B'), ' (s per camera path and pixel)'], value: '4.1e-6', title: "Your renderer's seconds per camera path, per pixel" },
-  { name: 'iteration_cost', label: ['t', h('sub', {}, '0'), ' (s per iteration)'], value: '1.9e-4', title: 'Seconds per iteration besides the paths' },
+  { name: 'light_cost', label: ['t', h('sub', {}, 'F'), ' (s per light path)'], value: '', cost: 'light_path', title: "Your renderer's seconds per light path (blank: the reference's)" },
+  { name: 'camera_cost', label: ['t', h('sub', {}, 'B'), ' (s per camera path and pixel)'], value: '', cost: 'camera_path', title: "Your renderer's seconds per camera path, per pixel (blank: the reference's)" },
+  { name: 'iteration_cost', label: ['t', h('sub', {}, '0'), ' (s per iteration)'], value: '', cost: 'iteration', title: "Seconds per iteration besides the paths (blank: the reference's)" },
   { name: 'pixels', label: 'Pixels P', value: '1e6', title: 'Pixels of the image the light paths serve' },
 ];
 
@@ -22,7 +24,7 @@ const FIELDS = [
 export class BudgetPanel {
   constructor(id) {
     Object.assign(this, { id, job: null, plan: null, busy: false });
-    this.inputs = Object.fromEntries(FIELDS.map((f) => [f.name, h('input', { name: f.name, value: f.value, inputmode: 'decimal', autocomplete: 'off', size: 9, title: f.title })]));
+    this.inputs = Object.fromEntries(FIELDS.map((f) => [f.name, h('input', { name: f.name, value: f.value, inputmode: 'decimal', autocomplete: 'off', size: 9, title: f.title, placeholder: f.cost ? 'reference' : null })]));
     this.submit = h('button', { type: 'submit', class: 'primary' }, 'Plan the budget');
     this.error = h('p', { class: 'notice notice-error', id: `budget-error-${id}`, role: 'alert', 'data-ref': 'budget-error', hidden: true });
     this.form = h('form', { class: 'budget-form', novalidate: true, 'data-ref': 'budget-form' },
@@ -35,7 +37,7 @@ export class BudgetPanel {
     });
     this.intro = h('p', { class: 'hint' }, 'The (N', h('sub', {}, 'F'), ', N', h('sub', {}, 'B'), ') that reaches a target RMS soonest, predicted for every strategy from this run\'s noise components, with a renderer whose iteration costs t = t',
       h('sub', {}, 'F'), '·N', h('sub', {}, 'F'), ' + t', h('sub', {}, 'B'), '·N', h('sub', {}, 'B'), '·P + t', h('sub', {}, '0'),
-      ' seconds. Filled in: the brute force\'s costs on the paper\'s scene (2 cores); enter your renderer\'s.');
+      ' seconds. Costs left blank are the reference\'s (this crate\'s brute force on the paper\'s scene, 2 cores), as in optimis budget and the API; enter your renderer\'s.');
     this.unavailable = h('p', { class: 'hint', 'data-ref': 'budget-unavailable', hidden: true },
       'Needs a job run with noise components: submit it with {"noise_components": true} in the extra overrides (N', h('sub', {}, 'F'), ' and N', h('sub', {}, 'B'), ' even).');
     this.result = h('div', { class: 'budget-result', 'data-ref': 'budget-result' });
@@ -63,6 +65,7 @@ export class BudgetPanel {
     const body = {};
     for (const f of FIELDS) {
       const text = this.inputs[f.name].value.trim();
+      if (text === '' && f.cost) continue; // the reference's
       const value = Number(text);
       if (text === '' || !Number.isFinite(value)) {
         const error = new Error(`${f.name}: “${text}” is not a number.`);
@@ -106,6 +109,10 @@ export class BudgetPanel {
 
   show(plan, iterations) {
     this.plan = plan;
+    // A blank cost was the reference's: its placeholder now says which value that is.
+    for (const f of FIELDS.filter((x) => x.cost && this.inputs[x.name].value.trim() === '')) {
+      this.inputs[f.name].placeholder = `reference ${formatScientific(plan.costs[f.cost])}`;
+    }
     const measured = { light_paths: this.job.spec.light_paths, camera_paths: this.job.spec.camera_paths };
     this.result.replaceChildren(...headlineOf(plan, { iterations: formatCount(iterations) }), planTable(plan),
       h('p', { class: 'hint', 'data-ref': 'budget-search' }, searchNote(plan, measured)));

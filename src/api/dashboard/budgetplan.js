@@ -75,10 +75,18 @@ export function headlineOf(plan, { iterations }) {
   return out;
 }
 
+// Where the costs come from, as the plan's `costs.source` says.
+const COST_SOURCES = {
+  reference: "the reference costs: this crate's brute force on the paper's scene, 2 cores — the same in optimis budget and the API",
+  given: 'your costs',
+  mixed: "your costs, the others the reference's",
+  measured: 'measured on the machine that planned',
+};
+
 /** What the plan searched and with which costs, in one line. */
 export function searchNote(plan, measured) {
   const { search: s, costs: c } = plan;
-  return `Predicted from the run at (N_F, N_B) = (${count(measured.light_paths)}, ${count(measured.camera_paths)}); searched N_F ${count(s.light_paths[0])}–${count(s.light_paths[1])}, N_B ${count(s.camera_paths[0])}–${count(s.camera_paths[1])} in half-decade steps${s.at_limit ? ' (widened to the limit of what the run can predict)' : ''}. Time per iteration t = t_F·N_F + t_B·N_B·P + t_0 with t_F = ${formatScientific(c.light_path)} s, t_B = ${formatScientific(c.camera_path)} s, t_0 = ${formatScientific(c.iteration)} s, P = ${formatScientific(c.pixels)} pixels; an iteration at least, (RMS / target)² iterations. RMS and speed-up ± 1 SE (jackknife over the folds; the speed-up's treats both RMS as independent, which overstates it). Only budgets whose RMS is predicted with an SE of at most ${supportPercent(plan)} % of itself are chosen: beyond, the fastest budget would be picked for its noise.`;
+  return `Predicted from the run at (N_F, N_B) = (${count(measured.light_paths)}, ${count(measured.camera_paths)}); searched N_F ${count(s.light_paths[0])}–${count(s.light_paths[1])}, N_B ${count(s.camera_paths[0])}–${count(s.camera_paths[1])} in half-decade steps${s.at_limit ? ' (widened to the limit of what the run can predict)' : ''}. Time per iteration t = t_F·N_F + t_B·N_B·P + t_0 with t_F = ${formatScientific(c.light_path)} s, t_B = ${formatScientific(c.camera_path)} s, t_0 = ${formatScientific(c.iteration)} s (${COST_SOURCES[c.source] ?? c.source}), P = ${formatScientific(c.pixels)} pixels; an iteration at least, (RMS / target)² iterations. RMS and speed-up ± 1 SE (jackknife over the folds; the speed-up's treats both RMS as independent, which overstates it). Only budgets whose RMS is predicted with an SE of at most ${supportPercent(plan)} % of itself are chosen: beyond, the fastest budget would be picked for its noise.`;
 }
 
 /** The table of every strategy's fastest budget, the headline's row marked, then the paper's configuration. */

@@ -20,8 +20,11 @@ import {
 } from './format.js';
 import { MAX_COMPARED } from './list.js';
 import { PlotSlot, binsOf, formatInterval, spotGuide, strategiesIn, weightRange } from './plots.js';
+import { fieldLabel, flattenSpec, formatField, varyingFields } from './specfields.js';
 
 const POLL_MS = 3000;
+// The parameters every comparison shows, varying or not; any other field is shown when it differs.
+const ALWAYS_SHOWN = ['engine', 'light_paths', 'camera_paths', 'merge_radius', 'scene.l2', 'scene.l3', 'scene.beta_deg', 'seed'];
 const JOB_COLORS = ['#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#17becf'];
 
 /** The job ids of `?ids=1,2,…`, or a message saying what is wrong with them. */
@@ -102,19 +105,29 @@ export function showCompare(app, query) {
       shown.map((e, k) => h('th', { scope: 'col', class: 'num', 'data-job': e.id },
         h('span', { class: 'swatch', style: { background: JOB_COLORS[k % JOB_COLORS.length] } }),
         h('a', { href: `#/jobs/${e.id}` }, `#${e.id}`), ' ', badge(e.job.state)))));
-    const param = (key, label, value) => h('tr', { 'data-param': key }, h('th', { scope: 'row' }, label),
-      shown.map((e) => h('td', { class: 'num' }, value(e))));
-    const symbol = (name, sub) => h('var', {}, name, sub ? h('sub', {}, sub) : null);
-    refs.params.replaceChildren(
-      param('preset', 'Preset', (e) => e.job.spec.preset),
-      param('illumination', 'Illumination', (e) => describeLight(e.job.spec.scene.illumination)),
-      param('engine', 'Engine', (e) => e.job.spec.engine || 'brute'),
-      param('light_paths', ['Light paths ', symbol('N', 'F')], (e) => formatCount(e.job.spec.light_paths)),
-      param('camera_paths', ['Camera paths ', symbol('N', 'B')], (e) => formatCount(e.job.spec.camera_paths)),
-      param('merge_radius', ['Merge radius ', symbol('R')], (e) => formatParameter(e.job.spec.merge_radius)),
-      param('iterations', 'Iterations', (e) => (e.result ? `${formatCount(e.result.iterations)}${e.result.partial ? ' (partial)' : ''}` : '—')),
-      param('seed', 'Seed', (e) => String(e.job.spec.seed)),
-      param('reference', 'Reference L·10⁵', (e) => (e.job.reference_luminance === null ? '—' : formatLuminance(e.job.reference_luminance))));
+    // The spec's fields: name and notes, the key parameters always, then every other field that
+    // differs between the jobs (specfields.js); a row whose value differs is marked `varying`.
+    const specs = shown.map((e) => e.job.spec);
+    const varying = new Set(varyingFields(specs));
+    const flat = specs.map(flattenSpec);
+    const param = (key, label, value, differs = varying.has(key), cell = 'num') => h('tr',
+      { 'data-param': key, class: differs ? 'varying' : null, title: differs ? 'Differs between these jobs' : null },
+      h('th', { scope: 'row' }, label), shown.map((e, k) => h('td', { class: cell }, value(e, k))));
+    const field = (path) => param(path, fieldLabel(path), (e, k) => formatField(path, flat[k].get(path)));
+    const text = (key) => (e) => e.job.spec[key] ?? '—';
+    const differ = (key) => new Set(specs.map((s) => s[key] ?? '')).size > 1;
+    refs.params.replaceChildren(...[
+      // Names and notes are prose: they wrap in their column rather than widen the table.
+      param('name', 'Name', text('name'), differ('name'), 'prose'),
+      specs.some((s) => s.notes) ? param('notes', 'Notes', text('notes'), differ('notes'), 'prose') : null,
+      field('preset'),
+      param('illumination', 'Illumination', (e) => describeLight(e.job.spec.scene.illumination),
+        [...varying].some((p) => p.startsWith('scene.illumination'))),
+      ...ALWAYS_SHOWN.map(field),
+      ...[...varying].filter((p) => !ALWAYS_SHOWN.includes(p) && p !== 'preset' && !p.startsWith('scene.illumination')).map(field),
+      param('iterations_done', 'Iterations done', (e) => (e.result ? `${formatCount(e.result.iterations)}${e.result.partial ? ' (partial)' : ''}` : '—'), false),
+      param('reference', 'Reference L·10⁵', (e) => (e.job.reference_luminance === null ? '—' : formatLuminance(e.job.reference_luminance)), false),
+    ].filter(Boolean));
     const strategies = strategiesIn(shown.map((e) => e.result?.noise_table ?? []));
     refs.rows.replaceChildren(...strategies.map((s) => h('tr', { 'data-strategy': s },
       h('th', { scope: 'row' }, h('code', {}, s)),

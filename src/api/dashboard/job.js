@@ -9,6 +9,7 @@ import {
 import { BudgetPanel } from './budget.js';
 import { PlotSlot } from './plots.js';
 import { ResultsLoader } from './results.js';
+import { byField, fieldLabel, flattenSpec, formatField } from './specfields.js';
 
 const RETRY_MS = 3000;
 
@@ -157,25 +158,30 @@ function renderStats(refs, job) {
   refs.updated.textContent = formatTime(job.updated_at);
 }
 
+// Every field of the spec (specfields.js), the paper's first — L₂ and L₃ too — under the job's
+// name, notes and labels: what a reader comparing runs of a sweep needs to tell them apart.
 function renderSpec(dl, job) {
   const spec = job.spec;
-  const rows = [
-    ['Preset', spec.preset],
-    ['Engine', spec.engine || 'brute'],
-    [['Light paths ', symbol('N', 'F')], formatCount(spec.light_paths)],
-    [['Camera paths ', symbol('N', 'B')], formatCount(spec.camera_paths)],
-    [['Merge radius ', symbol('R')], formatParameter(spec.merge_radius)],
-    [['Lobe width ', symbol('β')], `${formatParameter(spec.scene.beta_deg)}°`],
-    [['Iterations ', symbol('M')], formatCount(spec.iterations)],
-    ['Seed', String(spec.seed)],
-    ['Illumination', describeIllumination(spec.scene.illumination)],
-    ['Cells (r₂ × r₃ × φ)', `${spec.cells.r2_edges.length} × ${spec.cells.r3_edges.length} × ${spec.cells.phi_bins}`],
-    [['Gradient penalty ', symbol('λ')], formatParameter(spec.solver.lambda)],
-  ];
-  if (spec.shard) rows.push(['Shard', `${spec.shard.index + 1} of ${spec.shard.count}`]);
-  if (spec.first_iteration !== undefined) rows.push(['First iteration', formatCount(spec.first_iteration)]);
-  if (job.merged) rows.push(['Merged', 'yes: the moments of several jobs added together']);
-  dl.replaceChildren(...rows.map(([term, value]) => h('div', {}, h('dt', {}, term), h('dd', {}, value))));
+  const rows = [];
+  if (spec.name) rows.push(['Name', spec.name, 'name']);
+  if (spec.notes) rows.push(['Notes', spec.notes, 'notes']);
+  const labels = Object.entries(spec.labels ?? {});
+  if (labels.length) rows.push(['Labels', labels.map(([k, v]) => `${k}=${v}`).join(', '), 'labels']);
+  const flat = flattenSpec(spec);
+  let illumination = false;
+  for (const path of [...flat.keys()].sort(byField)) {
+    if (path.startsWith('scene.illumination.')) {
+      // One row in words (`spot: a = 0.02, r_ls = 0.1, contrast 10`), where the first of its fields sorts.
+      if (!illumination) rows.push(['Illumination', describeIllumination(spec.scene.illumination), 'scene.illumination']);
+      illumination = true;
+    } else if (path.startsWith('shard.')) {
+      if (path === 'shard.index') rows.push(['Shard', `${spec.shard.index + 1} of ${spec.shard.count}`, 'shard']);
+    } else {
+      rows.push([fieldLabel(path), path === 'cells' ? `${formatField(path, flat.get(path))} (r₂ × r₃ × φ)` : formatField(path, flat.get(path)), path]);
+    }
+  }
+  if (job.merged) rows.push(['Merged', 'yes: the moments of several jobs added together', 'merged']);
+  dl.replaceChildren(...rows.map(([term, value, path]) => h('div', { 'data-field': path }, h('dt', {}, term), h('dd', {}, value))));
 }
 
 /** The job's cluster tasks (`execution`, on a server with --executor slurm), while it runs. */
@@ -190,11 +196,6 @@ function renderTasks(refs, job) {
     h('td', {}, t.slurm_job_id || '—'),
     h('td', {}, String(t.attempts)),
     h('td', {}, h('code', {}, t.log)))));
-}
-
-/** A variable of the paper, such as N_F, in italics with its subscript. */
-function symbol(name, subscript) {
-  return h('var', {}, name, subscript ? h('sub', {}, subscript) : null);
 }
 
 function describeIllumination(ill) {

@@ -1,14 +1,19 @@
-// The job list page: one page of jobs (with each one's name and labels, engine, N_F, N_B, seed, and
-// whether it is a shard, a merge or a run of a sweep — a sweep's runs are named after their swept
-// values), polled, with the first running ones streamed live, the state and label filters (a
-// label chip filters by itself) and paging, the selection of jobs to compare (#/compare?ids=…), and the submit form (form.js).
+// The job list page, a runs table: one page of jobs (with each one's name and labels, and whether
+// it is a shard, a merge or a run of a sweep), its state and progress, and its parameters as
+// sortable columns — engine, N_F, N_B and seed always, and every other spec field that differs
+// between the jobs of the page (specfields.js), W&B style; polled, with the first running ones
+// streamed live. The state, label and sweep filters, the sort and the page are in the URL
+// (#/?state=…&label=…&sweep=…&sort=…&order=…&cursor=…), so a filtered view survives a reload and
+// can be shared. A label chip filters by itself; the selection of jobs to compare
+// (#/compare?ids=…); the submit form (form.js).
 
 import { TERMINAL, api, streamJob } from './api.js';
 import {
-  badge, describeBest, formatCount, formatDuration, formatParameter, formatRate, formatShortTime, formatTime, h, instantiate,
+  badge, describeBest, formatDuration, formatRate, formatRms, formatShortTime, formatTime, h, instantiate,
   isNewer, progressBar, showMessage, updateProgress,
 } from './format.js';
 import { setupSubmitForm } from './form.js';
+import { compareValues, fieldLabel, fieldText, flattenSpec, formatField, varyingFields } from './specfields.js';
 
 const PAGE_SIZE = 25;
 const LIST_POLL_MS = 3000;
@@ -17,15 +22,50 @@ const LIST_POLL_MS = 3000;
 const MAX_LIST_STREAMS = 2;
 // The compare page shows 2 to this many jobs side by side.
 export const MAX_COMPARED = 8;
+// Always columns (today's list); the fields that vary on the page come after them.
+const ALWAYS = ['engine', 'light_paths', 'camera_paths', 'seed'];
+// Beyond this many varying fields the rest are named in the caption, not given a column.
+const MAX_VARYING_COLUMNS = 6;
+// The sortable columns that are not spec fields.
+const OTHER_SORTS = { created: (job) => job.created_at, state: (job) => job.state, id: (job) => job.id };
 
-// Kept across page changes so that coming back from a job shows the same page of the list.
-const listView = { filter: '', label: '', cursors: [null], selected: new Set() };
+/** A parameter column's classes: numbers right-aligned, the varying ones marked. */
+const columnClass = (path) => [path === 'engine' ? '' : 'num', ALWAYS.includes(path) ? '' : 'varying'].filter(Boolean).join(' ') || null;
 
-/** Shows the list in `app` (the page's #app element); returns what leaving the page does. */
-export function showList(app) {
+// The jobs ticked for comparison, kept across pages and filters of the list.
+const selected = new Set();
+
+/** The list's state from the hash's query (`#/?state=running&label=k=v`), checked; unknowns dropped. */
+export function parseListQuery(query) {
+  const params = new URLSearchParams(query);
+  const view = { state: '', label: '', sweep: '', sort: '', order: 'asc', cursors: [null] };
+  const state = params.get('state') ?? '';
+  if (['queued', 'running', 'succeeded', 'failed', 'cancelled'].includes(state)) view.state = state;
+  view.label = (params.get('label') ?? '').trim().slice(0, 300);
+  if (/^[1-9]\d{0,18}$/.test(params.get('sweep') ?? '')) view.sweep = params.get('sweep');
+  if (/^[A-Za-z0-9_.]{1,80}$/.test(params.get('sort') ?? '')) view.sort = params.get('sort');
+  if (params.get('order') === 'desc') view.order = 'desc';
+  if (/^[1-9]\d{0,18}$/.test(params.get('cursor') ?? '')) view.cursors.push(params.get('cursor'));
+  return view;
+}
+
+/** The hash that shows `view` (what the address bar and the Jobs link hold). */
+export function listHash(view) {
+  const params = new URLSearchParams();
+  for (const key of ['state', 'label', 'sweep', 'sort']) if (view[key]) params.set(key, view[key]);
+  if (view.sort && view.order === 'desc') params.set('order', 'desc');
+  const cursor = view.cursors.at(-1);
+  if (cursor) params.set('cursor', cursor);
+  const query = params.toString();
+  return query ? `#/?${query}` : '#/';
+}
+
+/** Shows the list in `app` (the page's #app element) in the state of `query`; returns what leaving the page does. */
+export function showList(app, query = '') {
   const { fragment, refs } = instantiate('tpl-list');
   app.replaceChildren(fragment);
   document.title = 'Jobs · optimis';
+  const listView = parseListQuery(query);
 
   const streams = new Map(); // job id → close()
   let jobs = [];
@@ -33,13 +73,25 @@ export function showList(app) {
   let pollTimer = null;
   let requestSeq = 0;
   let alive = true;
+  let columns = []; // the spec fields shown, in order
+  let columnsKey = '';
+
+  // The address bar follows the view without a page change (replaceState fires no hashchange);
+  // the Jobs link of the top bar comes back to it.
+  function remember() {
+    const hash = listHash(listView);
+    if (location.hash !== hash && !(hash === '#/' && location.hash === '')) history.replaceState(null, '', hash);
+    document.querySelector('.topnav a[data-nav="jobs"]')?.setAttribute('href', hash);
+  }
 
   async function load() {
     clearTimeout(pollTimer);
+    remember();
     const seq = ++requestSeq;
     const params = new URLSearchParams({ limit: PAGE_SIZE });
-    if (listView.filter) params.set('state', listView.filter);
+    if (listView.state) params.set('state', listView.state);
     if (listView.label) params.set('label', listView.label);
+    if (listView.sweep) params.set('sweep', listView.sweep);
     const cursor = listView.cursors.at(-1);
     if (cursor) params.set('cursor', cursor);
     try {
@@ -63,6 +115,7 @@ export function showList(app) {
   }
 
   function render() {
+    chooseColumns();
     renderRows();
     const first = listView.cursors.length === 1;
     refs.table.hidden = jobs.length === 0;
@@ -75,49 +128,94 @@ export function showList(app) {
 
   function emptyText(firstPage) {
     if (!firstPage) return 'No more jobs on this page.';
-    const which = [listView.filter, listView.label ? `labelled ${listView.label}` : ''].filter(Boolean).join(' ');
+    const which = [listView.state, listView.label ? `labelled ${listView.label}` : '', listView.sweep ? `of sweep ${listView.sweep}` : '']
+      .filter(Boolean).join(' ');
     return which ? `No ${which} jobs.` : 'No jobs yet. Submit one with the form.';
+  }
+
+  // The columns: the always ones, then the fields that differ on this page; the header is rebuilt
+  // (and the rows with it) only when they change.
+  function chooseColumns() {
+    const varying = varyingFields(jobs.map((j) => j.spec)).filter((p) => !ALWAYS.includes(p));
+    const shown = varying.slice(0, MAX_VARYING_COLUMNS);
+    const key = JSON.stringify([shown, listView.sort, listView.order]);
+    refs['varying-note'].textContent = varying.length === 0 ? ''
+      : `Differing on this page: ${varying.map(fieldText).join(', ')}${varying.length > shown.length
+        ? ` (the first ${shown.length} as columns)` : ''}.`;
+    if (key === columnsKey) return;
+    columnsKey = key;
+    columns = [...ALWAYS, ...shown];
+    const sortable = (sortKey, label, numeric, extra = {}) => {
+      const active = listView.sort === sortKey;
+      const arrow = active ? (listView.order === 'desc' ? ' ▼' : ' ▲') : '';
+      return h('th', { scope: 'col', class: numeric ? 'num' : null, 'aria-sort': active ? (listView.order === 'desc' ? 'descending' : 'ascending') : null, ...extra },
+        h('button', { type: 'button', class: 'sort', 'data-sort': sortKey, title: `Sort this page by ${typeof label === 'string' ? label : fieldText(sortKey)}` }, label, arrow));
+    };
+    refs.head.replaceChildren(h('tr', {},
+      h('th', { scope: 'col', class: 'col-pick' }, h('span', { class: 'visually-hidden' }, 'Compare')),
+      sortable('id', 'Job', false),
+      sortable('state', 'State', false),
+      h('th', { scope: 'col', class: 'col-progress' }, 'Progress (iterations)'),
+      columns.map((path) => sortable(path, fieldLabel(path), path !== 'engine',
+        { 'data-col': path, class: columnClass(path) })),
+      h('th', { scope: 'col', class: 'num' }, 'Rate · ETA'),
+      h('th', { scope: 'col' }, 'Best (RMS %)'),
+      sortable('created', 'Created', false)));
+    refs.rows.replaceChildren(); // rows are rebuilt with the new columns
+  }
+
+  function sorted() {
+    if (!listView.sort) return jobs;
+    const other = OTHER_SORTS[listView.sort];
+    const value = other ?? ((job) => flattenSpec(job.spec).get(listView.sort));
+    const sign = listView.order === 'desc' ? -1 : 1;
+    return [...jobs].sort((a, b) => sign * compareValues(value(a), value(b)) || b.id - a.id);
   }
 
   // Rows are updated in place, and moved only when the order changes: a row taken out of the
   // page loses the keyboard focus, and every poll would otherwise do that.
   function renderRows() {
     const shown = new Map([...refs.rows.rows].map((tr) => [Number(tr.dataset.job), tr]));
-    const rows = jobs.map((job) => fillRow(shown.get(job.id) ?? jobRow(job), job));
+    const rows = sorted().map((job) => fillRow(shown.get(job.id) ?? jobRow(job), job));
     const sameOrder = rows.length === refs.rows.rows.length && rows.every((tr, i) => refs.rows.rows[i] === tr);
     if (!sameOrder) refs.rows.replaceChildren(...rows);
   }
 
   function jobRow(job) {
     const { spec } = job;
+    const flat = flattenSpec(spec);
     const pick = h('input', { type: 'checkbox', name: 'compare', value: job.id, 'aria-label': `Compare job ${job.id}` });
-    pick.checked = listView.selected.has(job.id);
+    pick.checked = selected.has(job.id);
     return h('tr', { 'data-job': job.id },
       h('td', { class: 'col-pick' }, pick),
       h('td', { class: 'col-job' }, h('a', { href: `#/jobs/${job.id}` }, `#${job.id}`),
         spec.name ? h('span', { class: 'job-name', 'data-col': 'name', title: spec.notes ?? spec.name }, spec.name) : null,
         h('span', { class: 'sub' }, describeKind(job)),
         labelChips(spec.labels)),
-      h('td'),
-      h('td', { class: 'col-progress' }, progressBar()),
-      h('td', { 'data-col': 'engine' }, spec.engine || 'brute'),
-      h('td', { class: 'num', 'data-col': 'light_paths' }, formatSize(spec.light_paths)),
-      h('td', { class: 'num', 'data-col': 'camera_paths' }, formatSize(spec.camera_paths)),
-      h('td', { class: 'num', 'data-col': 'seed' }, String(spec.seed)),
-      h('td', { class: 'num' }),
-      h('td', { class: 'num' }),
-      h('td'),
-      h('td', { title: formatTime(job.created_at) }, formatShortTime(job.created_at)));
+      h('td', { 'data-cell': 'state' }),
+      h('td', { class: 'col-progress', 'data-cell': 'progress' }, progressBar()),
+      columns.map((path) => h('td', { class: columnClass(path), 'data-col': path }, formatField(path, flat.get(path)))),
+      h('td', { class: 'num', 'data-cell': 'rate' }),
+      h('td', { 'data-cell': 'best', class: 'col-best' }),
+      h('td', { title: formatTime(job.created_at), class: 'col-created' }, formatShortTime(job.created_at)));
   }
 
   function fillRow(tr, job) {
-    const [, , state, progress, , , , , rate, eta, best] = tr.cells;
+    const cell = (name) => tr.querySelector(`td[data-cell="${name}"]`);
     const running = job.state === 'running';
+    const state = cell('state');
     if (state.textContent !== job.state) state.replaceChildren(badge(job.state));
-    updateProgress(progress.firstChild, job);
-    rate.textContent = running ? formatRate(job.progress.light_paths_per_second) : '—';
-    eta.textContent = running ? formatDuration(job.progress.eta_seconds) : '—';
-    best.textContent = describeBest(job.progress.best);
+    updateProgress(cell('progress').firstChild, job);
+    cell('rate').textContent = running
+      ? `${formatRate(job.progress.light_paths_per_second)}/s · ${formatDuration(job.progress.eta_seconds)}` : '—';
+    const best = job.progress.best;
+    const text = describeBest(best);
+    if (cell('best').title !== text) {
+      // The strategy's name may break after an underscore; its RMS on the line below.
+      cell('best').title = text;
+      cell('best').replaceChildren(...(best ? [h('code', {}, best.strategy.split('_').flatMap((w, i) => (i ? [h('wbr'), `_${w}`] : [w]))),
+        h('br'), `${formatRms(best.rms_percent)} %`] : ['—']));
+    }
     return tr;
   }
 
@@ -151,21 +249,45 @@ export function showList(app) {
     }
   }
 
-  refs.filter.value = listView.filter;
-  refs.filter.addEventListener('change', () => {
-    listView.filter = refs.filter.value;
+  const restart = () => {
     listView.cursors = [null];
     load();
+  };
+  refs.filter.value = listView.state;
+  refs.filter.addEventListener('change', () => {
+    listView.state = refs.filter.value;
+    restart();
   });
   // The label filter: KEY=VALUE as typed (the server says if it is not one), or a chip clicked.
   const filterByLabel = (label) => {
     listView.label = label.trim();
     refs['label-filter'].value = listView.label;
-    listView.cursors = [null];
-    load();
+    restart();
   };
   refs['label-filter'].value = listView.label;
   refs['label-filter'].addEventListener('change', () => filterByLabel(refs['label-filter'].value));
+  // The sweep filter comes from a sweep page's link; it shows as a chip that removes it.
+  const renderSweepFilter = () => {
+    refs['sweep-filter'].hidden = !listView.sweep;
+    refs['sweep-filter'].textContent = listView.sweep ? `sweep ${listView.sweep} ✕` : '';
+  };
+  renderSweepFilter();
+  refs['sweep-filter'].addEventListener('click', () => {
+    listView.sweep = '';
+    renderSweepFilter();
+    restart();
+  });
+  refs.head.addEventListener('click', (event) => {
+    const button = event.target.closest('button[data-sort]');
+    if (!button) return;
+    // Ascending, descending, then the server's order (newest first) again.
+    const key = button.dataset.sort;
+    if (listView.sort !== key) [listView.sort, listView.order] = [key, 'asc'];
+    else if (listView.order === 'asc') listView.order = 'desc';
+    else [listView.sort, listView.order] = ['', 'asc'];
+    remember();
+    render();
+  });
   refs.rows.addEventListener('click', (event) => {
     const chip = event.target.closest('button.label-chip');
     if (chip) filterByLabel(chip.dataset.label);
@@ -186,22 +308,22 @@ export function showList(app) {
   refs.rows.addEventListener('change', (event) => {
     if (event.target.name !== 'compare') return;
     const id = Number(event.target.value);
-    if (event.target.checked) listView.selected.add(id);
-    else listView.selected.delete(id);
+    if (event.target.checked) selected.add(id);
+    else selected.delete(id);
     renderCompare();
   });
   refs.compare.addEventListener('click', () => {
-    location.hash = `#/compare?ids=${[...listView.selected].sort((a, b) => a - b).join(',')}`;
+    location.hash = `#/compare?ids=${[...selected].sort((a, b) => a - b).join(',')}`;
   });
   refs['compare-clear'].addEventListener('click', () => {
-    listView.selected.clear();
+    selected.clear();
     for (const box of refs.rows.querySelectorAll('input[name="compare"]')) box.checked = false;
     renderCompare();
   });
 
   /** The Compare button: enabled for 2 to MAX_COMPARED selected jobs (kept across pages). */
   function renderCompare() {
-    const n = listView.selected.size;
+    const n = selected.size;
     refs.compare.disabled = n < 2 || n > MAX_COMPARED;
     refs.compare.textContent = `Compare${n ? ` (${n})` : ''}`;
     refs['compare-clear'].hidden = n === 0;
@@ -217,11 +339,6 @@ export function showList(app) {
     clearTimeout(pollTimer);
     for (const close of streams.values()) close();
   };
-}
-
-/** A whole number, powers of ten as 10ⁿ: 10⁷ light paths, 100 camera paths. */
-function formatSize(n) {
-  return Number.isInteger(Math.log10(n)) && n >= 1000 ? formatParameter(n) : formatCount(n);
 }
 
 /** A job's labels as chips; clicking one lists the jobs with that label. */

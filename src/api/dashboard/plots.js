@@ -21,14 +21,22 @@ export const STRATEGIES = [
   'power_corrected', 'correlation_aware_corrected', 'balance_planes23_corrected', 'power_planes23_corrected',
   'correlation_aware_planes23_corrected',
 ];
-// A heuristic's variants take darker shades of its colour; the stacked optimum is navy.
-const STRATEGY_COLORS = {
+// Eleven distinct hues, one per family: a heuristic's variants keep its hue and are told apart by
+// their dash — over planes 2–3 dashed, corrected by a table dotted, both dash-dotted — so that the
+// 21 lines of a chart stay distinguishable (issue 42, item 7: shades of grey were not).
+const FAMILY_COLORS = {
   plane1: '#8c564b', plane2: '#1f77b4', plane3: '#2ca02c', switch: '#9467bd', optimal: '#d62728',
-  optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', balance: '#17becf', power: '#7f7f7f', correlation_aware: '#bcbd22',
-  balance_planes23: '#0f8c99', power_planes23: '#525252', correlation_aware_planes23: '#8a8b10', optimal_stacked: '#1a237e',
-  switch_corrected: '#5e3c99', balance_corrected: '#0b6670', power_corrected: '#3a3a3a', correlation_aware_corrected: '#6b6c0a',
-  balance_planes23_corrected: '#08525a', power_planes23_corrected: '#262626', correlation_aware_planes23_corrected: '#4f500a',
+  optimal_holdout: '#ff7f0e', optimal_cv: '#e377c2', optimal_stacked: '#1a237e', balance: '#17becf', power: '#7f7f7f',
+  correlation_aware: '#bcbd22',
 };
+const familyOf = (strategy) => strategy.replace(/_corrected$/, '').replace(/_planes23$/, '');
+const STRATEGY_COLORS = Object.fromEntries(STRATEGIES.map((s) => [s, FAMILY_COLORS[familyOf(s)]]));
+/** The dash of a strategy's line: [] solid, dashed over planes 2–3, dotted corrected, dash-dotted both. */
+export function strategyDash(strategy) {
+  const planes = /_planes23(_corrected)?$/.test(strategy);
+  const corrected = strategy.endsWith('_corrected');
+  return planes && corrected ? [8, 3, 2, 3] : planes ? [8, 4] : corrected ? [2, 3] : [];
+}
 export const strategyColor = (strategy) => STRATEGY_COLORS[strategy] ?? '#444';
 
 /**
@@ -213,7 +221,7 @@ export function drawLuminance(slot, note, points, reference, recommended) {
     });
     const k = slot.bands.length - 1;
     series.push({
-      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), width: 2,
+      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2,
       show: shown.has(strategy), points: { show: points.length < 40, size: 4 },
       value: legendValue((v, i) => {
         const band = slot.bands[k];
@@ -247,7 +255,7 @@ export function drawHistory(slot, note, points) {
       return rms > 0 ? rms : null;
     }));
     series.push({
-      label: strategy, stroke: strategyColor(strategy), width: 2, points: { show: points.length < 40, size: 4 },
+      label: strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2, points: { show: points.length < 40, size: 4 },
       value: legendValue((v) => `${formatRms(v)} %`),
     });
   }

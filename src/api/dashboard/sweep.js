@@ -1,11 +1,13 @@
 // The sweep page: one sweep, polled while it runs — its progress (runs by state, iterations), its
 // specification, the table of its points with their jobs, the CSV download, cancel, and the charts
-// (sweepplots.js, sweepw1.js) with their SVG/PNG downloads.
+// (sweepplots.js, sweepw1.js) with their SVG/PNG downloads; links to its runs in the job list
+// (#/?sweep=ID, their varying fields as columns) and to the compare page of its runs.
 
 import { TERMINAL, api, download, hasToken } from './api.js';
 import {
   badge, formatCount, formatParameter, formatRms, formatTime, h, instantiate, showMessage, updateProgress, withError,
 } from './format.js';
+import { MAX_COMPARED } from './list.js';
 import { describeValue } from './sweepdata.js';
 import { RmsChart } from './sweepplots.js';
 import { W1Grid } from './sweepw1.js';
@@ -59,6 +61,7 @@ export function showSweep(app, id) {
     updateProgress(refs.progress, sweep);
     renderRuns(refs, sweep);
     refs.cancel.hidden = !running;
+    renderRunLinks(refs, sweep);
     if (!rows) {
       renderSpec(refs.spec, sweep);
       rows = makePointRows(refs, sweep);
@@ -98,6 +101,14 @@ export function showSweep(app, id) {
     w1.destroy();
     for (const chart of charts ?? []) chart.destroy();
   };
+}
+
+/** Its runs in the job list (their varying fields as columns), and side by side when 2 to 8. */
+function renderRunLinks(refs, sweep) {
+  refs['runs-link'].href = `#/?sweep=${sweep.id}`;
+  const jobs = [...new Set(sweep.points.map((p) => p.job_id).filter((j) => j !== null && j !== undefined))].sort((a, b) => a - b);
+  refs['compare-link'].hidden = jobs.length < 2 || jobs.length > MAX_COMPARED;
+  refs['compare-link'].href = `#/compare?ids=${jobs.join(',')}`;
 }
 
 function renderRuns(refs, sweep) {

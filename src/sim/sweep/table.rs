@@ -170,8 +170,10 @@ pub struct SweepRow {
     pub light_paths: u64,
     /// N_B of the point.
     pub camera_paths: u64,
-    /// Iterations behind the figures (fewer than the point's `iterations` while its run is partial).
-    pub iterations_done: u64,
+    /// Iterations behind the figures (fewer than the point's planned iterations while its run is
+    /// partial) — the CSV's `iterations` column, by the same name (`iterations_done` is read too).
+    #[serde(alias = "iterations_done")]
+    pub iterations: u64,
     /// True until the point's run has succeeded with all its iterations.
     pub partial: bool,
     /// The noise-table row's strategy.
@@ -248,7 +250,7 @@ impl SweepTable {
                     source: f.source,
                     light_paths: f.budget.light_paths,
                     camera_paths: f.budget.camera_paths,
-                    iterations_done: f.iterations,
+                    iterations: f.iterations,
                     partial: f.partial,
                     strategy: r.strategy,
                     luminance: r.luminance,
@@ -277,7 +279,7 @@ impl SweepTable {
                 json_cell(&r.source),
                 r.light_paths.to_string(),
                 r.camera_paths.to_string(),
-                r.iterations_done.to_string(),
+                r.iterations.to_string(),
                 r.partial.to_string(),
                 json_cell(&r.strategy),
                 number(r.luminance),

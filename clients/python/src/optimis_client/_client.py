@@ -738,24 +738,23 @@ class Client:
         id: int,
         *,
         target_rms: float,
-        light_cost: float,
-        camera_cost: float,
-        iteration_cost: float,
+        light_cost: Optional[float] = None,
+        camera_cost: Optional[float] = None,
+        iteration_cost: Optional[float] = None,
         pixels: float = 1e6,
         solver: Optional[Mapping[str, Any]] = None,
     ) -> Json:
         """The ray budget (N_F, N_B) that reaches `target_rms` (percent) soonest, per strategy
         (``POST /v1/jobs/{id}/budget``), for a renderer costing `light_cost` s per light path,
         `camera_cost` s per camera path and pixel and `iteration_cost` s per iteration, over
-        `pixels` pixels. Each speed-up over the paper's configuration has a standard error. Needs a
-        job run with ``"noise_components": true``."""
-        body: Json = {
-            "target_rms": target_rms,
-            "light_cost": light_cost,
-            "camera_cost": camera_cost,
-            "iteration_cost": iteration_cost,
-            "pixels": pixels,
-        }
+        `pixels` pixels. A cost left as None is the server's reference cost (the same that
+        ``optimis budget`` and the dashboard take; ``plan["costs"]["source"]`` says which were
+        given). Each speed-up over the paper's configuration has a standard error. Needs a job run
+        with ``"noise_components": true``."""
+        body: Json = {"target_rms": target_rms, "pixels": pixels}
+        for name, cost in (("light_cost", light_cost), ("camera_cost", camera_cost), ("iteration_cost", iteration_cost)):
+            if cost is not None:
+                body[name] = cost
         if solver is not None:
             body["solver"] = dict(solver)
         return self._json("POST", f"/v1/jobs/{int(id)}/budget", json=body, timeout=max(self.timeout, 120.0))

@@ -166,7 +166,7 @@ def history_frame(history: Mapping[str, Any]) -> pd.DataFrame:
     """A job's history (``GET /v1/jobs/{id}/history``) in long format.
 
     One row per checkpoint and strategy, oldest first: ``iterations``, ``strategy``,
-    ``luminance`` (model units), ``luminance_stderr`` = \|L\|·RMS/√M (as the server's CSV and the
+    ``luminance`` (model units), ``luminance_stderr`` = abs(L)·RMS/√M (as the server's CSV and the
     dashboard's band) and ``rms_percent`` (and any further member the server adds).
     """
     records = []
@@ -200,10 +200,12 @@ def sweep_table_frame(table: Mapping[str, Any]) -> pd.DataFrame:
         record: Dict[str, Any] = {"point": row.get("point")}
         record.update({field: values.get(field) for field in swept})
         record.update({k: v for k, v in row.items() if k not in ("point", "values")})
-        # docs/csv.md's name (the JSON row says iterations_done).
-        record["iterations"] = record.pop("iterations_done", None)
+        # docs/csv.md's name, which the JSON row has used since 0.1 (a server before it said
+        # iterations_done).
+        if "iterations_done" in record:
+            record["iterations"] = record.pop("iterations_done")
         records.append(record)
-    own = ["iterations" if c == "iterations_done" else c for c in own]
+    own = list(dict.fromkeys("iterations" if c == "iterations_done" else c for c in own))
     return _frame(records, ["point"] + swept + own)
 
 
