@@ -633,3 +633,32 @@ async fn evaluate_scores_another_runs_weights_on_a_job() {
     assert_problem(server.post("/v1/jobs/999/evaluate", &given).await, 404);
     server.stop().await;
 }
+
+/// Issue 42, item 7: the paper's run (10⁴ iterations of the restricted engine, whose batches are
+/// 4,096 long) has a point of history every `--checkpoint-iterations` (50 by default) — not only
+/// at its 3 checkpoints: between them the per-path rows (sums, no fit), at a checkpoint every row.
+/// The points wait for their own cost twice over, so at least 50 come on this run (about 80 on an
+/// idle 2-core machine, docs/results.md §20).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_paper_runs_history_has_a_point_every_checkpoint_interval() {
+    let server =
+        TestServer::start_with(|c| c.policy = optimis::jobs::RunPolicy { workers: 1, ..Default::default() }).await;
+    let id = server.submit_and_wait(&json!({ "preset": "paper-table1", "iterations": 10_000, "seed": 4 })).await;
+    let history = server.get(&format!("/v1/jobs/{id}/history")).await.json();
+    let points = history["points"].as_array().unwrap();
+    let at: Vec<u64> = points.iter().map(|p| p["iterations"].as_u64().unwrap()).collect();
+    assert!(points.len() >= 50, "{} points: {at:?}", points.len());
+    assert!(at.windows(2).all(|w| w[0] < w[1]) && *at.last().unwrap() == 10_000, "{at:?}");
+    assert!(at.iter().all(|i| i % 50 == 0), "at the stated interval: {at:?}");
+    let rows = |p: &Value| p["strategies"].as_array().unwrap().len();
+    let full = points.iter().filter(|p| rows(p) > 10).count();
+    assert!(full >= 1 && rows(points.last().unwrap()) > 10, "the last point is the final checkpoint's full table");
+    assert!(points.iter().all(|p| rows(p) == 10 || rows(p) > 10), "per-path rows, or the whole table");
+    // The per-path figures of the final point are the result's own.
+    let result = server.result(id).await;
+    let last = points.last().unwrap()["strategies"].as_array().unwrap();
+    let switch = last.iter().find(|s| s["strategy"] == "switch").unwrap();
+    let table = result["noise_table"].as_array().unwrap().iter().find(|r| r["strategy"] == "switch").unwrap();
+    assert_eq!(switch["rms_percent"], table["rms_percent"]);
+    server.stop().await;
+}

@@ -119,8 +119,14 @@ fn table1_and_fig2_as_svg_png_and_pdf() {
         succeeded(&optimis(dir.path(), &["figure", "fig2", "paper.json", "--out", "fig2.pdf"]));
         let pdf = std::fs::read(dir.path().join("fig2.pdf")).unwrap();
         assert!(pdf.starts_with(b"%PDF-") && pdf.len() > 1000, "a PDF");
-        // Text is kept as text (with its font embedded), not as pixels.
-        assert!(pdf.windows(8).any(|w| w == b"FontFile"), "the font is embedded");
+        // Text is vector, not pixels: outlines by default, the font embedded with `pdf-text`.
+        let embedded = pdf.windows(8).any(|w| w == b"FontFile");
+        assert_eq!(embedded, cfg!(feature = "pdf-text"), "the font is embedded only with the pdf-text feature");
+        assert!(!pdf.windows(15).any(|w| w == b"/Subtype /Image"), "no raster image in the PDF");
+        if !embedded {
+            // The labels' glyphs are paths: the outlined PDF is far larger than the drawing's lines alone.
+            assert!(pdf.len() > 20_000, "outlined text in the PDF ({} bytes)", pdf.len());
+        }
     }
 
     // Flags are checked and named.

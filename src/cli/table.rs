@@ -61,7 +61,7 @@ pub fn write_report(
         )?,
         Some([t, ..]) => writeln!(
             out,
-            "paper: {} ({} iterations); its optimum was fitted and scored in-sample, to compare with `optimal`",
+            "paper: {} ({} iterations); its optimum was fitted and scored in-sample, to compare with `optimal`; z(paper) = (ours − paper)/SE(ours), the paper giving no error",
             t.source, t.iterations
         )?,
         None => {}
@@ -161,8 +161,11 @@ pub fn write_noise_rows_with(
     paper: Option<&[ReferenceTable]>,
 ) -> io::Result<()> {
     let paper = paper.filter(|p| !p.is_empty());
-    let paper_header =
-        if paper.is_some() { format!(" {:>12} {:>9}", "paper L·10⁵", "paper RMS") } else { String::new() };
+    let paper_header = if paper.is_some() {
+        format!(" {:>12} {:>6} {:>9} {:>6}", "paper L·10⁵", "z", "paper RMS", "z")
+    } else {
+        String::new()
+    };
     writeln!(
         out,
         "{:<36} {:>10} {:>9} {:>9} {:>8} {:>10} {:>6}{paper_header}  note",
@@ -206,7 +209,17 @@ pub fn write_noise_rows_with(
         let published = match paper {
             Some(tables) => {
                 let p = figures(tables, row.strategy.name());
-                format!(" {} {}", num(p.map(|p| p.0), 1e5, 12, 3), num(p.map(|p| p.1), 1.0, 9, 0))
+                // How many of our standard errors the paper's figure lies away.
+                let z = |ours: Option<f64>, se: Option<f64>, theirs: Option<f64>| {
+                    ours.zip(se).zip(theirs).filter(|((_, se), _)| *se > 0.0).map(|((v, se), t)| (v - t) / se)
+                };
+                format!(
+                    " {} {} {} {}",
+                    num(p.map(|p| p.0), 1e5, 12, 3),
+                    num(z(row.luminance, row.luminance_stderr, p.map(|p| p.0)), 1.0, 6, 1),
+                    num(p.map(|p| p.1), 1.0, 9, 0),
+                    num(z(row.rms_percent, row.rms_percent_stderr, p.map(|p| p.1)), 1.0, 6, 1)
+                )
             }
             None => String::new(),
         };

@@ -178,5 +178,6 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option
         best: best.as_ref().and_then(|b| serde_json::to_string(b).ok()),
         warnings: Some(serde_json::to_string(&report.warnings).map_err(internal)?),
         history: serde_json::to_string(&history).map_err(internal)?,
+        between: Vec::new(),
     })
 }

@@ -54,16 +54,19 @@ pub struct StrategyPoint {
     pub rms_percent: Option<f64>,
 }
 
-/// Every strategy at one checkpoint.
+/// The strategies' figures at one point of a job's run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct HistoryPoint {
-    /// Iterations held by the checkpoint.
+    /// Iterations the figures are computed from.
     pub iterations: u64,
-    /// Every row of the checkpoint's noise table, in the table's order.
+    /// At a checkpoint every row of its noise table, in the table's order; between checkpoints
+    /// (a point every `--checkpoint-iterations`) the per-path rows only, whose figures are sums
+    /// (a fitted row's figure needs a fit, made at the checkpoints).
     pub strategies: Vec<StrategyPoint>,
 }
 
-/// How a job's figures evolved, checkpoint by checkpoint (at most 1,000 points, evenly thinned).
+/// How a job's figures evolved: a point every `--checkpoint-iterations` (at most 1,000 points,
+/// evenly thinned).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct JobHistory {
     /// Id of the job whose checkpoints these are.

@@ -19,14 +19,17 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use super::checkpoint::{checkpoint_of, decode_checkpoint};
+use super::documents::StrategyPoint;
 use super::error::JobError;
 use super::executor::{ExecutionView, Segment, SegmentError};
 use super::references::scene_reference_until;
 use super::resource::{BestStrategy, best_strategy, now_ms, rfc3339};
 use super::state::{ActiveJob, Inner, StopReason};
-use crate::sim::runner::{BatchMoments, RunError};
+use crate::sim::model::config::SimConfig;
+use crate::sim::runner::{BatchMoments, RunError, batch_len};
 use crate::sim::solve::noise::path_rows;
 use crate::sim::solve::warnings::Warning;
+use crate::sim::spec::ValidJob;
 use crate::sim::stats::moments::Moments;
 
 /// How often progress is published to the job's watchers.
@@ -36,6 +39,30 @@ const PROGRESS_INTERVAL: Duration = Duration::from_millis(250);
 /// which the restricted engine's workers then hand over from their own sums (an exact addition per
 /// touched sum, some milliseconds), so not at every progress step.
 const BEST_INTERVAL: Duration = Duration::from_secs(4);
+
+/// Iterations between two checkpoints: `--checkpoint-iterations`, but no fewer than the engine's
+/// batch (4,096 iterations of the restricted engine: a checkpoint is a full report, ~35 ms on the
+/// paper's grid, where an iteration takes microseconds) where they run in this process; the
+/// history has its points every
+/// `--checkpoint-iterations` in between (`history_between`).
+fn policy_checkpoints(inner: &Inner, config: &SimConfig) -> u64 {
+    let engine_batch = inner.executor.threads().map_or(1, |threads| batch_len(config, threads));
+    inner.policy.checkpoint_iterations.max(engine_batch)
+}
+
+/// A point of the history between checkpoints waits at least this many times its predecessor's
+/// cost (its share of the time at most a third).
+const POINT_SHARE: u32 = 2;
+
+/// A history point between checkpoints: each per-path strategy's L and RMS from the sums (no fit,
+/// microseconds); the fitted rows have their points at the checkpoints.
+fn history_between(moments: &Moments, job: &ValidJob) -> String {
+    let points: Vec<StrategyPoint> = path_rows(moments, &job.spec().solver.fixed)
+        .iter()
+        .map(|r| StrategyPoint { strategy: r.strategy, luminance: r.luminance, rms_percent: r.rms_percent })
+        .collect();
+    serde_json::to_string(&points).unwrap_or_else(|_| "[]".into())
+}
 
 /// Longest pause between two attempts of a write that failed for lack of storage.
 const STORAGE_RETRY_CAP: Duration = Duration::from_secs(30);
@@ -89,6 +116,9 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         }
     }
     let mut checkpointed = moments.iterations();
+    // Checkpoints (a full report each) come no more often than the engine's own batches, as they
+    // did before the batches were cut at --checkpoint-iterations for the history's points.
+    let checkpoint_every = policy_checkpoints(inner, config);
     let start = job.start;
     loop {
         let done = moments.iterations();
@@ -119,6 +149,13 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
         let mut last_best = segment_start.checked_sub(BEST_INTERVAL).unwrap_or(segment_start);
         let policy = &inner.policy;
         let mut counted = done;
+        // Points of the history between two checkpoints (every --checkpoint-iterations): the
+        // per-path rows, sums without a fit, written with the next checkpoint.
+        let mut between: Vec<(u64, String)> = Vec::new();
+        let mut last_point = done;
+        // A point costs a hand-over of the workers' sums and the per-path rows (milliseconds): the
+        // next waits at least POINT_SHARE times as long, as checkpoints do.
+        let (mut point_at, mut point_cost) = (segment_start, Duration::ZERO);
         let mut on_batch = |m: &mut dyn BatchMoments, next: u64| {
             let next = next - start;
             inner.metrics.add_iterations(next.saturating_sub(counted), config.light_paths);
@@ -131,9 +168,19 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
                 });
                 publish_progress(job, moments, next, done, segment_start, config.light_paths);
             }
-            let due = next - checkpointed >= policy.checkpoint_iterations
-                || segment_start.elapsed() >= policy.checkpoint_interval;
-            if due { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+            let elapsed = segment_start.elapsed();
+            let due = next - checkpointed >= checkpoint_every || elapsed >= policy.checkpoint_interval;
+            if due {
+                return ControlFlow::Break(());
+            }
+            if next - last_point >= policy.checkpoint_iterations && point_at.elapsed() >= point_cost * POINT_SHARE {
+                let started = Instant::now();
+                last_point = next;
+                let moments = m.moments();
+                between.push((moments.iterations(), history_between(moments, valid)));
+                (point_at, point_cost) = (Instant::now(), started.elapsed());
+            }
+            ControlFlow::Continue(())
         };
         let range = start + done..start + total;
         let cancelled = || job.stop_reason() == Some(StopReason::Cancel);
@@ -146,10 +193,11 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             stop: &job.stop,
             cancelled: &cancelled,
             report: &report,
+            batch: policy.checkpoint_iterations,
         };
         let outcome = inner.executor.run_segment(&segment, range, &mut moments, &mut on_batch);
         if moments.iterations() > checkpointed {
-            if !write_checkpoint(inner, job, &moments, reference)? {
+            if !write_checkpoint(inner, job, &moments, reference, between)? {
                 return stopped(inner, job);
             }
             checkpointed = moments.iterations();
@@ -270,9 +318,11 @@ fn write_checkpoint(
     job: &ActiveJob,
     moments: &Moments,
     reference: Option<f64>,
+    between: Vec<(u64, String)>,
 ) -> Result<bool, JobError> {
     let started = Instant::now();
-    let checkpoint = checkpoint_of(moments, &job.job, reference)?;
+    let mut checkpoint = checkpoint_of(moments, &job.job, reference)?;
+    checkpoint.between = between;
     let best = checkpoint.best.as_deref().and_then(|b| serde_json::from_str::<BestStrategy>(b).ok());
     let warnings: Vec<Warning> =
         checkpoint.warnings.as_deref().and_then(|w| serde_json::from_str(w).ok()).unwrap_or_default();

@@ -16,7 +16,7 @@ use std::sync::atomic::AtomicBool;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::sim::runner::{BatchMoments, RunError, run_iterations};
+use crate::sim::runner::{BatchMoments, RunError, run_iterations_within};
 use crate::sim::spec::{JobSpec, SpecError, ValidJob};
 use crate::sim::stats::moments::Moments;
 
@@ -42,6 +42,10 @@ pub struct Segment<'a> {
     pub cancelled: &'a (dyn Fn() -> bool + Sync),
     /// Shows how the work is divided (the job resource's `execution`).
     pub report: &'a (dyn Fn(ExecutionView) + Sync),
+    /// The most iterations between two calls of `on_batch` (the server's
+    /// `--checkpoint-iterations`: a checkpoint, and a point of the job's history, can come no
+    /// more often than `on_batch` is called).
+    pub batch: u64,
 }
 
 /// Why a segment ended without all its iterations.
@@ -77,6 +81,12 @@ pub trait Executor: Send + Sync {
     /// Job `id` was cancelled while no driver followed it: stops what still runs for it
     /// elsewhere. Blocking (call on a blocking thread).
     fn cancel(&self, _id: i64) {}
+
+    /// Threads a segment runs on in this process (what the engines' batch length depends on);
+    /// none where the work runs elsewhere.
+    fn threads(&self) -> Option<usize> {
+        None
+    }
 
     /// Job `id` was deleted: removes what the executor keeps for it. Blocking.
     fn forget(&self, _id: i64) {}
@@ -126,6 +136,10 @@ impl LocalPool {
 }
 
 impl Executor for LocalPool {
+    fn threads(&self) -> Option<usize> {
+        Some(self.pool.current_num_threads())
+    }
+
     fn admit(&self, spec: &JobSpec) -> Result<(), SpecError> {
         match spec.execution {
             None => Ok(()),
@@ -144,7 +158,9 @@ impl Executor for LocalPool {
         on_batch: &mut OnBatch<'_>,
     ) -> Result<u64, SegmentError> {
         let (config, seed) = (segment.job.config(), segment.job.spec().seed);
-        Ok(self.pool.install(|| run_iterations(config, seed, range, moments, segment.stop, on_batch))?)
+        Ok(self
+            .pool
+            .install(|| run_iterations_within(config, seed, range, moments, segment.stop, segment.batch, on_batch))?)
     }
 }
 

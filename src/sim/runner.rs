@@ -50,7 +50,8 @@ const MAX_BATCH_CAMERAS: u64 = 1 << 20;
 
 /// Iterations per batch: enough (iteration, chunk) items to balance `threads` workers, few enough
 /// to report progress and honour cancellation promptly, and few enough camera paths in memory.
-fn batch_len(config: &SimConfig, threads: usize) -> u64 {
+/// (The server checkpoints no more often than this: a checkpoint costs a full report.)
+pub fn batch_len(config: &SimConfig, threads: usize) -> u64 {
     if let Engine::Restricted(_) = config.engine {
         // Microseconds per iteration: batches of 4096 still report several times a second, and
         // cost nothing of their own (the workers' sums live across batches).
@@ -93,9 +94,24 @@ pub fn run_iterations(
     range: Range<u64>,
     moments: &mut Moments,
     cancel: &AtomicBool,
+    on_batch: impl FnMut(&mut dyn BatchMoments, u64) -> ControlFlow<()>,
+) -> Result<u64, RunError> {
+    run_iterations_within(config, seed, range, moments, cancel, u64::MAX, on_batch)
+}
+
+/// [`run_iterations`] with batches of at most `max_batch` iterations, so that `on_batch` can act
+/// every `max_batch` iterations: the server's checkpoints (and so a job's history) come at its
+/// `--checkpoint-iterations` even on the restricted engine, whose own batches are 4,096 long.
+pub fn run_iterations_within(
+    config: &SimConfig,
+    seed: u64,
+    range: Range<u64>,
+    moments: &mut Moments,
+    cancel: &AtomicBool,
+    max_batch: u64,
     mut on_batch: impl FnMut(&mut dyn BatchMoments, u64) -> ControlFlow<()>,
 ) -> Result<u64, RunError> {
-    let per_batch = batch_len(config, rayon::current_num_threads());
+    let per_batch = batch_len(config, rayon::current_num_threads()).min(max_batch.max(1));
     if let Engine::Restricted(proposals) = config.engine {
         let plan = RestrictedPlan::new(config, proposals);
         let run = RestrictedRun { config, plan: &plan, seed, cancel };

@@ -34,6 +34,9 @@ pub struct Checkpoint {
     pub warnings: Option<String>,
     /// Each strategy's luminance and RMS (JSON), appended to the job's history.
     pub history: String,
+    /// Points of the history since the previous checkpoint (iterations, JSON), appended before
+    /// this one's: the per-path rows at every --checkpoint-iterations between two checkpoints.
+    pub between: Vec<(u64, String)>,
 }
 
 /// A job's latest result as stored, with the two checksums that guard it.
@@ -73,16 +76,20 @@ async fn upsert_checkpoint(
     .bind(now)
     .execute(&mut *tx)
     .await?;
-    sqlx::query(
-        "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
-         ON CONFLICT (job_id, iterations) DO UPDATE SET strategies = excluded.strategies, written_at = excluded.written_at",
-    )
-    .bind(id)
-    .bind(checkpoint.iterations_done as i64)
-    .bind(&checkpoint.history)
-    .bind(now)
-    .execute(&mut *tx)
-    .await?;
+    let between = checkpoint.between.iter().filter(|(i, _)| *i < checkpoint.iterations_done);
+    let own = std::iter::once((checkpoint.iterations_done, checkpoint.history.as_str()));
+    for (iterations, strategies) in between.map(|(i, s)| (*i, s.as_str())).chain(own) {
+        sqlx::query(
+            "INSERT INTO checkpoint_history (job_id, iterations, strategies, written_at) VALUES (?, ?, ?, ?) \
+             ON CONFLICT (job_id, iterations) DO UPDATE SET strategies = excluded.strategies, written_at = excluded.written_at",
+        )
+        .bind(id)
+        .bind(iterations as i64)
+        .bind(strategies)
+        .bind(now)
+        .execute(&mut *tx)
+        .await?;
+    }
     thin_history(tx, id).await
 }
 
@@ -191,6 +198,7 @@ impl Store {
                 best: None,
                 warnings: None,
                 history: String::new(),
+                between: Vec::new(),
             })
         })
         .transpose()

@@ -169,8 +169,8 @@ export async function checkPaperJob(page, id) {
     (await page.locator('[data-ref="result-status"]').textContent()).startsWith('final')
     && (await page.locator('[data-ref="weights-plot"] canvas').count()) > 0);
   const result = (await callApi(`/v1/jobs/${id}/result`)).json;
-  check(await page.locator('table.noise-table thead th.paper-col:visible').count() === 2,
-    'the paper configuration shows the columns "Paper L·10⁵" and "Paper RMS %"');
+  check(await page.locator('table.noise-table thead th.paper-col:visible').count() === 4,
+    'the paper configuration shows the columns "Paper L·10⁵" and "Paper RMS %", each with its z');
   const rows = await page.locator('table.noise-table tbody tr').evaluateAll((trs) => trs.map((tr) => ({
     strategy: tr.dataset.strategy,
     cells: Object.fromEntries([...tr.querySelectorAll('td[data-col]')].map((td) => [td.dataset.col, td.textContent.trim()])),
@@ -180,6 +180,12 @@ export async function checkPaperJob(page, id) {
     const [kase, luminance, rms] = PAPER[row.strategy] ?? ['', '', ''];
     check(row.cells.case === kase && row.cells['paper-luminance'] === luminance && row.cells['paper-rms'] === rms,
       `${row.strategy}: paper case "${row.cells.case}", L·10⁵ "${row.cells['paper-luminance']}", RMS "${row.cells['paper-rms']}"`);
+    // z against the paper's figure: (ours − paper)/SE(ours), from the API's row.
+    const api = result.noise_table.find((r) => r.strategy === row.strategy);
+    const expected = luminance && api.luminance_stderr > 0 ? (api.luminance - Number(luminance) * 1e-5) / api.luminance_stderr : null;
+    const shown = row.cells['paper-luminance-z'] === '' ? null : Number(row.cells['paper-luminance-z'].replace('−', '-'));
+    check(expected === null ? shown === null : Math.abs(shown - expected) < 0.006,
+      `${row.strategy}: z against the paper's L "${row.cells['paper-luminance-z']}"${expected === null ? '' : ` (${expected.toFixed(3)})`}`);
   }
   checkZ(await readNoiseRows(page), result);
   const note = await page.locator('[data-ref="paper-note"]').textContent();

@@ -91,9 +91,14 @@ function noiseRow(row, context) {
       h('td', { class: 'num', 'data-col': 'rms' }, withError(row.rms_percent, row.rms_percent_stderr, formatRms)),
     ];
   const ours = published(result, row.strategy);
+  // z against the paper's figure, in our standard errors (the paper gives none).
+  const zPaper = (value, se, theirs) => (ours && Number.isFinite(value) && se > 0 ? formatZ((value - theirs) / se) : '');
+  const zTitle = 'z = (ours − paper) / SE(ours): how many of our standard errors the paper\'s figure lies away (the paper gives no error)';
   const paperCells = paper ? [
     h('td', { class: 'num paper-col', 'data-col': 'paper-luminance' }, ours ? fixed(ours.luminance * 1e5, 3) : ''),
+    h('td', { class: 'num paper-col', 'data-col': 'paper-luminance-z', title: zTitle }, zPaper(row.luminance, row.luminance_stderr, ours?.luminance)),
     h('td', { class: 'num paper-col', 'data-col': 'paper-rms' }, ours ? `${ours.rms_percent}` : ''),
+    h('td', { class: 'num paper-col', 'data-col': 'paper-rms-z', title: zTitle }, zPaper(row.rms_percent, row.rms_percent_stderr, ours?.rms_percent)),
   ] : [];
   return h('tr', { 'data-strategy': row.strategy, class: isRecommended ? 'recommended' : null },
     h('th', { scope: 'row' }, h('code', {}, row.strategy),

@@ -221,7 +221,7 @@ export function drawLuminance(slot, note, points, reference, recommended) {
     });
     const k = slot.bands.length - 1;
     series.push({
-      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2,
+      label: strategy === 'optimal' ? 'optimal (in-sample)' : strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2, spanGaps: true,
       show: shown.has(strategy), points: { show: points.length < 40, size: 4 },
       value: legendValue((v, i) => {
         const band = slot.bands[k];
@@ -255,7 +255,7 @@ export function drawHistory(slot, note, points) {
       return rms > 0 ? rms : null;
     }));
     series.push({
-      label: strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2, points: { show: points.length < 40, size: 4 },
+      label: strategy, stroke: strategyColor(strategy), dash: strategyDash(strategy), width: 2, spanGaps: true, points: { show: points.length < 40, size: 4 },
       value: legendValue((v) => `${formatRms(v)} %`),
     });
   }

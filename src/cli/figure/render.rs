@@ -50,8 +50,16 @@ pub fn png(svg: &str, width: u32) -> Result<Vec<u8>, CliError> {
 }
 
 /// The figure as a one-page vector PDF of the drawing's size (1 px = 1 pt at svg2pdf's 72 dpi).
+/// Its text is drawn as outlines — shaped with the system's font here, so it looks as in the PNG
+/// — unless the build has the `pdf-text` feature, which embeds the font (selectable text).
 pub fn pdf(svg: &str) -> Result<Vec<u8>, CliError> {
     let tree = tree(svg)?;
+    #[cfg(not(feature = "pdf-text"))]
+    let tree = {
+        // usvg writes the text it shaped as paths; the SVG read back has no text left to embed.
+        let outlined = tree.to_string(&usvg::WriteOptions { preserve_text: false, ..usvg::WriteOptions::default() });
+        usvg::Tree::from_str(&outlined, &usvg::Options::default()).map_err(|e| failed("PDF", e))?
+    };
     svg2pdf::to_pdf(&tree, svg2pdf::ConversionOptions::default(), svg2pdf::PageOptions::default())
         .map_err(|e| failed("PDF", e))
 }

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::options::FixedWeights;
 use super::strategy::Strategy;
 use crate::sim::engines::strategies::PathStrategy;
+use crate::sim::math::exact_sum::ExactSum;
 use crate::sim::stats::moments::{FoldMoments, Moments};
 
 /// A stacked heuristic's coefficient in a fitted row: per-path weights are the table's plus
@@ -235,8 +236,13 @@ pub(crate) fn path_fold_sums(moments: &Moments, s: PathStrategy) -> Vec<(usize, 
 
 /// The row of a per-path strategy from its power sums.
 pub(crate) fn path_row(fold: &FoldMoments, strategy: PathStrategy, fixed: &FixedWeights) -> NoiseRow {
+    path_row_of(strategy, fold.iterations, power_sums(fold, strategy), fixed)
+}
+
+/// The row of per-path strategy `strategy` from `iterations` and its power sums, if kept.
+fn path_row_of(strategy: PathStrategy, iterations: u64, sums: Option<[f64; 4]>, fixed: &FixedWeights) -> NoiseRow {
     let name = Strategy::of_path(strategy);
-    let Some(s) = power_sums(fold, strategy) else {
+    let Some(s) = sums else {
         return NoiseRow {
             respects_fixed: respects_fixed(strategy, fixed),
             ..NoiseRow::failed(
@@ -245,17 +251,33 @@ pub(crate) fn path_row(fold: &FoldMoments, strategy: PathStrategy, fixed: &Fixed
             )
         };
     };
-    let m = fold.iterations as f64;
+    let m = iterations as f64;
     NoiseRow {
         respects_fixed: respects_fixed(strategy, fixed),
         ..NoiseRow::from_sums(name, m, s[0], s[1], (m > 0.0).then(|| central_3_4(m, s)))
     }
 }
 
-/// The rows of the per-path strategies alone (cheap: no fit), for progress reports.
+/// The rows of the per-path strategies alone (cheap: no fit), for progress reports and the points
+/// of a job's history between checkpoints. Only these strategies' power sums are added over the
+/// folds — exactly, so the rows equal the noise table's — not every sum of the moments (the cells'
+/// second moments among them), which took milliseconds at every point.
 pub fn path_rows(moments: &Moments, fixed: &FixedWeights) -> Vec<NoiseRow> {
-    let pooled = moments.pooled();
-    PathStrategy::ALL.iter().map(|&s| path_row(&pooled, s, fixed)).collect()
+    let iterations = moments.folds.iter().map(|f| f.iterations).sum();
+    PathStrategy::ALL
+        .iter()
+        .map(|&s| {
+            let mut pooled: [ExactSum; 4] = std::array::from_fn(|_| ExactSum::new());
+            let kept = moments.folds.iter().all(|fold| match fold.strategies.get(s.index()) {
+                Some(sums) => {
+                    pooled.iter_mut().zip(sums).for_each(|(p, x)| p.add_sum(x));
+                    true
+                }
+                None => false,
+            });
+            path_row_of(s, iterations, kept.then(|| pooled.map(|x| x.value())), fixed)
+        })
+        .collect()
 }
 
 /// Jackknife standard errors of each cell's (w0, w1, w2).
