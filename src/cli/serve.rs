@@ -33,7 +33,8 @@ pub struct ServeArgs {
     /// Simulation threads shared by the running jobs (default: one per core).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub threads: Option<u32>,
-    /// Checkpoint a running job at least every this many iterations.
+    /// A point of a running job's history every this many iterations, and a checkpoint too (but
+    /// no more often than the engine's batch: 4,096 iterations of the restricted engine).
     #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
     pub checkpoint_iterations: u64,
     /// …and at least every this many seconds.
