@@ -188,6 +188,11 @@ export async function checkPaperJob(page, id) {
       `${row.strategy}: z against the paper's L "${row.cells['paper-luminance-z']}"${expected === null ? '' : ` (${expected.toFixed(3)})`}`);
   }
   checkZ(await readNoiseRows(page), result);
+  const fit = await page.locator('table.noise-table').evaluate((table) => {
+    const wrap = table.closest('.table-wrap') ?? table.parentElement;
+    return { scroll: wrap.scrollWidth, client: wrap.clientWidth };
+  });
+  check(fit.scroll <= fit.client, `at 1366 px the noise table with the paper's four columns fits its card (${fit.scroll} of ${fit.client} px)`);
   const note = await page.locator('[data-ref="paper-note"]').textContent();
   check(note.includes('Ershov') && note.includes('Table 1') && note.includes(result.references[0].source),
     `the paper's column cites its source, as the server serves it ("${note.slice(0, 50)}…")`);

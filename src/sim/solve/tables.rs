@@ -69,12 +69,19 @@ fn clip(name: &str) -> String {
     name.chars().take(40).collect()
 }
 
-/// The rows to print, in order.
-fn chosen<'a>(table: &'a [NoiseRow], opts: &TextTable) -> Vec<&'a NoiseRow> {
-    match &opts.rows {
+/// The rows to print, in order, whether any has the paper's figures, and whether any is in-sample.
+fn chosen<'a>(
+    table: &'a [NoiseRow],
+    paper: &impl Fn(&Strategy) -> Option<(f64, f64)>,
+    opts: &TextTable,
+) -> (Vec<&'a NoiseRow>, bool, bool) {
+    let rows: Vec<&NoiseRow> = match &opts.rows {
         None => table.iter().collect(),
         Some(rows) => rows.iter().filter_map(|s| table.iter().find(|r| r.strategy == *s)).collect(),
-    }
+    };
+    let with_paper = rows.iter().any(|r| paper(&r.strategy).is_some());
+    let in_sample = rows.iter().any(|r| r.in_sample);
+    (rows, with_paper, in_sample)
 }
 
 /// z = (ours − paper)/SE(ours): how many of our standard errors the paper's figure lies away.
@@ -141,9 +148,7 @@ pub fn noise_table_markdown(
     paper: impl Fn(&Strategy) -> Option<(f64, f64)>,
     opts: &TextTable,
 ) -> String {
-    let rows = chosen(rows, opts);
-    let with_paper = rows.iter().any(|r| paper(&r.strategy).is_some());
-    let in_sample = rows.iter().any(|r| r.in_sample);
+    let (rows, with_paper, in_sample) = chosen(rows, &paper, opts);
     let mut out = format!("{}\n\n", caption(opts, with_paper, in_sample, false));
     out.push_str("| strategy | L·10⁵ ± SE | RMS % ± SE |");
     out.push_str(if with_paper { " paper L·10⁵ | z | paper RMS % | z |\n" } else { "\n" });
@@ -170,9 +175,7 @@ pub fn noise_table_latex(
     paper: impl Fn(&Strategy) -> Option<(f64, f64)>,
     opts: &TextTable,
 ) -> String {
-    let rows = chosen(rows, opts);
-    let with_paper = rows.iter().any(|r| paper(&r.strategy).is_some());
-    let in_sample = rows.iter().any(|r| r.in_sample);
+    let (rows, with_paper, in_sample) = chosen(rows, &paper, opts);
     let mut out = String::from(
         "% The noise table of an optimis run: L in units of 10^-5, RMS of one iteration in percent of L.\n",
     );
