@@ -21,7 +21,7 @@ struct Tally {
 
 async fn client_loop(base: String, id: String, token: Option<String>, until: Instant) -> Tally {
     // One client per connection: a dashboard tab or a polling script.
-    optimis::jobs::peers::install_crypto_provider();
+    optimis::trust::pins::install_crypto_provider();
     let client = reqwest::Client::builder().pool_max_idle_per_host(1).build().expect("client");
     let urls = [format!("{base}/v1/jobs/{id}"), format!("{base}/v1/jobs/{id}/result")];
     let mut tally = Tally::default();

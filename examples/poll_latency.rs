@@ -13,7 +13,7 @@ async fn main() {
     let base = args.get(1).cloned().unwrap_or_else(|| "http://127.0.0.1:8080".into());
     let id = args.get(2).cloned().unwrap_or_else(|| "1".into());
     let count: usize = args.get(3).and_then(|n| n.parse().ok()).unwrap_or(1000);
-    optimis::jobs::peers::install_crypto_provider();
+    optimis::trust::pins::install_crypto_provider();
     let client = reqwest::Client::new();
     let url = format!("{base}/v1/jobs/{id}");
     let mut latencies = Vec::with_capacity(count);

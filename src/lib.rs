@@ -11,8 +11,11 @@
 //!   its connection limits, TLS, graceful shutdown (feature `server`).
 //! * [`api`] — the HTTP routes, their limits and bearer token, the error mapping, the OpenAPI
 //!   description and the dashboard (feature `server`).
-//! * [`jobs`] — the job runner: manager, scheduler, drivers, job state, checkpoints, policy,
-//!   statistics operations, peers (feature `server`).
+//! * [`jobs`] — the job runner: its lifecycle core (manager, scheduler, drivers, job state,
+//!   checkpoints, policy, the executor seam) and the features built on it — statistics, merges and
+//!   peers, solves, predictions, sweeps, the cluster executor (feature `server`).
+//! * [`trust`] — signing keys and trusted keys, TLS pins and this server's certificate, secret
+//!   files (feature `server`).
 //! * [`metrics`] — Prometheus metrics of requests, checkpoints and jobs (feature `server`).
 //! * [`store`] — SQLite persistence of jobs, their typed states and checkpoints (feature `server`).
 //! * [`sim`] — the pure simulation core in folders by concept: math → model → engines → stats →
@@ -47,3 +50,5 @@ pub mod server;
 pub mod sim;
 #[cfg(feature = "server")]
 pub mod store;
+#[cfg(feature = "server")]
+pub mod trust;

@@ -14,14 +14,9 @@
 //!   the name comes from (`crate::jobs::JobManager` reaches `jobs/manager.rs`, which `jobs/mod.rs`
 //!   re-exports it from). A module file's own `use child::…` paths (without `self::`) are read for
 //!   that only: a module file declares its children, so they are not edges of their own;
-//! * **methods, by type name**: a type's inherent `impl` blocks may be spread over several files,
-//!   so a call does not always name the file it needs. When A knows a type `X` (defines it, has an
-//!   `impl X` block, or names it in a path) and calls `.m(` or `::m(`, and `fn m` is in an
-//!   inherent `impl X` block of a file C that does not define `X` (paths to the file that does
-//!   already lead there), then A → C. This is how `self.verified_checkpoint(..)` in one
-//!   `impl JobManager` block reaches the file whose `impl JobManager` defines it. It is a heuristic
-//!   on names: a method of `X` called on another value of A that has a method of the same name
-//!   counts too, which can only add edges, never hide one.
+//! * **methods** need no rule of their own: every type's inherent `impl` blocks are in the file
+//!   that defines it (checked below), so whatever names a type — or names what hands out a value
+//!   of it — reaches every method the type has. No method name is skipped or guessed.
 //!
 //! # What it checks
 //! * no import cycle among the files of `src/` (the failure lists every cycle with its files);
@@ -32,6 +27,10 @@
 //! * the core imports nothing outside `src/sim/`, and inside it imports point down the layers
 //!   math → model → engines → stats → solve → the root files (spec, configuration, document, signature, runner, sweep) →
 //!   checks;
+//! * every type's inherent `impl` blocks are in the file that defines the type;
+//! * the job runner's rooms point down [`JOB_ROOMS`]: the lifecycle core (`jobs/core/`) is the
+//!   ground and imports no feature, and no folder of `jobs/` has more than [`MAX_ROOM_EDGES`]
+//!   import edges between its parts (a subfolder counts as one part of its parent);
 //! * the top-level modules form no cycle (in particular `api` and `server` do not import each
 //!   other both ways);
 //! * no file under `src/` is longer than 500 lines (the dashboard's vendored library excepted).
@@ -41,7 +40,9 @@ mod graph;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use graph::{Edges, Source, cycles, edges_of, expand, graph, referenced_paths, source, strip_code};
+use graph::{
+    Edges, Source, cycles, edges_of, expand, graph, referenced_paths, source, sources, stray_impls, strip_code,
+};
 
 const MAX_LINES: usize = 500;
 
@@ -55,6 +56,19 @@ const SIM_LAYERS: &[&[&str]] = &[
     &["spec", "configuration", "document", "signature", "runner", "sweep", "weights", "mod"],
     &["checks"],
 ];
+
+/// The rooms of `jobs/`, lowest first: a room imports only rooms of lower layers (and its own
+/// files). The core is the ground; each feature is a service on it.
+const JOB_ROOMS: &[&[&str]] = &[
+    &["core"],
+    &["cluster", "statistics"],
+    &["merges", "artifacts", "evaluation", "solves", "prediction"],
+    &["sweeps"],
+    &["services", "mod"],
+];
+
+/// Most import edges between the parts of one folder of `jobs/`.
+const MAX_ROOM_EDGES: usize = 45;
 
 /// How a folder's module file states what the folder may import (one line of its module doc).
 const PROMISE: &str = "//! Imports: ";
@@ -86,8 +100,8 @@ fn no_files_of_the_crate_import_each_other_in_a_cycle() {
     let listed: Vec<String> = found.iter().map(|c| describe(c, &edges)).collect();
     assert!(found.is_empty(), "{} import cycles in src/:\n  {}", found.len(), listed.join("\n  "));
     // The check itself sees edges: the driver imports the job state, the runner the engines.
-    assert!(edges[Path::new("jobs/driver")].contains(Path::new("jobs/state")));
-    assert!(!edges[Path::new("jobs/driver")].contains(Path::new("jobs/manager")));
+    assert!(edges[Path::new("jobs/core/driver")].contains(Path::new("jobs/core/state")));
+    assert!(!edges[Path::new("jobs/core/driver")].contains(Path::new("jobs/core/manager")));
     assert!(edges[Path::new("sim/runner")].iter().any(|t| t.starts_with("sim/engines")));
 }
 
@@ -254,18 +268,17 @@ mod tests { use super::l; }
 }
 
 #[test]
-fn a_method_called_on_a_type_reaches_the_file_of_its_impl_block() {
+fn an_impl_block_away_from_its_type_is_found() {
     let files = [
-        ("a/mod", "pub struct Hub;\nimpl Hub {\n    fn run(&self) { self.check(); }\n}\n"),
+        ("a/mod", "pub struct Hub;\nimpl Hub {\n    fn run(&self) {}\n}\nimpl std::fmt::Debug for Hub {}\n"),
         ("a/check", "use super::Hub;\nimpl Hub {\n    pub fn check(&self) {}\n}\n"),
-        ("a/user", "use super::Hub;\nfn go(h: &Hub) { h.run(); }\n"),
+        (
+            "a/saver",
+            "pub struct Saver<W>(W);\nimpl<W: FnMut(&[u8]) -> Result<(), ()>> Saver<W> {\n    fn go(&self) {}\n}\n",
+        ),
     ];
     let sources = files.iter().map(|(p, t)| (PathBuf::from(p), source(Path::new(p), t.to_string()))).collect();
-    let edges = edges_of(&sources);
-    assert!(edges[Path::new("a/mod")].contains(Path::new("a/check")), "{edges:?}");
-    assert_eq!(edges[Path::new("a/user")], BTreeSet::from([PathBuf::from("a/mod")]), "{edges:?}");
-    let found = cycles(&edges, &sources.keys().cloned().collect());
-    assert_eq!(found, [vec![PathBuf::from("a/check"), PathBuf::from("a/mod")]]);
+    assert_eq!(stray_impls(&sources), ["src/a/check.rs: impl Hub"]);
 }
 
 #[test]
@@ -279,4 +292,106 @@ fn a_path_through_a_re_export_reaches_the_file_that_defines_the_name() {
     let edges = edges_of(&sources);
     assert_eq!(edges[Path::new("b/user")], BTreeSet::from([PathBuf::from("a/inner")]), "{edges:?}");
     assert!(edges[Path::new("a/mod")].is_empty(), "a module file's children are not its imports: {edges:?}");
+}
+
+#[test]
+fn every_types_inherent_impl_blocks_are_in_the_file_that_defines_it() {
+    let stray = stray_impls(&sources());
+    assert!(
+        stray.is_empty(),
+        "inherent impl blocks away from the file that defines their type (move them there, or make the \
+         operation a type of its own):\n{}",
+        stray.join("\n")
+    );
+}
+
+/// A file's room in `jobs/` (`core`, `merges`, `statistics`, …), None outside `jobs/`.
+fn room(source: &Source) -> Option<&str> {
+    (source.module.first()? == "jobs").then(|| source.module.get(1).map_or("mod", String::as_str))
+}
+
+/// What breaks the rooms of `jobs/`: imports up or across the layers, the core importing a
+/// feature, a folder with too many edges between its parts. Also the edge count of each folder.
+fn job_room_violations(sources: &BTreeMap<PathBuf, Source>, edges: &Edges) -> (Vec<String>, BTreeMap<String, usize>) {
+    let layer = |room: &str| JOB_ROOMS.iter().position(|l| l.contains(&room));
+    let mut broken = Vec::new();
+    for (from, targets) in edges {
+        let Some(a) = room(&sources[from]) else { continue };
+        let la = layer(a).unwrap_or_else(|| panic!("jobs/{a} has no layer in JOB_ROOMS"));
+        for to in targets {
+            let Some(b) = room(&sources[to]) else { continue };
+            let lb = layer(b).unwrap_or_else(|| panic!("jobs/{b} has no layer in JOB_ROOMS"));
+            if a != b && (lb > la || (lb == la && a != "mod")) {
+                let how = if a == "core" { "the core imports a feature" } else { "an import up or across the rooms" };
+                broken.push(format!("{how}: src/{}.rs → src/{}.rs", from.display(), to.display()));
+            }
+        }
+    }
+    // Edges between the parts of each folder of jobs/: its files, and its subfolders as one part.
+    let mut counts = BTreeMap::new();
+    let folders: BTreeSet<Vec<String>> = sources
+        .values()
+        .filter(|s| s.module.first().is_some_and(|m| m == "jobs"))
+        .flat_map(|s| (1..s.module.len()).map(|n| s.module[..n].to_vec()))
+        .collect();
+    for folder in folders {
+        let part = |s: &Source| {
+            (s.module.len() > folder.len() && s.module.starts_with(&folder)).then(|| s.module[folder.len()].clone())
+        };
+        let mut between = BTreeSet::new();
+        for (from, targets) in edges {
+            for to in targets {
+                if let (Some(a), Some(b)) = (part(&sources[from]), part(&sources[to]))
+                    && a != b
+                {
+                    between.insert((a, b));
+                }
+            }
+        }
+        let name = format!("src/{}/", folder.join("/"));
+        if between.len() > MAX_ROOM_EDGES {
+            broken.push(format!(
+                "{name} has {} import edges between its parts (at most {MAX_ROOM_EDGES})",
+                between.len()
+            ));
+        }
+        counts.insert(name, between.len());
+    }
+    (broken, counts)
+}
+
+#[test]
+fn the_job_rooms_point_down_from_features_to_a_core_that_knows_none() {
+    let (sources, edges) = graph();
+    let (broken, counts) = job_room_violations(&sources, &edges);
+    eprintln!("import edges between the parts of each folder of jobs/: {counts:?}");
+    assert!(broken.is_empty(), "the rooms of jobs/ are broken:\n{}", broken.join("\n"));
+    let jobs = sources.iter().filter(|(_, s)| room(s).is_some()).map(|(p, _)| p.clone()).collect();
+    assert!(cycles(&edges, &jobs).is_empty(), "import cycles in jobs/");
+    assert!(counts["src/jobs/"] > 0 && counts["src/jobs/core/"] > 0, "the count sees edges: {counts:?}");
+}
+
+/// The probes of issue 43: a call from the core's driver back to the manager (a cycle manager →
+/// scheduler → driver → manager), and a call from the core to a feature, each fail the layout.
+#[test]
+fn a_call_from_a_lower_job_room_to_a_higher_one_fails_the_layout() {
+    let probes = [
+        ("jobs/core/driver", "fn probe(jobs: &super::manager::JobManager) { let _ = jobs.cancel(1); }"),
+        ("jobs/core/driver", "fn probe(jobs: &crate::jobs::JobManager) { let _ = jobs.cancel(1); }"),
+        ("jobs/core/resource", "fn probe(s: &crate::jobs::statistics::Statistics) { let _ = s.result(1); }"),
+        ("jobs/statistics", "fn probe(s: &super::sweeps::Sweeps) { let _ = s.get(1); }"),
+        ("jobs/cluster/executor", "fn probe(m: &crate::jobs::merges::Merges) { let _ = m.clone(); }"),
+    ];
+    let (plain, edges) = graph();
+    assert!(job_room_violations(&plain, &edges).0.is_empty(), "the rooms hold before the probes");
+    assert!(cycles(&edges, &plain.keys().cloned().collect()).is_empty(), "no cycle before the probes");
+    for (file, probe) in probes {
+        let mut probed = sources();
+        let target = probed.get_mut(Path::new(file)).unwrap_or_else(|| panic!("no src/{file}.rs"));
+        target.text.push_str(&format!("\n{}\n", strip_code(probe)));
+        let edges = edges_of(&probed);
+        let cycles = cycles(&edges, &probed.keys().cloned().collect());
+        let (broken, _) = job_room_violations(&probed, &edges);
+        assert!(!cycles.is_empty() || !broken.is_empty(), "the probe `{probe}` in src/{file}.rs went unnoticed");
+    }
 }

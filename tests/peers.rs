@@ -65,8 +65,8 @@ async fn bystander() -> (u16, Arc<AtomicBool>) {
     (port, contacted)
 }
 
-fn allow(peers: &[&str]) -> Vec<optimis::jobs::peers::Peer> {
-    peers.iter().map(|p| optimis::jobs::peers::Peer::parse(p).unwrap()).collect()
+fn allow(peers: &[&str]) -> Vec<optimis::jobs::merges::peers::Peer> {
+    peers.iter().map(|p| optimis::jobs::merges::peers::Peer::parse(p).unwrap()).collect()
 }
 
 /// A peer answering 500 with an endless body (a 3 GiB one once took the server to 6.3 GB): at most
@@ -214,7 +214,7 @@ async fn two_servers_with_tokens_exchange_a_study_over_https() {
     let b = Process::start_on(&db("b.db"), pb, &b_flags.iter().map(String::as_str).collect::<Vec<_>>());
     let a = Process::start_on(&db("a.db"), pa, &a_flags.iter().map(String::as_str).collect::<Vec<_>>());
 
-    optimis::jobs::peers::install_crypto_provider();
+    optimis::trust::pins::install_crypto_provider();
     let ca = reqwest::Certificate::from_pem(certified.cert.pem().as_bytes()).unwrap();
     let https = reqwest::Client::builder().tls_certs_only([ca]).build().unwrap();
     let (client_a, client_b) = (

@@ -134,8 +134,10 @@ async fn a_slow_peer_delays_only_the_client_whose_studies_pull_from_it() {
     let fast = TestServer::start().await;
     let fast_job = fast.submit_and_wait(&small_job(4, 31)).await;
     let slow = slow_peer().await;
-    let allowed: Vec<_> =
-        [slow.as_str(), fast.base.as_str()].iter().map(|p| optimis::jobs::peers::Peer::parse(p).unwrap()).collect();
+    let allowed: Vec<_> = [slow.as_str(), fast.base.as_str()]
+        .iter()
+        .map(|p| optimis::jobs::merges::peers::Peer::parse(p).unwrap())
+        .collect();
     let server = TestServer::start_with(move |c| {
         c.peers = allowed;
         c.http.max_document_requests = 2;

@@ -62,12 +62,12 @@ pub async fn compare(
     let csv = wants_csv(&headers, q.format.as_deref())?;
     let mut results = Vec::with_capacity(ids.len());
     for &id in &ids {
-        results.push(state.statistics.result(id).await?);
+        results.push(state.services.statistics.result(id).await?);
     }
     if csv {
         let mut specs = Vec::with_capacity(ids.len());
         for &id in &ids {
-            specs.push(state.jobs.get(id).await?.spec);
+            specs.push(state.services.jobs.get(id).await?.spec);
         }
         let rows = results.iter().zip(&specs).map(|(r, spec)| {
             let paper: Box<dyn Fn(&Strategy) -> PaperColumns + '_> =

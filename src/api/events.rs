@@ -26,7 +26,7 @@ use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::JobId;
 use super::responses::{NoSuchJob, ServerFailure};
-use crate::jobs::resource::JobResource;
+use crate::jobs::core::resource::JobResource;
 
 /// Shortest time between two events of a stream.
 pub const MIN_EVENT_INTERVAL: Duration = Duration::from_millis(250);
@@ -62,9 +62,9 @@ enum Phase {
     )
 )]
 pub async fn events(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
-    let shutdown = state.jobs.shutdown_signal();
-    let Some(rx) = state.jobs.subscribe(id) else {
-        state.jobs.get(id).await?; // 404 for no such job
+    let shutdown = state.services.jobs.shutdown_signal();
+    let Some(rx) = state.services.jobs.subscribe(id) else {
+        state.services.jobs.get(id).await?; // 404 for no such job
         return Ok(StatusCode::NO_CONTENT.into_response());
     };
     // Held by the stream: the slot frees when the stream ends or the client goes away.

@@ -25,7 +25,7 @@ use tokio::sync::{OwnedSemaphorePermit, TryAcquireError};
 
 use super::AppState;
 use super::error::ApiError;
-use crate::jobs::shares::{ClientKey, Share};
+use crate::jobs::merges::shares::{ClientKey, Share};
 
 /// Bodies up to this size are parsed on the worker that read them (microseconds); larger ones on
 /// the blocking pool.

@@ -34,7 +34,7 @@ pub async fn healthz() -> Json<Health> {
     )
 )]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
-    state.jobs.store().ready().await.map_err(ApiError::Unavailable)?;
+    state.services.jobs.store().ready().await.map_err(ApiError::Unavailable)?;
     Ok(Json(Health { status: "ok".into() }))
 }
 
@@ -48,8 +48,8 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
     )
 )]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
-    let states = state.jobs.store().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
-    let text = state.jobs.metrics().render(&states, &state.jobs.running_samples());
+    let states = state.services.jobs.store().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+    let text = state.services.jobs.metrics().render(&states, &state.services.jobs.running_samples());
     Ok(([(header::CONTENT_TYPE, crate::metrics::CONTENT_TYPE)], text))
 }
 

@@ -15,8 +15,8 @@ use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, page, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use super::wait::WaitQuery;
-use crate::jobs::documents::JobList;
-use crate::jobs::resource::{JobResource, JobState};
+use crate::jobs::core::documents::JobList;
+use crate::jobs::core::resource::{JobResource, JobState};
 use crate::sim::model::params::{MAX_LABEL_VALUE, is_label_key};
 use crate::store::JobFilter;
 
@@ -110,7 +110,7 @@ pub async fn submit(
             )
         }
     };
-    let (resource, replayed) = state.jobs.submit(doc, key).await?;
+    let (resource, replayed) = state.services.jobs.submit(doc, key).await?;
     let mut response = accepted(&resource);
     if replayed {
         response.headers_mut().insert("idempotent-replayed", HeaderValue::from_static("true"));
@@ -141,7 +141,7 @@ pub async fn list(
         return Err(ApiError::Invalid { field: "sweep".into(), message: "must be a sweep id (≥ 1)".into() });
     }
     let filter = JobFilter { state: q.state, sweep: q.sweep, label };
-    Ok(Json(state.jobs.list(&filter, cursor, limit).await?))
+    Ok(Json(state.services.jobs.list(&filter, cursor, limit).await?))
 }
 
 /// `KEY=VALUE` of the list's `label` filter.
@@ -177,16 +177,16 @@ pub async fn get(
     // A job that is not in memory has ended (or waits in the database for a restart's queue):
     // nothing to wait for.
     if let Some(wait) = q.duration()?
-        && let Some(mut rx) = state.jobs.subscribe(id)
+        && let Some(mut rx) = state.services.jobs.subscribe(id)
     {
         let _slot = state.streams.acquire()?;
-        let mut shutdown = state.jobs.shutdown_signal();
+        let mut shutdown = state.services.jobs.shutdown_signal();
         tokio::select! {
             _ = tokio::time::timeout(wait, rx.wait_for(|job| job.state.is_terminal())) => {}
             _ = shutdown.wait_for(|stopping| *stopping) => {}
         }
     }
-    Ok(Json(state.jobs.get(id).await?))
+    Ok(Json(state.services.jobs.get(id).await?))
 }
 
 /// Cancel a queued job, or stop a running one within one chunk of light paths.
@@ -201,7 +201,7 @@ pub async fn get(
     )
 )]
 pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
-    Ok(accepted(&state.jobs.cancel(id).await?))
+    Ok(accepted(&state.services.jobs.cancel(id).await?))
 }
 
 /// Add iterations to a job; they continue the same deterministic sequence.
@@ -225,7 +225,7 @@ pub async fn extend(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let request: ExtendRequest = typed(&body)?;
-    Ok(accepted(&state.jobs.extend(id, request.iterations, request.total).await?))
+    Ok(accepted(&state.services.jobs.extend(id, request.iterations, request.total).await?))
 }
 
 /// Delete a job that is not running, with its checkpoint.
@@ -239,6 +239,6 @@ pub async fn extend(
     )
 )]
 pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<StatusCode, ApiError> {
-    state.jobs.delete(id).await?;
+    state.services.jobs.delete(id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -35,7 +35,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Router;
-use axum::extract::{DefaultBodyLimit, State};
+use axum::extract::{DefaultBodyLimit, FromRef, State};
 use axum::response::Response;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::CompressionLayer;
@@ -44,6 +44,9 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+use crate::jobs::artifacts::Artifacts;
+use crate::jobs::evaluation::Evaluations;
+use crate::jobs::merges::Merges;
 use crate::jobs::prediction::Predictions;
 use crate::jobs::solves::Solves;
 use crate::jobs::statistics::Statistics;
@@ -53,19 +56,12 @@ use error::ApiError;
 use guard::Guard;
 pub use limits::{BearerToken, DEFAULT_DOCUMENT_LIMIT, HttpLimits};
 
-/// What every handler can reach; cheap to clone.
+/// What every handler can reach; cheap to clone. A route file takes only the handle it needs
+/// (`State<Statistics>`: axum's substates, see [`substates`]); the rest is the HTTP layer's own.
 #[derive(Clone)]
 pub struct AppState {
-    /// The lifecycle (`jobs.rs`, `events.rs`, `health.rs`).
-    pub jobs: JobManager,
-    /// Results, re-solves, moments, evaluations, merges and studies (`statistics.rs`, `studies.rs`).
-    pub statistics: Statistics,
-    /// Named solves (`solves.rs`).
-    pub solves: Solves,
-    /// Predictions at other ray budgets (`predictions.rs`).
-    pub predictions: Predictions,
-    /// Sweeps (`sweeps.rs`).
-    pub sweeps: Sweeps,
+    /// The job layer's handles: the lifecycle and the feature services.
+    pub services: Services,
     /// The OpenAPI document, rendered once.
     pub openapi_yaml: Arc<str>,
     /// SHA-256 of the bearer token, when the server requires one.
@@ -80,9 +76,32 @@ pub struct AppState {
     /// `--max-document-requests` + [`DOCUMENT_MEMORY_BODIES`] times the document limit.
     pub document_memory: Arc<tokio::sync::Semaphore>,
     /// Each client's share of `document_memory`: one document limit.
-    pub document_shares: Arc<crate::jobs::shares::Shares>,
+    pub document_shares: Arc<crate::jobs::merges::shares::Shares>,
     /// The document routes' body limit, bytes.
     pub document_bytes: usize,
+}
+
+/// Each handle of [`Services`] as a substate of [`AppState`], so that a handler takes
+/// `State<JobManager>` or `State<Statistics>` rather than the whole state.
+macro_rules! substates {
+    ($($field:ident: $handle:ty),* $(,)?) => {
+        $(impl FromRef<AppState> for $handle {
+            fn from_ref(state: &AppState) -> Self {
+                state.services.$field.clone()
+            }
+        })*
+    };
+}
+
+substates! {
+    jobs: JobManager,
+    statistics: Statistics,
+    merges: Merges,
+    artifacts: Artifacts,
+    evaluations: Evaluations,
+    solves: Solves,
+    predictions: Predictions,
+    sweeps: Sweeps,
 }
 
 /// Whole document bodies held beyond those being processed: room for a few uploads to arrive
@@ -175,7 +194,7 @@ async fn observe(
     let method = crate::metrics::method_label(request.method());
     let started = std::time::Instant::now();
     let response = next.run(request).await;
-    state.jobs.metrics().observe_request(method, &route, response.status().as_u16(), started.elapsed());
+    state.services.jobs.metrics().observe_request(method, &route, response.status().as_u16(), started.elapsed());
     response
 }
 
@@ -198,19 +217,14 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
 /// is read).
 pub fn router(services: Services, limits: &HttpLimits, token: Option<BearerToken>, guard: Guard) -> Router {
     let (router, api) = routes_and_document(limits.document_bytes);
-    let Services { jobs, statistics, solves, predictions, sweeps } = services;
     let state = AppState {
-        jobs,
-        statistics,
-        solves,
-        predictions,
-        sweeps,
+        services,
         openapi_yaml: api.to_yaml().expect("the OpenAPI document serialises").into(),
         token_digest: token.map(|t| auth::digest(&t.0)),
         streams: auth::StreamSlots::new(limits.max_event_streams),
         guard,
         body_timeout: limits.body_timeout,
-        document_shares: crate::jobs::shares::Shares::new(limits.document_bytes),
+        document_shares: crate::jobs::merges::shares::Shares::new(limits.document_bytes),
         document_memory: Arc::new(tokio::sync::Semaphore::new(
             (limits.max_document_requests + DOCUMENT_MEMORY_BODIES).saturating_mul(limits.document_bytes),
         )),

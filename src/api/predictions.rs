@@ -33,7 +33,7 @@ pub async fn predict(
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobPrediction>, ApiError> {
     let request: PredictRequest = typed(&body)?;
-    Ok(Json(state.predictions.predict(id, &request).await?))
+    Ok(Json(state.services.predictions.predict(id, &request).await?))
 }
 
 /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, for a renderer of
@@ -60,5 +60,5 @@ pub async fn budget(
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobBudget>, ApiError> {
     let request: BudgetRequest = typed(&body)?;
-    Ok(Json(state.predictions.budget(id, &request).await?))
+    Ok(Json(state.services.predictions.budget(id, &request).await?))
 }

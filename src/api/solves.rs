@@ -11,7 +11,7 @@ use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody};
 use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
-use crate::jobs::documents::JobResult;
+use crate::jobs::core::documents::JobResult;
 use crate::jobs::solves::SolveList;
 
 /// The `{id}` and `{name}` of a solve route; an id that names no job is a 404.
@@ -44,7 +44,7 @@ impl<S: Send + Sync> FromRequestParts<S> for SolvePath {
     )
 )]
 pub async fn list(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<SolveList>, ApiError> {
-    Ok(Json(state.solves.list_solves(id).await?))
+    Ok(Json(state.services.solves.list_solves(id).await?))
 }
 
 /// Keep solver options under a name (replacing any of that name; at most 32 per job) and answer
@@ -69,7 +69,7 @@ pub async fn save(
     SolvePath(id, name): SolvePath,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.solves.save_solve(id, &name, &patch).await?))
+    Ok(Json(state.services.solves.save_solve(id, &name, &patch).await?))
 }
 
 /// The results of a kept solve, re-solved from the job's latest checkpoint.
@@ -84,7 +84,7 @@ pub async fn save(
     )
 )]
 pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.solves.solve_result(id, &name).await?))
+    Ok(Json(state.services.solves.solve_result(id, &name).await?))
 }
 
 /// Forget a kept solve (`default` cannot be).
@@ -99,6 +99,6 @@ pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) 
     )
 )]
 pub async fn delete(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<StatusCode, ApiError> {
-    state.solves.delete_solve(id, &name).await?;
+    state.services.solves.delete_solve(id, &name).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -16,7 +16,7 @@ use super::csv::{csv_response, wants_csv};
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
-use crate::jobs::documents::{JobHistory, JobResult};
+use crate::jobs::core::documents::{JobHistory, JobResult};
 use crate::jobs::evaluation::JobEvaluation;
 use crate::sim::checks::published::{figures, paper_columns};
 use crate::sim::document::MomentsDocument;
@@ -104,8 +104,8 @@ pub async fn result(
     }
     let csv = text.is_none() && wants_csv(&headers, q.format.as_deref())?;
     let result = match q.lambda {
-        None => state.statistics.result(id).await?,
-        Some(lambda) => state.statistics.solve(id, &serde_json::json!({}), Some(lambda)).await?,
+        None => state.services.statistics.result(id).await?,
+        Some(lambda) => state.services.statistics.solve(id, &serde_json::json!({}), Some(lambda)).await?,
     };
     if let Some(format) = text {
         if q.table.as_deref().is_some_and(|t| t != "noise") {
@@ -157,7 +157,7 @@ pub async fn result(
             Ok(csv_response(weights_csv(&result.report), &format!("optimis-job-{id}-weights.csv")))
         }
         (true, Some("weights" | "effective")) => {
-            let effective = state.statistics.effective(id, None, EFFECTIVE_PATHS).await?;
+            let effective = state.services.artifacts.effective(id, None, EFFECTIVE_PATHS).await?;
             Ok(csv_response(effective_csv(&effective), &format!("optimis-job-{id}-effective.csv")))
         }
         (true, Some(other)) => Err(ApiError::Invalid {
@@ -186,7 +186,7 @@ pub async fn solve(
     JobId(id): JobId,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.statistics.solve(id, &patch, None).await?))
+    Ok(Json(state.services.statistics.solve(id, &patch, None).await?))
 }
 
 /// Score given weights on the job's latest checkpoint: another run's `/result` (its recommended
@@ -212,7 +212,7 @@ pub async fn evaluate(
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobEvaluation>, ApiError> {
     let given: GivenWeights = typed(&body)?;
-    Ok(Json(state.statistics.evaluate(id, given).await?))
+    Ok(Json(state.services.evaluations.evaluate(id, given).await?))
 }
 
 /// The job's moments (additive statistics) from its latest checkpoint, as a checksummed document.
@@ -228,7 +228,7 @@ pub async fn evaluate(
 )]
 pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
     // Serialised on the job layer's request pool (a document can be megabytes), sent as is.
-    let bytes = state.statistics.moments_json(id).await?;
+    let bytes = state.services.statistics.moments_json(id).await?;
     let disposition = HeaderValue::from_str(&format!("attachment; filename=\"optimis-job-{id}-moments.json\""))
         .expect("an ASCII header");
     Ok((
@@ -261,7 +261,7 @@ pub async fn history(
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let csv = wants_csv(&headers, q.format.as_deref())?;
-    let history = state.statistics.history(id).await?;
+    let history = state.services.statistics.history(id).await?;
     if csv {
         return Ok(csv_response(history.to_csv(), &format!("optimis-job-{id}-history.csv")));
     }

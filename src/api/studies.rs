@@ -17,8 +17,8 @@ use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{DocumentBody, JobId};
 use super::responses::{NoSuchJob, NotJson, ServerFailure};
-use crate::jobs::documents::JobResult;
-use crate::jobs::resource::JobResource;
+use crate::jobs::core::documents::JobResult;
+use crate::jobs::core::resource::JobResource;
 use crate::sim::document::MomentsDocument;
 
 /// A job on a peer optimis server whose moments are pulled over http or https. The peer must be
@@ -77,7 +77,7 @@ pub async fn merge(
     JobId(id): JobId,
     body: DocumentBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.statistics.merge_into(id, body.bytes.clone(), body.client).await?))
+    Ok(Json(state.services.merges.merge_into(id, body.bytes.clone(), body.client).await?))
 }
 
 /// Create a finished job from merged statistics of several documents or peer jobs.
@@ -98,7 +98,7 @@ pub async fn merge(
     )
 )]
 pub async fn create(State(state): State<AppState>, body: DocumentBody) -> Result<Response, ApiError> {
-    let resource = state.statistics.create_study(body.bytes.clone(), body.client).await?;
+    let resource = state.services.merges.create_study(body.bytes.clone(), body.client).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/jobs/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);

@@ -58,7 +58,7 @@ pub struct TableQuery {
     )
 )]
 pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> Result<Response, ApiError> {
-    let resource = state.sweeps.create_sweep(doc).await?;
+    let resource = state.services.sweeps.create_sweep(doc).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/sweeps/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);
@@ -80,7 +80,7 @@ pub async fn list(
 ) -> Result<Json<SweepList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let (limit, cursor) = page(q.limit, q.cursor, 20, 100)?;
-    Ok(Json(state.sweeps.list_sweeps(cursor, limit).await?))
+    Ok(Json(state.services.sweeps.list_sweeps(cursor, limit).await?))
 }
 
 /// A sweep: progress, and per point the swept values, its job, its honest noise table and
@@ -103,9 +103,9 @@ pub async fn get(
     let Query(q) = query.map_err(query_problem)?;
     if let Some(wait) = q.duration()? {
         let _slot = state.streams.acquire()?;
-        state.sweeps.wait_for_end(id, wait).await?;
+        state.services.sweeps.wait_for_end(id, wait).await?;
     }
-    Ok(Json(state.sweeps.get_sweep(id).await?))
+    Ok(Json(state.services.sweeps.get_sweep(id).await?))
 }
 
 /// The sweep's table: one row per point (with figures) and strategy, as JSON or CSV (columns:
@@ -132,7 +132,7 @@ pub async fn table(
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let csv = wants_csv(&headers, q.format.as_deref())?;
-    let table = state.sweeps.sweep_table(id).await?;
+    let table = state.services.sweeps.sweep_table(id).await?;
     if !csv {
         return Ok(Json(table).into_response());
     }
@@ -149,7 +149,7 @@ pub async fn table(
     )
 )]
 pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
-    Ok(Json(state.sweeps.cancel_sweep(id).await?))
+    Ok(Json(state.services.sweeps.cancel_sweep(id).await?))
 }
 
 /// Delete a sweep and its jobs (refused while one runs: cancel the sweep first).
@@ -163,6 +163,6 @@ pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Resu
     )
 )]
 pub async fn delete(State(state): State<AppState>, SweepId(id): SweepId) -> Result<StatusCode, ApiError> {
-    state.sweeps.delete_sweep(id).await?;
+    state.services.sweeps.delete_sweep(id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

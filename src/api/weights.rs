@@ -50,7 +50,7 @@ pub async fn weights(
     query: Result<Query<WeightsParams>, QueryRejection>,
 ) -> Result<Json<WeightsArtifact>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    Ok(Json(state.statistics.weights(id, parse_strategy(q.strategy)?).await?))
+    Ok(Json(state.services.artifacts.weights(id, parse_strategy(q.strategy)?).await?))
 }
 
 /// A strategy named in a query, as a noise-table row.
@@ -103,5 +103,5 @@ pub async fn effective(
         });
     }
     let strategy = parse_strategy(q.strategy)?;
-    Ok(Json(state.statistics.effective(id, strategy, paths as usize).await?))
+    Ok(Json(state.services.artifacts.effective(id, strategy, paths as usize).await?))
 }

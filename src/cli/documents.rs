@@ -114,7 +114,7 @@ pub fn merge(args: MergeArgs) -> Result<(), CliError> {
     let documents = args.documents.iter().map(read_document).collect::<Result<Vec<_>, _>>()?;
     #[cfg(feature = "server")]
     let (provenance, signers) = {
-        use crate::jobs::signing::Provenance;
+        use crate::trust::signing::Provenance;
         let provenance =
             Provenance::load(args.signing_key.as_deref(), &args.trust).map_err(|e| CliError::Config(e.to_string()))?;
         let mut signers = Vec::with_capacity(documents.len());

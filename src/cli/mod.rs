@@ -1,7 +1,7 @@
 //! The command line: `optimis run`, `bench`, `merge`, `report`, `predict`, `evaluate`, `budget`,
 //! `compare`, `figure`, `sweep`, `serve`, `wait` and `openapi`, thin shells around the library.
 //!
-//! Imports: crate::api, crate::jobs, crate::server, crate::sim
+//! Imports: crate::api, crate::jobs, crate::server, crate::sim, crate::trust
 
 mod bench;
 mod budget;

@@ -27,8 +27,8 @@ impl Server {
     /// A client of `base`, each request given `timeout`.
     pub fn new(base: &str, timeout: Duration) -> Result<Self, CliError> {
         let base = if base.contains("://") { base.to_string() } else { format!("http://{base}") };
-        crate::jobs::peers::install_crypto_provider();
-        let tls = crate::jobs::peer_tls::client_config(Vec::new())
+        crate::trust::pins::install_crypto_provider();
+        let tls = crate::trust::pins::client_config(Vec::new())
             .map_err(|e| CliError::Config(format!("cannot set up TLS: {e}")))?;
         let client = reqwest::Client::builder()
             .tls_backend_preconfigured(tls)

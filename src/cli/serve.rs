@@ -10,8 +10,9 @@ use super::{CliError, cores};
 use crate::api::{BearerToken, HttpLimits};
 use crate::jobs::RunPolicy;
 use crate::jobs::cluster::SlurmOptions;
-use crate::jobs::peers::{Peer, check_owner_only, read_secret};
+use crate::jobs::merges::peers::Peer;
 use crate::server::{ConnectionLimits, ServerConfig, TlsFiles, serve, termination_signal};
+use crate::trust::secrets::{check_owner_only, read_secret};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum LogFormat {
@@ -50,7 +51,7 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 1e16, value_parser = positive_number)]
     pub max_job_budget: f64,
     /// Largest expected work of one iteration, in light-path equivalents (a merge counts 50).
-    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
+    #[arg(long, default_value_t = crate::jobs::core::policy::DEFAULT_MAX_ITERATION_WORK, value_parser = positive_number)]
     pub max_iteration_work: f64,
     /// Most cells of a job's weight grid.
     #[arg(long, default_value_t = crate::sim::model::cells::MAX_CELLS as u64, value_parser = clap::value_parser!(u64).range(1..=crate::sim::model::cells::MAX_CELLS as u64))]
@@ -59,10 +60,10 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub max_queued_jobs: u64,
     /// Most points, and most runs, of one sweep (`POST /v1/sweeps`; each run is a queued job).
-    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_MAX_SWEEP_POINTS as u64, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    #[arg(long, default_value_t = crate::jobs::core::policy::DEFAULT_MAX_SWEEP_POINTS as u64, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     pub max_sweep_points: u64,
     /// Seconds a study (`POST /v1/studies`) may take to gather and merge its sources.
-    #[arg(long, default_value_t = crate::jobs::policy::DEFAULT_STUDY_DEADLINE.as_secs_f64(), value_parser = positive_seconds)]
+    #[arg(long, default_value_t = crate::jobs::core::policy::DEFAULT_STUDY_DEADLINE.as_secs_f64(), value_parser = positive_seconds)]
     pub study_deadline: f64,
     /// Most event streams open at once (beyond: 429 with Retry-After).
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=100_000))]

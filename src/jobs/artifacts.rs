@@ -4,8 +4,8 @@
 //! vouching exactly as its moments export does); and the same row's effective weights per (r2, r3)
 //! bin (`GET /v1/jobs/{id}/effective`, what Fig. 2 draws).
 
-use super::error::JobError;
-use super::references::{expected_luminances, scene_reference};
+use super::core::error::JobError;
+use super::core::references::{expected_luminances, scene_reference};
 use super::statistics::{Latest, Statistics};
 use crate::sim::solve::effective::EffectiveWeights;
 use crate::sim::solve::report::ReportInputs;
@@ -15,14 +15,26 @@ use crate::sim::weights::artifact::WeightsArtifact;
 use crate::sim::weights::build::artifact_of_moments;
 use crate::sim::weights::effective::effective_of_moments;
 
-impl Statistics {
+/// The weights artifacts and effective weights of stored jobs; cheap to clone.
+#[derive(Clone)]
+pub struct Artifacts {
+    statistics: Statistics,
+}
+
+impl Artifacts {
+    /// The artifacts of the jobs `statistics` reads.
+    pub fn new(statistics: Statistics) -> Self {
+        Self { statistics }
+    }
+
     /// The artifact of job `id`'s row `strategy` (none: its recommended row) from its latest
     /// checkpoint. CPU work (a report, maybe a refit): on the heavy pool.
     pub async fn weights(&self, id: i64, strategy: Option<Strategy>) -> Result<WeightsArtifact, JobError> {
-        let attests = self.attestation(id).await?;
-        let Latest { job, moments, .. } = self.latest(id).await?;
-        let provenance = self.provenance.clone();
-        self.jobs
+        let attests = self.statistics.attestation(id).await?;
+        let Latest { job, moments, .. } = self.statistics.latest(id).await?;
+        let provenance = self.statistics.provenance.clone();
+        self.statistics
+            .jobs
             .compute_heavy(move |_| -> Result<WeightsArtifact, JobError> {
                 let mut artifact = as_result(&job, |inputs| artifact_of_moments(&moments, &job, inputs, strategy))?;
                 artifact.provenance.job_id = Some(id);
@@ -44,8 +56,9 @@ impl Statistics {
         strategy: Option<Strategy>,
         paths: usize,
     ) -> Result<EffectiveWeights, JobError> {
-        let Latest { job, moments, .. } = self.latest(id).await?;
-        self.jobs
+        let Latest { job, moments, .. } = self.statistics.latest(id).await?;
+        self.statistics
+            .jobs
             .compute_heavy(move |_| -> Result<EffectiveWeights, JobError> {
                 as_result(&job, |inputs| effective_of_moments(&moments, &job, inputs, strategy, paths))
             })

@@ -4,8 +4,8 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::error::JobError;
-use super::resource::JobState;
+use super::core::error::JobError;
+use super::core::resource::JobState;
 use super::statistics::{Latest, Statistics};
 use crate::sim::model::params::SpecError;
 use crate::sim::solve::evaluate::{Evaluation, GivenWeights, evaluate};
@@ -25,11 +25,23 @@ pub struct JobEvaluation {
     pub evaluation: Evaluation,
 }
 
-impl Statistics {
+/// Evaluations of given weights on stored jobs; cheap to clone.
+#[derive(Clone)]
+pub struct Evaluations {
+    statistics: Statistics,
+}
+
+impl Evaluations {
+    /// Evaluations on the jobs `statistics` reads.
+    pub fn new(statistics: Statistics) -> Self {
+        Self { statistics }
+    }
+
     /// Scores `given` on the job's latest checkpoint; nothing is run or stored.
     pub async fn evaluate(&self, id: i64, given: GivenWeights) -> Result<JobEvaluation, JobError> {
-        let Latest { state, partial, job, moments, .. } = self.latest(id).await?;
+        let Latest { state, partial, job, moments, .. } = self.statistics.latest(id).await?;
         let evaluation = self
+            .statistics
             .jobs
             .compute_heavy(move |_| -> Result<Evaluation, JobError> {
                 evaluate(&moments, &job.config().cells, &given, &job.spec().solver.fixed)

@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
-use super::error::JobError;
-use super::resource::JobState;
+use super::core::error::JobError;
+use super::core::resource::JobState;
 use super::statistics::{Latest, Statistics};
 use crate::sim::model::params::{check, check_path_counts};
 use crate::sim::solve::budget::{BudgetPlan, Costs, plan};

@@ -1,21 +1,32 @@
 //! The job layer's handles, built once at start-up: the lifecycle core and the feature services
 //! on it. The HTTP state holds each of them; a route file uses one.
 
-use super::peers::Peers;
+use std::sync::Arc;
+
+use super::artifacts::Artifacts;
+use super::core::manager::JobManager;
+use super::evaluation::Evaluations;
+use super::merges::Merges;
+use super::merges::peers::Peers;
 use super::prediction::Predictions;
-use super::signing::Provenance;
 use super::solves::Solves;
 use super::statistics::Statistics;
 use super::sweeps::Sweeps;
-use super::toolbox::JobManager;
+use crate::trust::signing::Provenance;
 
 /// Every handle of the job layer; cheap to clone.
 #[derive(Clone)]
 pub struct Services {
     /// The lifecycle: submit, get, list, cancel, extend, delete, events, shutdown.
     pub jobs: JobManager,
-    /// Results, histories, re-solves, the moments export, evaluations, merges and studies.
+    /// Results, histories, re-solves, the moments export.
     pub statistics: Statistics,
+    /// Merges and studies.
+    pub merges: Merges,
+    /// Weights artifacts and effective weights.
+    pub artifacts: Artifacts,
+    /// Given weights scored on a job.
+    pub evaluations: Evaluations,
     /// Named re-solves kept with a job.
     pub solves: Solves,
     /// Noise tables predicted at other ray budgets.
@@ -29,8 +40,12 @@ impl Services {
     /// and merged documents checked with `provenance`, at most `documents` merges or studies
     /// process documents at once.
     pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance, documents: usize) -> Self {
-        let statistics = Statistics::new(jobs.clone(), peers, provenance, documents);
+        let provenance = Arc::new(provenance);
+        let statistics = Statistics::new(jobs.clone(), provenance.clone());
         Self {
+            merges: Merges::new(statistics.clone(), peers, provenance, documents),
+            artifacts: Artifacts::new(statistics.clone()),
+            evaluations: Evaluations::new(statistics.clone()),
             solves: Solves::new(statistics.clone()),
             predictions: Predictions::new(statistics.clone()),
             sweeps: Sweeps::new(statistics.clone()),

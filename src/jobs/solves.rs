@@ -10,9 +10,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::ToSchema;
 
-use super::documents::JobResult;
-use super::error::JobError;
-use super::resource::{now_ms, rfc3339};
+use super::core::documents::JobResult;
+use super::core::error::JobError;
+use super::core::resource::{now_ms, rfc3339};
 use super::statistics::Statistics;
 use crate::sim::model::params::check;
 use crate::sim::solve::options::SolverOptions;

@@ -1,20 +1,18 @@
 //! Statistics of stored jobs: results and histories, re-solves with other solver options, and the
-//! moments export — each read from the latest checkpoint, verified against its checksum. Merges
-//! and studies (`merges`) and evaluations of given weights (`evaluation`) are operations of the
-//! same handle.
+//! moments export — each read from the latest checkpoint, verified against its checksum. The
+//! weights artifacts (`artifacts`), evaluations of given weights (`evaluation`), solves and
+//! predictions are services of their own that read through this one.
 
 use std::sync::Arc;
 
 use serde_json::Value;
 
-use super::checkpoint::{checked_result, decode_checkpoint, no_checkpoint};
-use super::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS};
-use super::error::JobError;
-use super::peers::Peers;
-use super::references::expected_luminances;
-use super::resource::JobState;
-use super::signing::Provenance;
-use super::toolbox::JobManager;
+use super::core::checkpoint::{checked_result, decode_checkpoint, no_checkpoint};
+use super::core::documents::{HistoryPoint, JobHistory, JobResult, MAX_HISTORY_POINTS};
+use super::core::error::JobError;
+use super::core::manager::JobManager;
+use super::core::references::expected_luminances;
+use super::core::resource::JobState;
 use crate::sim::checks::published::applicable;
 use crate::sim::document::{Attestation, AttestationBasis, MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
@@ -23,6 +21,7 @@ use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_rep
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::ValidJob;
 use crate::sim::stats::moments::Moments;
+use crate::trust::signing::Provenance;
 
 /// A job's latest statistics, read once through [`Statistics::latest`].
 pub(super) struct Latest {
@@ -40,31 +39,18 @@ pub(super) struct Latest {
     pub moments: Moments,
 }
 
-/// The statistics of stored jobs; cheap to clone. It owns what only statistics need: the peers
-/// merges may pull from and this server's signing key and trusted keys.
+/// The statistics of stored jobs; cheap to clone.
 #[derive(Clone)]
 pub struct Statistics {
     pub(super) jobs: JobManager,
-    /// The allowed peers and the client that pulls from them.
-    pub(super) peers: Arc<Peers>,
-    /// The signing key for exports and the keys merges require (`signing`).
+    /// The signing key for exports (`crate::trust::signing`).
     pub(super) provenance: Arc<Provenance>,
-    /// Merges and studies parsing or merging documents at once (`--max-document-requests`): each
-    /// holds parsed documents. Taken only for that, never while a request waits on a peer.
-    pub(super) processing: Arc<tokio::sync::Semaphore>,
 }
 
 impl Statistics {
-    /// The statistics of `jobs`' jobs; merges pull from `peers`, exports are signed and merged
-    /// documents checked with `provenance`; at most `processing` merges or studies parse or merge
-    /// documents at once.
-    pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance, processing: usize) -> Self {
-        Self {
-            jobs,
-            peers: Arc::new(peers),
-            provenance: Arc::new(provenance),
-            processing: Arc::new(tokio::sync::Semaphore::new(processing.max(1))),
-        }
+    /// The statistics of `jobs`' jobs; exports are signed with `provenance`.
+    pub fn new(jobs: JobManager, provenance: Arc<Provenance>) -> Self {
+        Self { jobs, provenance }
     }
 
     /// The lifecycle these statistics belong to.
@@ -74,7 +60,7 @@ impl Statistics {
 
     /// The results of the latest checkpoint. Its moments are verified against their checksum when
     /// this checkpoint is first served and again once the last verification is older than
-    /// [`REVERIFY_AFTER`](super::checkpoint::REVERIFY_AFTER) (a corrupted checkpoint answers 409, not a stale result); the reads in
+    /// [`REVERIFY_AFTER`](super::core::checkpoint::REVERIFY_AFTER) (a corrupted checkpoint answers 409, not a stale result); the reads in
     /// between read the result alone, as a dashboard or a load polls it many times a second.
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
         let resource = self.jobs.get(id).await?;

@@ -38,7 +38,7 @@ use tokio::sync::Semaphore;
 use tokio::time::Sleep;
 use tokio_rustls::TlsAcceptor;
 
-use crate::jobs::shares::ClientKey;
+use crate::jobs::merges::shares::ClientKey;
 
 /// Longest wait for open connections to finish after a shutdown began.
 pub const GRACE: Duration = Duration::from_secs(10);

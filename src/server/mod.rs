@@ -4,10 +4,9 @@
 //! * [`listener`] — the accept loop: connection limit, timeouts, TLS, graceful shutdown;
 //! * [`tls`] — the server's certificate and key.
 //!
-//! Imports: crate::api, crate::jobs, crate::metrics, crate::store
+//! Imports: crate::api, crate::jobs, crate::metrics, crate::store, crate::trust
 
 pub mod listener;
-pub mod tls;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -19,11 +18,11 @@ use tokio::net::TcpListener;
 use crate::api::guard::Guard;
 use crate::api::{BearerToken, HttpLimits};
 use crate::jobs::cluster::{SlurmExecutor, SlurmOptions};
-use crate::jobs::compute::Pools;
-use crate::jobs::peers::{Peer, PeerConfigError, Peers};
-use crate::jobs::signing::{KeyError, Provenance};
+use crate::jobs::core::compute::Pools;
+use crate::jobs::merges::peers::{Peer, PeerConfigError, Peers};
 use crate::jobs::{Executor, JobManager, LocalPool, RunPolicy, Services};
 use crate::store::{Store, StoreError};
+use crate::trust::signing::{KeyError, Provenance};
 pub use listener::ConnectionLimits;
 
 /// Everything `optimis serve` can be told, validated.
@@ -92,7 +91,7 @@ pub enum ServerError {
     Peers(#[from] PeerConfigError),
     /// The TLS certificate or key is unusable.
     #[error(transparent)]
-    Tls(#[from] tls::TlsError),
+    Tls(#[from] crate::trust::acceptor::TlsError),
     /// The signing key or a trusted public key is unusable.
     #[error(transparent)]
     Keys(#[from] KeyError),
@@ -151,7 +150,7 @@ struct App {
 
 async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerError> {
     // Everything that can be refused is checked before the database is touched.
-    let tls = config.tls.as_ref().map(|f| tls::acceptor(&f.cert, &f.key)).transpose()?;
+    let tls = config.tls.as_ref().map(|f| crate::trust::acceptor::acceptor(&f.cert, &f.key)).transpose()?;
     let peers = Peers::new(config.peers.clone(), config.peer_ca.as_deref(), config.http.document_bytes)?;
     let provenance = Provenance::load(config.signing_key.as_deref(), &config.trust)?;
     let store = Store::open(&config.database).await?;

@@ -1,7 +1,7 @@
 //! Who vouches for a moments document: its detached signature ([`DocumentSignature`], Ed25519 over
 //! the document's checksum behind a domain tag) and what the signature attests ([`Attestation`]:
 //! how the signer came by the statistics). The keys and the signing live in the server
-//! (`jobs::signing`); the core only defines the format and the bytes a signature covers
+//! (`trust::signing`); the core only defines the format and the bytes a signature covers
 //! (`MomentsDocument::signed_message`).
 
 use serde::{Deserialize, Serialize};

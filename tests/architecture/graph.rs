@@ -16,7 +16,8 @@ pub(super) struct Source {
     pub(super) text: String,
 }
 
-fn sources() -> BTreeMap<PathBuf, Source> {
+/// Every source file under `src/` (tests files excepted), by path without extension.
+pub(super) fn sources() -> BTreeMap<PathBuf, Source> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut out = BTreeMap::new();
     let mut stack = vec![root.clone()];
@@ -252,8 +253,8 @@ fn words(code: &str) -> Vec<(usize, &str)> {
 }
 
 /// The types `code` defines (`struct`, `enum`, `trait`, `union`), and the functions of its
-/// inherent `impl` blocks by type. Trait impls are left out: calling their methods needs the trait,
-/// which a path names.
+/// inherent `impl` blocks by type. Trait impls are left out: they may live anywhere, and calling
+/// their methods needs the trait, which a path names.
 fn types_and_methods(code: &str) -> (BTreeSet<String>, BTreeMap<String, BTreeSet<String>>) {
     let (mut types, mut methods) = (BTreeSet::new(), BTreeMap::<String, BTreeSet<String>>::new());
     let w = words(code);
@@ -291,6 +292,8 @@ fn closing_angle(text: &str) -> usize {
     for (i, ch) in text.char_indices() {
         match ch {
             '<' => depth += 1,
+            // The arrow of a closure bound (`W: FnMut(&[u8]) -> Result<(), E>`) closes nothing.
+            '>' if text[..i].ends_with('-') => {}
             '>' if depth == 1 => return i + 1,
             '>' => depth -= 1,
             _ => {}
@@ -336,100 +339,32 @@ pub(super) fn graph() -> (BTreeMap<PathBuf, Source>, Edges) {
     (sources, edges)
 }
 
-/// Method names of the standard library's common types (maps, sets, locks, channels, options,
-/// iterators): a call of one of them on a receiver other than `self` says nothing about which
-/// crate type it calls.
-const COMMON_METHODS: &[&str] = &[
-    "get",
-    "insert",
-    "remove",
-    "len",
-    "is_empty",
-    "contains",
-    "lock",
-    "clone",
-    "iter",
-    "map",
-    "push",
-    "pop",
-    "new",
-    "default",
-    "from",
-    "into",
-    "list",
-    "delete",
-    "cancel",
-    "send",
-    "recv",
-    "take",
-    "set",
-    "next",
-    "extend",
-    "retain",
-    "clear",
-    "join",
-    "split",
-    "find",
-    "filter",
-    "load",
-    "store",
-    "run",
-    "start",
-    "write",
-    "read",
-    "flush",
-    "close",
-    "shutdown",
-    "subscribe",
-    "borrow",
-    "result",
-    "merge",
-    "check",
-    "parse",
-    "add",
-    "sum",
-];
-
-/// The import graph of `sources`: their paths, and their method calls resolved by type name.
+/// The import graph of `sources`: the files their paths lead to. Method calls need no edges of
+/// their own: every type's inherent `impl` blocks are in the file that defines it
+/// ([`stray_impls`] finds any that are not), so the path that names a type — or the path to
+/// whatever hands out a value of it — already leads to every method it has.
 pub(super) fn edges_of(sources: &BTreeMap<PathBuf, Source>) -> Edges {
     let modules = Modules::of(sources);
-    let items: BTreeMap<&PathBuf, _> = sources.iter().map(|(p, s)| (p, types_and_methods(&s.text))).collect();
-    // Each (type, method) of an inherent impl block outside the files that define the type (there
-    // the paths that name the type already lead), and the files that hold it.
-    let mut homes: BTreeMap<(&str, &str), BTreeSet<&PathBuf>> = BTreeMap::new();
-    for (path, (types, methods)) in &items {
-        for (ty, fns) in methods.iter().filter(|(ty, _)| !types.contains(*ty)) {
-            for f in fns {
-                homes.entry((ty.as_str(), f.as_str())).or_default().insert(*path);
-            }
-        }
-    }
     let mut edges = Edges::new();
     for (path, source) in sources {
         let targets = edges.entry(path.clone()).or_default();
         let referenced = referenced_paths(&source.module, &source.text);
-        let (types, methods) = &items[path];
-        let mut known: BTreeSet<&str> = types.iter().chain(methods.keys()).map(String::as_str).collect();
-        known.extend(referenced.iter().filter_map(|p| p.last()).map(String::as_str));
         targets.extend(referenced.iter().filter_map(|r| modules.resolve(r, 0)));
-        for ((ty, method), files) in &homes {
-            // `self.m(` where the file implements the type is a call of the type's method; any
-            // other receiver only counts for a name the standard library does not also use
-            // (`.get(` on a map is not `JobManager::get`).
-            let own = methods.contains_key(*ty)
-                && [format!("self.{method}("), format!("Self::{method}(")]
-                    .iter()
-                    .any(|c| source.text.contains(c.as_str()));
-            let calls = [format!(".{method}("), format!("::{method}("), format!(".{method}::<")];
-            let other =
-                !COMMON_METHODS.contains(method) && calls.iter().any(|call| source.text.contains(call.as_str()));
-            if known.contains(ty) && (own || other) {
-                targets.extend(files.iter().map(|f| (*f).clone()));
-            }
-        }
         targets.remove(path);
     }
     edges
+}
+
+/// Inherent `impl` blocks outside the file that defines their type, as "file: impl Type".
+pub(super) fn stray_impls(sources: &BTreeMap<PathBuf, Source>) -> Vec<String> {
+    let mut stray = Vec::new();
+    for (path, source) in sources {
+        let (types, methods) = types_and_methods(&source.text);
+        for ty in methods.keys().filter(|ty| !types.contains(*ty)) {
+            stray.push(format!("src/{}.rs: impl {ty}", path.display()));
+        }
+    }
+    stray
 }
 
 /// The cycles (strongly connected components of more than one file) among `files`.

@@ -70,7 +70,7 @@ pub fn assert_problem(reply: Reply, status: u16) -> Value {
 
 /// An HTTP client for tests (rustls needs its crypto provider installed once per process).
 pub fn http() -> reqwest::Client {
-    optimis::jobs::peers::install_crypto_provider();
+    optimis::trust::pins::install_crypto_provider();
     reqwest::Client::new()
 }
 

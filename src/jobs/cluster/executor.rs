@@ -25,7 +25,7 @@ use super::options::SlurmOptions;
 use super::private::FileError;
 use super::slurm::{QueueEntry, Slurm, SlurmError};
 use super::tracking::{Tracking, round_spec};
-use crate::jobs::executor::{Executor, OnBatch, Segment, SegmentError};
+use crate::jobs::core::executor::{Executor, OnBatch, Segment, SegmentError};
 use crate::metrics::Metrics;
 use crate::sim::runner::RunError;
 use crate::sim::spec::{JobSpec, SpecError};

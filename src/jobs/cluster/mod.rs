@@ -4,7 +4,7 @@
 //! files, merges the documents exactly, resubmits failed tasks and adopts running ones after a
 //! restart. Slurm schedules; nothing here is a scheduler of its own.
 //!
-//! Imports: crate::jobs::executor, crate::sim, crate::metrics
+//! Imports: crate::jobs::core::executor, crate::sim, crate::metrics
 //!
 //! * [`executor`] — the executor: rounds submitted, tasks followed, failures retried, merges;
 //! * [`tracking`] — one job's tasks between two looks: documents read, states judged;

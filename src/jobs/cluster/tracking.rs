@@ -9,7 +9,7 @@ use std::time::{Instant, SystemTime};
 use super::files::{JobDir, MAX_TASK_DOCUMENT, Record, Round, document_name};
 use super::private::PrivateDir;
 use super::slurm::{QueueEntry, is_active};
-use crate::jobs::executor::{ExecutionView, TaskView};
+use crate::jobs::core::executor::{ExecutionView, TaskView};
 use crate::sim::document::MomentsDocument;
 use crate::sim::spec::{JobSpec, Shard, ValidJob};
 use crate::sim::stats::coverage::Coverage;

@@ -22,13 +22,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use utoipa::ToSchema;
 
-use super::checkpoint::spec_json;
-use super::error::JobError;
-use super::policy::{check_budget, check_iteration_work, range_len};
-use super::references::cached_scene_reference;
-use super::resource::{JobState, now_ms, resource_from_row, rfc3339};
+use super::core::checkpoint::spec_json;
+use super::core::error::JobError;
+use super::core::manager::JobManager;
+use super::core::policy::{check_budget, check_iteration_work, range_len};
+use super::core::references::cached_scene_reference;
+use super::core::resource::{JobState, now_ms, resource_from_row, rfc3339};
 use super::statistics::Statistics;
-use super::toolbox::JobManager;
 use crate::sim::spec::SpecError;
 use crate::sim::sweep::{
     PointFigures, PointResults, SweepPlan, SweepSpec, SweepTable, figures_of_report, plan, point_figures,

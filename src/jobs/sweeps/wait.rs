@@ -3,8 +3,8 @@
 use std::time::{Duration, Instant};
 
 use super::{Sweeps, no_sweep, overall_state};
-use crate::jobs::error::JobError;
-use crate::jobs::resource::JobState;
+use crate::jobs::core::error::JobError;
+use crate::jobs::core::resource::JobState;
 
 impl Sweeps {
     /// Returns once every run of the sweep has ended, `wait` has passed or the server stops; one

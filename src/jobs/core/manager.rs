@@ -22,8 +22,9 @@
 //! Each of them is bounded (see `sim::checks::quadrature`, `sim::engines::cost`,
 //! `sim::math::exact_sum`).
 //!
-//! The features built on the lifecycle — statistics, solves, predictions, sweeps — are handles of
-//! their own that use the small toolbox in `toolbox`; none of them is a method of the manager.
+//! The features built on the lifecycle — statistics, merges, solves, predictions, sweeps — are
+//! handles of their own (outside this folder) that use the handle's small toolbox (the first
+//! `impl` block below); none of them is a method of the manager.
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
@@ -33,23 +34,132 @@ use std::time::Duration;
 
 use serde_json::Value;
 use tokio::runtime::Handle;
-use tokio::sync::{Notify, watch};
+use tokio::sync::{MutexGuard, Notify, watch};
 
-use super::checkpoint::spec_json;
-use super::compute::Pools;
+use super::checkpoint::{self, spec_json};
+use super::compute::{Pools, Stop};
+use super::documents::JobList;
 use super::error::JobError;
 use super::executor::Executor;
 use super::policy::{RunPolicy, check_budget, check_iteration_work, range_len, refuse_shard_extension, target_total};
+use super::recovery::recover;
 use super::references::cached_scene_reference;
 use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row, rfc3339};
 use super::scheduler::scheduler;
-use super::state::{ActiveJob, Inner, StopReason};
-use super::toolbox::JobManager;
+use super::state::{ActiveJob, Hold, Inner, StopReason};
 use crate::metrics::{JobSample, Metrics};
 use crate::sim::math::digest::sha256_hex;
+use crate::sim::spec::ValidJob;
 use crate::sim::spec::{SpecError, parse_job_spec};
-use crate::store::{Inserted, JobFilter, NewJob, Store, StoreError};
+use crate::store::{Checkpoint, Inserted, JobFilter, NewJob, Store, StoreError};
 
+/// Handle to the job manager; cheap to clone.
+#[derive(Clone)]
+pub struct JobManager {
+    inner: Arc<Inner>,
+}
+
+/// What the features (statistics, merges, solves, predictions, sweeps) may do with the core: run
+/// work on the request pools, read the store and the policy, look at and queue active jobs under
+/// the lifecycle lock, hold a finished job for an operation, verify a checkpoint.
+impl JobManager {
+    /// Runs light work `f` (parsing, validation, checksums) on the request pool and awaits it.
+    pub(crate) async fn compute<T: Send + 'static>(
+        &self,
+        f: impl FnOnce() -> T + Send + 'static,
+    ) -> Result<T, JobError> {
+        self.inner.pools.light(f).await
+    }
+
+    /// Runs heavy work `f` (quadratures, re-fits, re-solves, predictions) on the bounded heavy
+    /// pool (`compute`): 429 when it stays full; `f` can see that its request went away.
+    pub(crate) async fn compute_heavy<T: Send + 'static>(
+        &self,
+        f: impl FnOnce(&Stop) -> T + Send + 'static,
+    ) -> Result<T, JobError> {
+        self.inner.pools.heavy(self.shutdown_signal(), f).await
+    }
+
+    /// Receives shutdown: true once the server is stopping.
+    pub fn shutdown_signal(&self) -> watch::Receiver<bool> {
+        self.inner.shutdown.subscribe()
+    }
+
+    /// Whether the server is stopping (new work is refused).
+    pub(crate) fn is_shutting_down(&self) -> bool {
+        self.inner.shutting_down()
+    }
+
+    /// The store behind the manager.
+    pub fn store(&self) -> &Store {
+        &self.inner.store
+    }
+
+    /// The server's metrics.
+    pub fn metrics(&self) -> &Arc<Metrics> {
+        &self.inner.metrics
+    }
+
+    /// What this server accepts.
+    pub(crate) fn policy(&self) -> &RunPolicy {
+        &self.inner.policy
+    }
+
+    /// Takes the lifecycle lock: state checks and the database writes they decide are atomic with
+    /// respect to every other transition while the guard lives. Never hold it across computation.
+    pub(crate) async fn transition(&self) -> MutexGuard<'_, ()> {
+        self.inner.lifecycle.lock().await
+    }
+
+    /// The queued or running job `id`, if it is one.
+    pub(crate) fn active(&self, id: i64) -> Option<Arc<ActiveJob>> {
+        self.inner.active(id)
+    }
+
+    /// Jobs waiting for a worker.
+    pub(crate) fn queued(&self) -> usize {
+        self.inner.queued()
+    }
+
+    /// Whether job `id` waits for a worker (queued, not running).
+    pub(crate) fn is_queued(&self, id: i64) -> bool {
+        self.inner.is_queued(id)
+    }
+
+    /// Queues job `id` (whose row is committed) behind the others (call under the lifecycle lock).
+    pub(crate) fn enqueue(&self, id: i64, job: ValidJob, resource: JobResource) {
+        self.inner.enqueue(id, job, resource)
+    }
+
+    /// Forgets a queued job whose row is gone or cancelled (call under the lifecycle lock).
+    pub(crate) fn discard_queued(&self, id: i64) {
+        self.inner.discard_queued(id)
+    }
+
+    /// Holds the finished job `id` for an operation (a merge; call under the lifecycle lock), or
+    /// says that another operation holds it. Extend and delete refuse a held job.
+    pub(crate) fn hold(&self, id: i64) -> Result<Hold, JobError> {
+        self.inner.hold(id)
+    }
+
+    /// Whether an operation holds job `id`.
+    pub(crate) fn is_held(&self, id: i64) -> bool {
+        self.inner.is_held(id)
+    }
+
+    /// The latest checkpoint of job `id`, its checksum verified (`checkpoint::verified_checkpoint`).
+    pub(crate) async fn verified_checkpoint(&self, id: i64) -> Result<Checkpoint, JobError> {
+        checkpoint::verified_checkpoint(&self.inner.store, &self.inner.pools, &self.inner.verified, id).await
+    }
+
+    /// Whether job `id`'s stored moments were verified against `checksum` lately
+    /// (`checkpoint::REVERIFY_AFTER`).
+    pub(crate) fn recently_verified(&self, id: i64, checksum: &str) -> bool {
+        self.inner.verified.recently(id, checksum)
+    }
+}
+
+/// The lifecycle.
 impl JobManager {
     /// Starts the manager on `store`: re-queues the jobs a previous server left running or queued
     /// (running ones first, each to resume from its last checkpoint; a job whose cancel was
@@ -81,61 +191,10 @@ impl JobManager {
             driver_ended: Notify::new(),
             shutdown,
         });
+        recover(&inner).await?;
         let manager = Self { inner };
-        manager.recover().await?;
         tokio::spawn(scheduler(manager.inner.clone()));
         Ok(manager)
-    }
-
-    /// Fills in the result checksums of checkpoints written before they were kept (once: later
-    /// starts find none), in bounded batches hashed on the request pool.
-    async fn checksum_old_results(&self) -> Result<(), StoreError> {
-        loop {
-            let rows = self.inner.store.results_without_checksum(64).await?;
-            if rows.is_empty() {
-                return Ok(());
-            }
-            let hashed = self
-                .compute(move || rows.into_iter().map(|(id, result)| (id, sha256_hex(result.as_bytes()))).collect())
-                .await
-                .map_err(|e| StoreError::Corrupt { job: 0, detail: e.to_string() })?;
-            let hashed: Vec<(i64, String)> = hashed;
-            for (id, checksum) in hashed {
-                self.inner.store.fill_result_checksum(id, &checksum).await?;
-            }
-        }
-    }
-
-    async fn recover(&self) -> Result<(), StoreError> {
-        self.checksum_old_results().await?;
-        for row in self.inner.store.unfinished_jobs().await? {
-            if row.cancel_requested {
-                // The cancel was acknowledged before the server stopped: honour it.
-                self.inner.store.set_state(row.id, JobState::Cancelled, None, now_ms()).await?;
-                tracing::info!(job = row.id, iterations_done = row.iterations_done, "cancelled job stays cancelled");
-                continue;
-            }
-            let valid = parse_stored_spec(&row)
-                .map_err(|e| e.to_string())
-                .and_then(|s| s.validate().map_err(|e| e.to_string()));
-            match valid {
-                Ok(job) => {
-                    if row.state != JobState::Queued {
-                        self.inner.store.set_state(row.id, JobState::Queued, None, now_ms()).await?;
-                    }
-                    let mut resource = resource_from_row(&row)
-                        .map_err(|e| StoreError::Corrupt { job: row.id, detail: e.to_string() })?;
-                    resource.state = JobState::Queued;
-                    self.enqueue(row.id, job, resource);
-                    tracing::info!(job = row.id, iterations_done = row.iterations_done, "re-queued unfinished job");
-                }
-                Err(e) => {
-                    let reason = format!("the stored specification is no longer valid: {e}");
-                    self.inner.store.set_state(row.id, JobState::Failed, Some(&reason), now_ms()).await?;
-                }
-            }
-        }
-        Ok(())
     }
 
     /// Iterations and throughput of every running job, from memory.
@@ -249,12 +308,7 @@ impl JobManager {
     }
 
     /// A page of jobs, newest first, optionally in one state, after `cursor` (the last id seen).
-    pub async fn list(
-        &self,
-        filter: &JobFilter,
-        cursor: Option<i64>,
-        limit: u32,
-    ) -> Result<super::documents::JobList, JobError> {
+    pub async fn list(&self, filter: &JobFilter, cursor: Option<i64>, limit: u32) -> Result<JobList, JobError> {
         let mut rows = self.inner.store.list_jobs(filter, cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
@@ -266,7 +320,7 @@ impl JobManager {
                 None => resource_from_row(row),
             })
             .collect::<Result<_, _>>()?;
-        Ok(super::documents::JobList { jobs, next_cursor })
+        Ok(JobList { jobs, next_cursor })
     }
 
     /// Cancels a queued job at once, or asks a running one to stop (within one chunk of light

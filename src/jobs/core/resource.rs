@@ -106,13 +106,13 @@ pub fn rfc3339(ms: i64) -> String {
 }
 
 /// The spec stored with a job.
-pub(super) fn parse_stored_spec(row: &JobRow) -> Result<JobSpec, JobError> {
+pub(in crate::jobs) fn parse_stored_spec(row: &JobRow) -> Result<JobSpec, JobError> {
     serde_json::from_str(&row.spec)
         .map_err(|e| JobError::Internal(format!("stored spec of job {} is unreadable: {e}", row.id)))
 }
 
 /// The resource of a job that is not active, from its row.
-pub(super) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
+pub(in crate::jobs) fn resource_from_row(row: &JobRow) -> Result<JobResource, JobError> {
     Ok(JobResource {
         id: row.id,
         state: row.state,

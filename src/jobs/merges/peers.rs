@@ -20,7 +20,7 @@
 //!   holds a connection and nothing else: no processing slot, no other client's turn.
 //!
 //! https peers are verified against the system's roots plus any `--peer-ca` certificates, each of
-//! which is also pinned (`peer_tls`; rustls with the ring provider).
+//! which is also pinned (`crate::trust::pins`; rustls with the ring provider).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -32,9 +32,10 @@ use tokio::sync::Semaphore;
 use rustls::pki_types::CertificateDer;
 use rustls::pki_types::pem::PemObject;
 
-use super::error::JobError;
-use super::peer_tls::client_config;
 use super::shares::{ClientKey, Shares};
+use crate::jobs::core::error::JobError;
+use crate::trust::pins::{client_config, install_crypto_provider};
+use crate::trust::secrets::{SecretError, read_config_file, read_secret};
 
 /// Time to establish a connection to a peer.
 pub const PEER_CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
@@ -74,19 +75,10 @@ pub enum PeerConfigError {
     /// A `--peer` argument (as given) is not a usable base URL, and why.
     #[error("--peer {0:?}: {1}")]
     Url(String, String),
-    /// A secret file (a peer's or this server's token, the TLS key) or the `--peer-ca` file
-    /// cannot be read.
-    #[error("cannot read {path}: {source}")]
-    Read {
-        /// The file that cannot be read.
-        path: PathBuf,
-        /// The operating system's reason.
-        source: std::io::Error,
-    },
-    /// A secret file is readable by other users than its owner, or holds no acceptable token (at
-    /// least 16 visible ASCII characters); the message says which and how to fix it.
-    #[error("{0}")]
-    Insecure(String),
+    /// A peer's token file or the `--peer-ca` file cannot be read, or the token file is not
+    /// secret (see [`SecretError`]).
+    #[error(transparent)]
+    Secret(#[from] SecretError),
     /// The `--peer-ca` file holds no PEM certificate, or one that cannot be parsed.
     #[error("--peer-ca {path}: {message}")]
     Ca {
@@ -142,61 +134,6 @@ impl Peer {
     }
 }
 
-/// Refuses a secret file (a token, a TLS key) that users other than its owner can read.
-pub fn check_owner_only(path: &Path) -> Result<(), PeerConfigError> {
-    let metadata =
-        std::fs::metadata(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let mode = metadata.permissions().mode();
-        if mode & 0o077 != 0 {
-            return Err(PeerConfigError::Insecure(format!(
-                "{} is readable by other users (mode {:o}); make it readable by its owner only: chmod 600 {}",
-                path.display(),
-                mode & 0o777,
-                path.display()
-            )));
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = metadata;
-    Ok(())
-}
-
-/// Largest key, token or certificate file read at start: far more than any PEM key or chain, and
-/// a bound for a path such as `/dev/zero` that would never end.
-pub const MAX_CONFIG_FILE: u64 = 1 << 20;
-
-/// Reads a configuration file (a key, a token, certificates) of at most [`MAX_CONFIG_FILE`] bytes.
-pub fn read_config_file(path: &Path) -> Result<Vec<u8>, std::io::Error> {
-    use std::io::Read;
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)?.take(MAX_CONFIG_FILE + 1).read_to_end(&mut bytes)?;
-    if bytes.len() as u64 > MAX_CONFIG_FILE {
-        return Err(std::io::Error::other(format!(
-            "larger than {MAX_CONFIG_FILE} bytes: not a key, token or certificate file"
-        )));
-    }
-    Ok(bytes)
-}
-
-/// Reads a secret from a file that only its owner may read (a group- or world-readable secret is
-/// refused, as ssh does): the trimmed first line, at least 16 visible ASCII characters.
-pub fn read_secret(path: &Path) -> Result<String, PeerConfigError> {
-    check_owner_only(path)?;
-    let bytes = read_config_file(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
-    let text = String::from_utf8_lossy(&bytes);
-    let token = text.trim().to_string();
-    if token.len() < 16 || !token.chars().all(|c| c.is_ascii_graphic()) {
-        return Err(PeerConfigError::Insecure(format!(
-            "{} must hold a token of at least 16 visible ASCII characters (e.g. `openssl rand -hex 32`)",
-            path.display()
-        )));
-    }
-    Ok(token)
-}
-
 /// The peers this server may pull from, and the client it pulls with.
 pub struct Peers {
     allowed: Vec<Peer>,
@@ -215,11 +152,6 @@ impl std::fmt::Debug for Peers {
     }
 }
 
-/// Installs ring as the process's rustls provider (once; later calls find it installed).
-pub fn install_crypto_provider() {
-    let _ = rustls::crypto::ring::default_provider().install_default();
-}
-
 impl Peers {
     /// The allow-list `allowed`, with extra trusted roots from the PEM file `ca` (for peers with
     /// self-signed or private certificates).
@@ -235,7 +167,7 @@ impl Peers {
         let mut extra = Vec::new();
         if let Some(path) = ca {
             let pem =
-                read_config_file(path).map_err(|source| PeerConfigError::Read { path: path.to_path_buf(), source })?;
+                read_config_file(path).map_err(|source| SecretError::Read { path: path.to_path_buf(), source })?;
             extra = CertificateDer::pem_slice_iter(&pem)
                 .collect::<Result<Vec<_>, _>>()
                 .map_err(|e| PeerConfigError::Ca { path: path.to_path_buf(), message: e.to_string() })?;

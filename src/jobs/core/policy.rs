@@ -34,7 +34,7 @@ pub struct RunPolicy {
 /// on 2 cores (the paper's brute-force iteration is 10⁷, its restricted one ~3·10³).
 pub const DEFAULT_MAX_ITERATION_WORK: f64 = 1e10;
 
-/// Default study deadline: enough for [`super::peers::CONCURRENT_PULLS`] slow peers at a time to
+/// Default study deadline: enough for the merges' `CONCURRENT_PULLS` slow peers at a time to
 /// deliver documents at the document limit twice over, short enough that no study holds a request
 /// for hours.
 pub const DEFAULT_STUDY_DEADLINE: Duration = Duration::from_secs(180);
@@ -60,7 +60,7 @@ impl Default for RunPolicy {
 }
 
 /// Refuses jobs beyond this server's budget: N_F · N_B · `iterations` and the cell count.
-pub(super) fn check_budget(policy: &RunPolicy, spec: &JobSpec, iterations: u64) -> Result<(), JobError> {
+pub(in crate::jobs) fn check_budget(policy: &RunPolicy, spec: &JobSpec, iterations: u64) -> Result<(), JobError> {
     let pairs = spec.light_paths as f64 * spec.camera_paths as f64 * iterations as f64;
     if pairs > policy.job_budget {
         return Err(SpecError::new(
@@ -87,7 +87,7 @@ pub(super) fn check_budget(policy: &RunPolicy, spec: &JobSpec, iterations: u64) 
 /// Refuses a configuration whose single iteration is expected to cost more than the server
 /// allows (the check behind "a job that cannot be cancelled": an iteration of 10¹⁷ light-path
 /// equivalents once ran for ever). CPU work: call it on the request pool.
-pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobError> {
+pub(in crate::jobs) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result<(), JobError> {
     let work = iteration_work(job.config());
     let total = work.total();
     if total.is_finite() && total <= policy.max_iteration_work {
@@ -115,7 +115,12 @@ pub(super) fn check_iteration_work(policy: &RunPolicy, job: &ValidJob) -> Result
 
 /// The new total of an extension: `more` beyond `base`, or `total` outright (which must exceed
 /// `done`); at most 10⁹.
-pub(super) fn target_total(base: u64, done: u64, more: Option<u64>, total: Option<u64>) -> Result<u64, JobError> {
+pub(in crate::jobs) fn target_total(
+    base: u64,
+    done: u64,
+    more: Option<u64>,
+    total: Option<u64>,
+) -> Result<u64, JobError> {
     const MAX: u64 = crate::sim::spec::MAX_ITERATIONS;
     match (more, total) {
         (Some(add), None) => match base.checked_add(add) {
@@ -140,13 +145,13 @@ pub(super) fn target_total(base: u64, done: u64, more: Option<u64>, total: Optio
 }
 
 /// Iterations a job runs (its range's length).
-pub(super) fn range_len(spec: &JobSpec) -> u64 {
+pub(in crate::jobs) fn range_len(spec: &JobSpec) -> u64 {
     let r = spec.iteration_range();
     r.end - r.start
 }
 
 /// A shard's range is fixed by its study: running past it would overlap the next shard.
-pub(super) fn refuse_shard_extension(id: i64, spec: &JobSpec) -> Result<(), JobError> {
+pub(in crate::jobs) fn refuse_shard_extension(id: i64, spec: &JobSpec) -> Result<(), JobError> {
     match spec.shard {
         Some(_) => Err(JobError::Conflict(format!(
             "job {id} is a shard: its range is fixed by the study; add iterations with a new job using first_iteration"

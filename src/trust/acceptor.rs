@@ -9,7 +9,8 @@ use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use tokio_rustls::TlsAcceptor;
 
-use crate::jobs::peers::read_config_file;
+use super::pins::install_crypto_provider;
+use super::secrets::read_config_file;
 
 /// Why the certificate or key cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -37,7 +38,7 @@ pub enum TlsError {
 
 /// An acceptor for the certificate chain in `cert` and the private key in `key` (PEM).
 pub fn acceptor(cert: &Path, key: &Path) -> Result<TlsAcceptor, TlsError> {
-    crate::jobs::peers::install_crypto_provider();
+    install_crypto_provider();
     let cert_error = |message: String| TlsError::Certificate { path: cert.to_path_buf(), message };
     let pem = read_config_file(cert).map_err(|e| cert_error(e.to_string()))?;
     let chain: Vec<CertificateDer<'static>> =

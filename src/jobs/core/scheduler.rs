@@ -8,7 +8,7 @@ use super::driver;
 use super::state::Inner;
 
 /// Starts queued jobs while workers are free; runs until shutdown.
-pub(super) async fn scheduler(inner: Arc<Inner>) {
+pub(in crate::jobs) async fn scheduler(inner: Arc<Inner>) {
     let mut shutdown = inner.shutdown.subscribe();
     loop {
         if *shutdown.borrow() {

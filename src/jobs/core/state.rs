@@ -118,6 +118,64 @@ impl Drop for Hold {
     }
 }
 
+/// The queue and the jobs in memory (each call takes its std mutex for a map operation only).
+impl Inner {
+    /// The queued or running job `id`, if it is one.
+    pub(crate) fn active(&self, id: i64) -> Option<Arc<ActiveJob>> {
+        self.active.lock().expect("active map").get(&id).cloned()
+    }
+
+    /// Jobs waiting for a worker.
+    pub(crate) fn queued(&self) -> usize {
+        self.queue.lock().expect("queue").len()
+    }
+
+    /// Whether job `id` waits for a worker (queued, not running).
+    pub(crate) fn is_queued(&self, id: i64) -> bool {
+        self.queue.lock().expect("queue").contains(&id)
+    }
+
+    /// Queues job `id` (whose row is committed) behind the others (call under the lifecycle lock).
+    pub(crate) fn enqueue(&self, id: i64, job: ValidJob, resource: JobResource) {
+        let total = resource.progress.iterations_total;
+        let active = Arc::new(ActiveJob {
+            id,
+            start: job.spec().iteration_range().start,
+            job,
+            stop: AtomicBool::new(false),
+            stop_reason: AtomicU8::new(0),
+            total: AtomicU64::new(total),
+            view: watch::channel(resource).0,
+        });
+        self.active.lock().expect("active map").insert(id, active);
+        self.queue.lock().expect("queue").push_back(id);
+        self.wake.notify_one();
+    }
+
+    /// Forgets a queued job whose row is gone or cancelled (call under the lifecycle lock): out of
+    /// the queue and memory, its watchers told it is cancelled.
+    pub(crate) fn discard_queued(&self, id: i64) {
+        self.queue.lock().expect("queue").retain(|&q| q != id);
+        if let Some(job) = self.active.lock().expect("active map").remove(&id) {
+            job.view.send_modify(|r| r.state = JobState::Cancelled);
+        }
+    }
+
+    /// Whether an operation holds job `id` (see [`Hold`]).
+    pub(crate) fn is_held(&self, id: i64) -> bool {
+        self.held.lock().expect("held set").contains(&id)
+    }
+
+    /// Holds the finished job `id` for an operation (a merge; call under the lifecycle lock), or
+    /// says that another operation holds it. Extend and delete refuse a held job.
+    pub(crate) fn hold(self: &Arc<Self>, id: i64) -> Result<Hold, JobError> {
+        if !self.held.lock().expect("held set").insert(id) {
+            return Err(JobError::Conflict(format!("job {id} is taking another merge; retry when it has finished")));
+        }
+        Ok(Hold { inner: self.clone(), id })
+    }
+}
+
 /// State transitions of a running job, called by its driver (through `block_on`).
 impl Inner {
     pub(crate) async fn mark_running(&self, job: &ActiveJob) -> Result<(), JobError> {

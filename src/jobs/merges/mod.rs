@@ -1,183 +1,74 @@
 //! Merges and studies: moments documents (sent, or pulled from allowed peers) added exactly to a
 //! finished job's statistics, or gathered into a new finished job.
 //!
+//! Imports: crate::jobs::core, crate::jobs::statistics, crate::sim, crate::store, crate::trust
+//!
 //! Documents arrive as bytes and are parsed straight into typed values on the request pool
-//! ([`parse_merge_body`], [`parse_study_body`]), never through a generic JSON value and never on a
-//! tokio worker; peers are pulled through the allow-list of [`super::peers`]. A merge holds its
-//! target (`toolbox`: extend and delete refuse it meanwhile) under the lifecycle lock, then
-//! verifies and adds the statistics with the lock released, and takes the lock again only to
-//! write: no other transition waits for its computation. Everything a merge computes goes into a
-//! copy of the target's statistics, so a refused merge changes nothing.
+//! ([`sources`]), never through a generic JSON value and never on a tokio worker; peers are pulled
+//! through the allow-list of [`peers`], each client within its share ([`shares`]). A merge holds
+//! its target (`JobManager::hold`: extend and delete refuse it meanwhile) under the lifecycle
+//! lock, then verifies and adds the statistics with the lock released, and takes the lock again
+//! only to write: no other transition waits for its computation. Everything a merge computes goes
+//! into a copy of the target's statistics, so a refused merge changes nothing.
 
+pub mod peers;
+pub mod shares;
+pub mod sources;
+
+use std::sync::Arc;
 use std::time::Duration;
 
 use futures_util::stream::{self, StreamExt, TryStreamExt};
-use serde::Deserialize;
-use serde_json::Value;
 
-use super::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
-use super::documents::JobResult;
-use super::error::JobError;
-use super::lineage::{MergeProvenance, SourceRecord};
-use super::peers::PULLS_PER_CLIENT;
-use super::policy::check_budget;
-use super::references::scene_reference;
-use super::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
-use super::shares::ClientKey;
+use self::peers::{PULLS_PER_CLIENT, Peers};
+use self::shares::ClientKey;
+use self::sources::{Source, StudyBody, parse_merge_body, parse_study_body};
+use super::core::checkpoint::{checkpoint_of, decode_checkpoint, spec_json};
+use super::core::documents::JobResult;
+use super::core::error::JobError;
+use super::core::lineage::{MergeProvenance, SourceRecord};
+use super::core::policy::check_budget;
+use super::core::references::scene_reference;
+use super::core::resource::{JobResource, JobState, now_ms, parse_stored_spec, resource_from_row};
 use super::statistics::Statistics;
 use crate::sim::configuration::explained;
-use crate::sim::document::{DocumentError, DocumentSignature, MomentsDocument, merged_spec, parse_json};
+use crate::sim::document::{DocumentError, MomentsDocument, merged_spec};
 use crate::sim::spec::{JobSpec, SpecError};
-use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
 use crate::store::{Checkpoint, NewJob};
+use crate::trust::signing::Provenance;
 
-/// Most sources of one study.
-pub const MAX_STUDY_SOURCES: usize = 256;
-
-/// A merge source as sent: `{"from": URL}` or the fields of a moments document. Deserialised
-/// field by field (an untagged enum would first copy the whole document into a generic value).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SourceFields {
-    from: Option<String>,
-    kind: Option<String>,
-    format_version: Option<u32>,
-    fingerprint: Option<String>,
-    coverage: Option<Coverage>,
-    spec: Option<JobSpec>,
-    moments: Option<Moments>,
-    checksum: Option<String>,
-    signature: Option<DocumentSignature>,
-}
-
-/// Where merged statistics come from.
-pub enum Source {
-    /// A document in the request, verified; `field` is its JSON path (empty for a merge's body).
-    Document {
-        /// The moments document, its checksum and consistency already verified (its signature is
-        /// checked against `--trust` when it is merged).
-        doc: Box<MomentsDocument>,
-        /// JSON path of the document in the request (`sources[2]`; empty for a merge's body).
-        field: String,
-    },
-    /// The job at this URL on a peer server; `field` is the JSON path of the URL.
-    Peer {
-        /// The job's URL on the peer, as sent in `from`; it must lie under an allowed `--peer`.
-        url: String,
-        /// JSON path of the `from` that named it (`sources[2].from`, or `from` for a merge).
-        field: String,
-    },
-}
-
-impl Source {
-    /// How the source is recorded in the merged job's provenance: the peer job's URL, or
-    /// `document` (or `document sources[2]` in a study).
-    pub fn label(&self) -> String {
-        match self {
-            Source::Peer { url, .. } => url.clone(),
-            Source::Document { field, .. } if field.is_empty() => "document".to_string(),
-            Source::Document { field, .. } => format!("document {field}"),
-        }
-    }
-}
-
-impl SourceFields {
-    /// The source, with an inline document verified. `at` is the JSON path of the source.
-    fn into_source(self, at: &str) -> Result<Source, JobError> {
-        let field = |name: &str| if at.is_empty() { name.to_string() } else { format!("{at}.{name}") };
-        if let Some(url) = self.from {
-            let others = [
-                self.kind.is_some(),
-                self.format_version.is_some(),
-                self.fingerprint.is_some(),
-                self.coverage.is_some(),
-                self.spec.is_some(),
-                self.moments.is_some(),
-                self.checksum.is_some(),
-                self.signature.is_some(),
-            ];
-            if others.iter().any(|&x| x) {
-                return Err(SpecError::new(at, "a peer source has exactly one field, `from`").into());
-            }
-            return Ok(Source::Peer { url, field: field("from") });
-        }
-        let missing = |name: &str| SpecError::new(field(name), "missing field of a moments document (or give `from`)");
-        let doc = MomentsDocument {
-            kind: self.kind.ok_or_else(|| missing("kind"))?,
-            format_version: self.format_version.ok_or_else(|| missing("format_version"))?,
-            fingerprint: self.fingerprint.ok_or_else(|| missing("fingerprint"))?,
-            coverage: self.coverage.ok_or_else(|| missing("coverage"))?,
-            spec: self.spec.ok_or_else(|| missing("spec"))?,
-            moments: self.moments.ok_or_else(|| missing("moments"))?,
-            checksum: self.checksum.ok_or_else(|| missing("checksum"))?,
-            signature: self.signature,
-        };
-        doc.verify()?;
-        Ok(Source::Document { doc: Box::new(doc), field: at.to_string() })
-    }
-}
-
-/// A JSON parse error: 400 for text that is not JSON, 422 naming the field for JSON of the wrong
-/// shape.
-fn parse_error(bytes: &[u8], message: String) -> JobError {
-    match serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-        Err(e) if e.is_syntax() || e.is_eof() => {
-            JobError::Malformed(format!("the request body is not valid JSON: {e}"))
-        }
-        _ => {
-            let (field, message) = match message.split_once(": ") {
-                Some((path, rest)) if !path.contains(' ') => (path.to_string(), rest.to_string()),
-                _ => (String::new(), message),
-            };
-            SpecError::new(field, message).into()
-        }
-    }
-}
-
-/// Parses the body of `POST /v1/jobs/{id}/merge` (CPU work: on the request pool).
-pub fn parse_merge_body(bytes: &[u8]) -> Result<Source, JobError> {
-    let fields: SourceFields = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
-    fields.into_source("")
-}
-
-/// The body of `POST /v1/studies`, parsed.
-pub struct StudyBody {
-    /// The sources to merge, 1 to [`MAX_STUDY_SOURCES`], inline documents already verified.
-    pub sources: Vec<Source>,
-    /// A merge patch on the solver options of the first source's spec; none keeps them.
-    pub solver: Option<Value>,
-}
-
-/// Parses the body of `POST /v1/studies` (CPU work: on the request pool).
-pub fn parse_study_body(bytes: &[u8]) -> Result<StudyBody, JobError> {
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Raw {
-        sources: Vec<SourceFields>,
-        solver: Option<Value>,
-    }
-    let raw: Raw = parse_json(bytes).map_err(|m| parse_error(bytes, m))?;
-    if !(1..=MAX_STUDY_SOURCES).contains(&raw.sources.len()) {
-        return Err(SpecError::new(
-            "sources",
-            format!("must list 1 to {MAX_STUDY_SOURCES} sources, got {}", raw.sources.len()),
-        )
-        .into());
-    }
-    let sources = raw
-        .sources
-        .into_iter()
-        .enumerate()
-        .map(|(i, s)| s.into_source(&format!("sources[{i}]")))
-        .collect::<Result<_, _>>()?;
-    Ok(StudyBody { sources, solver: raw.solver })
+/// Merges and studies; cheap to clone. It owns what only merges need: the peers they may pull
+/// from, the keys merged documents are checked against, and the processing slots.
+#[derive(Clone)]
+pub struct Merges {
+    /// The merged job's results, and the lifecycle (`Statistics::jobs`).
+    statistics: Statistics,
+    /// The allowed peers and the client that pulls from them.
+    peers: Arc<Peers>,
+    /// This server's key and the keys merges require (`crate::trust::signing`).
+    provenance: Arc<Provenance>,
+    /// Merges and studies parsing or merging documents at once (`--max-document-requests`): each
+    /// holds parsed documents. Taken only for that, never while a request waits on a peer.
+    processing: Arc<tokio::sync::Semaphore>,
 }
 
 /// How long a merge or a study waits for a processing slot before it is told to retry.
 const PROCESSING_WAIT: Duration = Duration::from_secs(10);
 
-impl Statistics {
+impl Merges {
+    /// Merges and studies of the jobs `statistics` reads: they pull from `peers`, check
+    /// documents with `provenance`, and at most `processing` of them parse or merge documents at
+    /// once.
+    pub fn new(statistics: Statistics, peers: Peers, provenance: Arc<Provenance>, processing: usize) -> Self {
+        Self {
+            statistics,
+            peers: Arc::new(peers),
+            provenance,
+            processing: Arc::new(tokio::sync::Semaphore::new(processing.max(1))),
+        }
+    }
+
     /// One of the few processing slots (`--max-document-requests`), for parsing or merging: 429
     /// after [`PROCESSING_WAIT`].
     async fn processing_slot(&self) -> Result<tokio::sync::SemaphorePermit<'_>, JobError> {
@@ -193,7 +84,7 @@ impl Statistics {
     /// Light work on parsed documents, under a processing slot.
     async fn process<T: Send + 'static>(&self, f: impl FnOnce() -> T + Send + 'static) -> Result<T, JobError> {
         let _slot = self.processing_slot().await?;
-        self.jobs.compute(f).await
+        self.statistics.jobs().compute(f).await
     }
 
     /// The verified document of a source (pulled from its peer for `client` if it names one), and
@@ -204,7 +95,7 @@ impl Statistics {
             Source::Peer { url, field } => {
                 // A pull waits on the network: a stopping server answers 503 at once instead of
                 // holding the request (and its own exit) until the pull's deadline.
-                let mut stopping = self.jobs.shutdown_signal();
+                let mut stopping = self.statistics.jobs().shutdown_signal();
                 let bytes = tokio::select! {
                     pulled = self.peers.pull(&url, &field, client) => pulled?,
                     _ = stopping.wait_for(|&s| s) => return Err(JobError::ShuttingDown),
@@ -246,30 +137,32 @@ impl Statistics {
         let (doc, signed_by) = self.fetch(source, client).await?;
         // Reserve the job: a short critical section (state checks only).
         let (row, _reservation) = {
-            let _guard = self.jobs.transition().await;
-            if self.jobs.active(id).is_some() {
+            let _guard = self.statistics.jobs().transition().await;
+            if self.statistics.jobs().active(id).is_some() {
                 return Err(JobError::Conflict(format!(
                     "job {id} is queued or running; merge into it once it has finished, or cancel it first"
                 )));
             }
-            let row = self.jobs.store().get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+            let row =
+                self.statistics.jobs().store().get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
             if !matches!(row.state, JobState::Succeeded | JobState::Cancelled) {
                 return Err(JobError::Conflict(format!(
                     "job {id} is {}; only a succeeded or cancelled job takes merges",
                     row.state
                 )));
             }
-            let reservation = self.jobs.hold(id)?;
+            let reservation = self.statistics.jobs().hold(id)?;
             (row, reservation)
         };
         // Verify, merge and summarise with the lock released (the reservation keeps extend and
         // delete away), on the heavy pool (the summary re-fits), into a copy of the target's
         // statistics.
-        let checkpoint = self.jobs.store().load_checkpoint(id).await?;
-        let policy = self.jobs.policy().clone();
+        let checkpoint = self.statistics.jobs().store().load_checkpoint(id).await?;
+        let policy = self.statistics.jobs().policy().clone();
         let _slot = self.processing_slot().await?;
         let (checkpoint, spec, provenance) = self
-            .jobs
+            .statistics
+            .jobs()
             .compute_heavy(move |_| -> Result<(Checkpoint, String, String), JobError> {
                 let spec = parse_stored_spec(&row)?;
                 let job = spec.validate()?;
@@ -295,10 +188,10 @@ impl Statistics {
             })
             .await??;
         {
-            let _guard = self.jobs.transition().await;
-            self.jobs.store().write_merged(id, &checkpoint, &spec, &provenance, now_ms()).await?;
+            let _guard = self.statistics.jobs().transition().await;
+            self.statistics.jobs().store().write_merged(id, &checkpoint, &spec, &provenance, now_ms()).await?;
         }
-        self.result(id).await
+        self.statistics.result(id).await
     }
 
     /// Creates a finished job from several moments documents or peer jobs (a study, its body as
@@ -308,7 +201,7 @@ impl Statistics {
     /// sums: the order does not change a bit), so memory holds a few documents, not all of them.
     /// A processing slot is held only while a document is parsed or merged.
     pub async fn create_study(&self, body: bytes::Bytes, client: ClientKey) -> Result<JobResource, JobError> {
-        if self.jobs.is_shutting_down() {
+        if self.statistics.jobs().is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
         let StudyBody { sources, solver } = self.process(move || parse_study_body(&body)).await??;
@@ -351,7 +244,7 @@ impl Statistics {
         };
         // The whole gathering is bounded (each pull is too, but a study of many slow sources
         // would otherwise hold its request for the sum of their deadlines).
-        let deadline = self.jobs.policy().study_deadline;
+        let deadline = self.statistics.jobs().policy().study_deadline;
         let (first, total, records) = tokio::time::timeout(deadline, gather).await.map_err(|_| JobError::Peer {
             field: "sources".into(),
             message: format!(
@@ -363,10 +256,11 @@ impl Statistics {
         let (Some((_, base)), Some(moments)) = (first, total) else {
             return Err(SpecError::new("sources", "must list at least one source").into());
         };
-        let policy = self.jobs.policy().clone();
+        let policy = self.statistics.jobs().policy().clone();
         let _slot = self.processing_slot().await?;
         let (new, checkpoint) = self
-            .jobs
+            .statistics
+            .jobs()
             .compute_heavy(move |_| -> Result<(NewJob, Checkpoint), JobError> {
                 moments.check_bounded().map_err(DocumentError::from)?;
                 let mut spec = merged_spec(&base, &moments);
@@ -390,30 +284,7 @@ impl Statistics {
             })
             .await??;
         let provenance = MergeProvenance::of(records.into_iter().map(|(_, r)| r).collect()).to_json();
-        let row = self.jobs.store().insert_study(&new, &checkpoint, &provenance).await?;
+        let row = self.statistics.jobs().store().insert_study(&new, &checkpoint, &provenance).await?;
         resource_from_row(&row)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sources_are_parsed_field_by_field() {
-        let peer = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2"}"#).unwrap();
-        assert!(matches!(peer, Source::Peer { url, field } if url == "http://h:1/v1/jobs/2" && field == "from"));
-        let mixed = parse_merge_body(br#"{"from": "http://h:1/v1/jobs/2", "kind": "optimis-moments"}"#);
-        assert!(matches!(mixed, Err(JobError::Invalid(e)) if e.message.contains("exactly one field")));
-        assert!(matches!(parse_merge_body(b"{\"from\": "), Err(JobError::Malformed(_))));
-        assert!(matches!(parse_merge_body(b"[1, 2]"), Err(JobError::Invalid(_))));
-        let missing = parse_merge_body(br#"{"kind": "optimis-moments"}"#);
-        assert!(matches!(missing, Err(JobError::Invalid(e)) if e.field == "format_version"), "names the field");
-        let unknown = parse_merge_body(br#"{"fromm": 1}"#);
-        assert!(matches!(unknown, Err(JobError::Invalid(e)) if e.message.contains("fromm")));
-        let study = parse_study_body(br#"{"sources": [{"from": "http://h:1/v1/jobs/2"}, {"kind": "x"}]}"#);
-        assert!(matches!(study, Err(JobError::Invalid(e)) if e.field == "sources[1].format_version"));
-        let empty = parse_study_body(br#"{"sources": []}"#);
-        assert!(matches!(empty, Err(JobError::Invalid(e)) if e.field == "sources"));
     }
 }

@@ -26,8 +26,7 @@ use ring::signature::{ED25519, Ed25519KeyPair, KeyPair, UnparsedPublicKey};
 use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{PrivatePkcs8KeyDer, SubjectPublicKeyInfoDer};
 
-use super::error::JobError;
-use super::peers::{PeerConfigError, check_owner_only, read_config_file};
+use super::secrets::{SecretError, check_owner_only, read_config_file};
 use crate::sim::document::{Attestation, DocumentSignature, MomentsDocument};
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::spec::SpecError;
@@ -117,7 +116,7 @@ impl Provenance {
     /// content): the id of a trusted key — or this server's own — whose signature it carries, or
     /// none. With `--trust`, a document without a trusted signature is refused (`at` is its JSON
     /// path in the request, named in the error with `.signature`).
-    pub fn vouch(&self, doc: &MomentsDocument, at: &str) -> Result<Option<String>, JobError> {
+    pub fn vouch(&self, doc: &MomentsDocument, at: &str) -> Result<Option<String>, SpecError> {
         if self.trust.required() {
             return self.trust.check(doc, at).map(Some);
         }
@@ -150,7 +149,7 @@ impl SigningKey {
     pub fn load(path: &Path) -> Result<Self, KeyError> {
         let err = |message: String| KeyError::Signing { path: path.to_path_buf(), message };
         check_owner_only(path).map_err(|e| match e {
-            PeerConfigError::Read { source, .. } => err(source.to_string()),
+            SecretError::Read { source, .. } => err(source.to_string()),
             other => err(other.to_string()),
         })?;
         let pem = read_config_file(path).map_err(|e| err(e.to_string()))?;
@@ -269,9 +268,9 @@ impl TrustedKeys {
     /// Checks that `doc` (already verified: its checksum matches its content) is signed by a
     /// trusted key, and says which; `at` is the JSON path of the document in the request (a
     /// peer's URL field for a pulled one), named in the error with `.signature`.
-    pub fn check(&self, doc: &MomentsDocument, at: &str) -> Result<String, JobError> {
+    pub fn check(&self, doc: &MomentsDocument, at: &str) -> Result<String, SpecError> {
         let field = if at.is_empty() { "signature".to_string() } else { format!("{at}.signature") };
-        let refuse = |message: String| -> JobError { SpecError::new(field.clone(), message).into() };
+        let refuse = |message: String| -> SpecError { SpecError::new(field.clone(), message) };
         let Some(signature) = &doc.signature else {
             return Err(refuse(format!(
                 "this server accepts only documents signed by a trusted key ({}); the document is unsigned — export it \
@@ -366,10 +365,7 @@ mod tests {
         let read = MomentsDocument::from_json(&signed.to_json()).unwrap();
         trust.check(&read, "").unwrap();
 
-        let field = |e: JobError| match e {
-            JobError::Invalid(e) => (e.field, e.message),
-            other => panic!("{other:?}"),
-        };
+        let field = |e: SpecError| (e.field, e.message);
         // Edited and re-sealed (a valid checksum): the signature no longer matches.
         let mut edited = signed.clone();
         edited.spec.seed += 1;
@@ -405,10 +401,10 @@ mod tests {
         let trust = TrustedKeys::load(&[public]).unwrap();
         let mut doc = SigningKey::load(&private).unwrap().sign(document(), computed());
         doc.signature.as_mut().unwrap().key_id = "f".repeat(5_000_000);
-        let JobError::Invalid(e) = trust.check(&doc, "").unwrap_err() else { panic!() };
+        let e = trust.check(&doc, "").unwrap_err();
         assert!(e.message.len() < 200 && e.message.contains("(5000000 bytes)"), "{}", &e.message[..200]);
         doc.signature.as_mut().unwrap().algorithm = "x".repeat(1_000_000);
-        let JobError::Invalid(e) = trust.check(&doc, "").unwrap_err() else { panic!() };
+        let e = trust.check(&doc, "").unwrap_err();
         assert!(e.message.len() < 200, "{}", &e.message[..200]);
     }
 
