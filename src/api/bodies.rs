@@ -142,69 +142,162 @@ pub struct SolverPatch {
 #[cfg(test)]
 mod tests {
     //! The ranges these schemas publish are literals (utoipa's attributes take no constants); the
-    //! validator's constants are the one declaration, and this test holds the schemas to them.
-    use serde_json::Value;
-    use utoipa::PartialSchema;
+    //! validator's constants are the one declaration, and this test holds the served OpenAPI
+    //! document to them: every range keyword of every schema a submission or an extension reaches
+    //! (following `$ref`s), and the label rule in the job list's `label` parameter.
+    use std::collections::{BTreeMap, BTreeSet};
 
-    use super::*;
-    use crate::api::jobs::ExtendRequest;
+    use serde_json::Value;
+
+    use crate::api::{DEFAULT_DOCUMENT_LIMIT, routes_and_document};
     use crate::sim::model::params::{
         MAX_BETA_DEG, MAX_CAMERA_PATHS, MAX_LENGTH, MAX_LEVEL, MAX_LIGHT_PATHS, MAX_PHI_BINS, MAX_RINGS, MIN_BETA_DEG,
         MIN_LENGTH,
     };
     use crate::sim::solve::options::{MAX_CV_LAMBDAS, MAX_LAMBDA};
-    use crate::sim::spec::MAX_ITERATIONS;
+    use crate::sim::spec::{
+        MAX_ITERATIONS, MAX_LABEL_KEY, MAX_LABEL_VALUE, MAX_LABELS, MAX_NAME, MAX_NOTES, MAX_TASKS,
+    };
 
-    /// `keyword` of property `name` in the JSON form of `schema`.
-    fn bound(schema: &Value, name: &str, keyword: &str) -> f64 {
-        let property = &schema["properties"][name];
-        property[keyword].as_f64().unwrap_or_else(|| panic!("{name} has no {keyword}: {property}"))
+    /// The JSON Schema keywords that bound a value, an array, a string or an object.
+    const RANGE_KEYWORDS: [&str; 10] = [
+        "minimum",
+        "maximum",
+        "exclusiveMinimum",
+        "exclusiveMaximum",
+        "minItems",
+        "maxItems",
+        "minLength",
+        "maxLength",
+        "minProperties",
+        "maxProperties",
+    ];
+
+    /// (schema, property, keyword): a property's items are `property[]`.
+    type Bounds = BTreeMap<(String, String, String), f64>;
+
+    /// A property's bounds as the validator states them: (schema, property, [(keyword, bound)]).
+    type Row<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
+
+    /// The OpenAPI document as served (and as `openapi.yaml` is written), as JSON.
+    fn served() -> Value {
+        serde_json::to_value(routes_and_document(DEFAULT_DOCUMENT_LIMIT).1).unwrap()
     }
 
-    fn json<T: PartialSchema>() -> Value {
-        serde_json::to_value(T::schema()).unwrap()
+    /// Every `$ref`'d schema name inside `value`.
+    fn refs(value: &Value, out: &mut Vec<String>) {
+        match value {
+            Value::Object(map) => {
+                if let Some(name) = map.get("$ref").and_then(Value::as_str) {
+                    out.push(name.trim_start_matches("#/components/schemas/").to_string());
+                }
+                map.values().for_each(|v| refs(v, out));
+            }
+            Value::Array(items) => items.iter().for_each(|v| refs(v, out)),
+            _ => {}
+        }
+    }
+
+    /// Every range keyword of the properties (and their items) of `roots` and of every schema they
+    /// reach.
+    fn published(doc: &Value, roots: &[&str]) -> Bounds {
+        let mut bounds = Bounds::new();
+        let mut todo: Vec<String> = roots.iter().map(|r| r.to_string()).collect();
+        let mut seen = BTreeSet::new();
+        while let Some(name) = todo.pop() {
+            if !seen.insert(name.clone()) {
+                continue;
+            }
+            let schema = &doc["components"]["schemas"][&name];
+            assert!(schema.is_object(), "the document has no schema {name}");
+            refs(schema, &mut todo);
+            for (property, value) in schema["properties"].as_object().into_iter().flatten() {
+                for (path, value) in [(property.clone(), value), (format!("{property}[]"), &value["items"])] {
+                    for keyword in RANGE_KEYWORDS {
+                        if let Some(bound) = value[keyword].as_f64() {
+                            bounds.insert((name.clone(), path.clone(), keyword.to_string()), bound);
+                        }
+                    }
+                }
+            }
+        }
+        bounds
     }
 
     #[test]
     fn the_published_ranges_are_the_validators() {
-        let job = json::<JobSubmission>();
-        for (name, lo, hi) in [
-            ("merge_radius", MIN_LENGTH, MAX_LENGTH),
-            ("light_paths", 1.0, MAX_LIGHT_PATHS as f64),
-            ("camera_paths", 1.0, MAX_CAMERA_PATHS as f64),
-            ("iterations", 1.0, MAX_ITERATIONS as f64),
-        ] {
-            assert_eq!((bound(&job, name, "minimum"), bound(&job, name, "maximum")), (lo, hi), "{name}");
-        }
-        let scene = json::<ScenePatch>();
-        for name in ["l2", "l3"] {
-            assert_eq!((bound(&scene, name, "minimum"), bound(&scene, name, "maximum")), (MIN_LENGTH, MAX_LENGTH));
-        }
+        let doc = served();
+        let both = |lo: f64, hi: f64| [("minimum", lo), ("maximum", hi)];
+        let lengths = both(MIN_LENGTH, MAX_LENGTH);
+        let counts = |hi: u64| both(1.0, hi as f64);
+        let iterations = counts(MAX_ITERATIONS);
+        let rows: &[Row] = &[
+            ("JobSubmission", "merge_radius", &lengths),
+            ("JobSubmission", "light_paths", &counts(MAX_LIGHT_PATHS)),
+            ("JobSubmission", "camera_paths", &counts(MAX_CAMERA_PATHS)),
+            ("JobSubmission", "iterations", &iterations),
+            // Unsigned integers: utoipa's own bound, the validator's too.
+            ("JobSubmission", "seed", &[("minimum", 0.0)]),
+            ("JobSubmission", "first_iteration", &[("minimum", 0.0)]),
+            ("JobSubmission", "name", &[("minLength", 1.0), ("maxLength", MAX_NAME as f64)]),
+            ("JobSubmission", "notes", &[("maxLength", MAX_NOTES as f64)]),
+            ("ScenePatch", "l2", &lengths),
+            ("ScenePatch", "l3", &lengths),
+            ("ScenePatch", "beta_deg", &both(MIN_BETA_DEG, MAX_BETA_DEG)),
+            ("IlluminationPatch", "a", &lengths),
+            ("IlluminationPatch", "r_ls", &lengths),
+            ("IlluminationPatch", "contrast", &[("exclusiveMinimum", 0.0), ("maximum", MAX_LEVEL)]),
+            ("IlluminationPatch", "rings", &[("minItems", 1.0), ("maxItems", MAX_RINGS as f64)]),
+            ("RingSpec", "outer_radius", &lengths),
+            ("RingSpec", "level", &both(0.0, MAX_LEVEL)),
+            ("CellPatch", "r2_edges", &[("minItems", 1.0)]),
+            ("CellPatch", "r3_edges", &[("minItems", 1.0)]),
+            ("CellPatch", "phi_bins", &both(1.0, f64::from(MAX_PHI_BINS))),
+            ("SolverPatch", "lambda", &both(0.0, MAX_LAMBDA)),
+            ("SolverPatch", "cv_lambdas", &[("minItems", 1.0), ("maxItems", MAX_CV_LAMBDAS as f64)]),
+            ("Shard", "index", &[("minimum", 0.0)]),
+            ("Shard", "count", &[("minimum", 1.0)]),
+            ("Execution", "tasks", &counts(MAX_TASKS)),
+            ("ExtendRequest", "iterations", &iterations),
+            ("ExtendRequest", "total", &iterations),
+        ];
+        let expected: Bounds = rows
+            .iter()
+            .flat_map(|(schema, property, bounds)| {
+                bounds
+                    .iter()
+                    .map(|(keyword, bound)| ((schema.to_string(), property.to_string(), keyword.to_string()), *bound))
+            })
+            .collect();
+        let found = published(&doc, &["JobSubmission", "ExtendRequest"]);
+        let differ: Vec<String> = expected
+            .keys()
+            .chain(found.keys())
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .filter(|k| expected.get(*k) != found.get(*k))
+            .map(|k| format!("{}.{} {}: validator {:?}, published {:?}", k.0, k.1, k.2, expected.get(k), found.get(k)))
+            .collect();
+        assert!(differ.is_empty(), "published ranges that are not the validator's:\n{}", differ.join("\n"));
+    }
+
+    #[test]
+    fn the_published_label_rule_is_the_labels() {
+        let doc = served();
+        let parameters = doc["paths"]["/v1/jobs"]["get"]["parameters"].as_array().unwrap();
+        let label = parameters.iter().find(|p| p["name"] == "label").expect("the list has a label parameter");
         assert_eq!(
-            (bound(&scene, "beta_deg", "minimum"), bound(&scene, "beta_deg", "maximum")),
-            (MIN_BETA_DEG, MAX_BETA_DEG)
+            label["schema"]["pattern"],
+            format!("^[A-Za-z0-9_.-]{{1,{MAX_LABEL_KEY}}}=.{{0,{MAX_LABEL_VALUE}}}$"),
+            "the list's label pattern"
         );
-        let light = json::<IlluminationPatch>();
-        for name in ["a", "r_ls"] {
-            assert_eq!((bound(&light, name, "minimum"), bound(&light, name, "maximum")), (MIN_LENGTH, MAX_LENGTH));
-        }
-        assert_eq!(bound(&light, "contrast", "exclusiveMinimum"), 0.0);
-        assert_eq!(bound(&light, "contrast", "maximum"), MAX_LEVEL);
-        assert_eq!(bound(&light, "rings", "maxItems"), MAX_RINGS as f64);
-        let ring = json::<RingSpec>();
-        assert_eq!(
-            (bound(&ring, "outer_radius", "minimum"), bound(&ring, "outer_radius", "maximum")),
-            (MIN_LENGTH, MAX_LENGTH)
-        );
-        assert_eq!((bound(&ring, "level", "minimum"), bound(&ring, "level", "maximum")), (0.0, MAX_LEVEL));
-        let cells = json::<CellPatch>();
-        assert_eq!(bound(&cells, "phi_bins", "maximum"), f64::from(MAX_PHI_BINS));
-        let solver = json::<SolverPatch>();
-        assert_eq!((bound(&solver, "lambda", "minimum"), bound(&solver, "lambda", "maximum")), (0.0, MAX_LAMBDA));
-        assert_eq!(bound(&solver, "cv_lambdas", "maxItems"), MAX_CV_LAMBDAS as f64);
-        let extend = json::<ExtendRequest>();
-        for name in ["iterations", "total"] {
-            assert_eq!(bound(&extend, name, "maximum"), MAX_ITERATIONS as f64, "{name}");
+        for schema in ["JobSubmission", "JobSpec"] {
+            let text = doc["components"]["schemas"][schema]["properties"]["labels"]["description"].as_str().unwrap();
+            for limit in
+                [format!("at most {MAX_LABELS}"), format!("1–{MAX_LABEL_KEY}"), format!("at most {MAX_LABEL_VALUE}")]
+            {
+                assert!(text.contains(&limit), "{schema}.labels says {limit:?}: {text}");
+            }
         }
     }
 }

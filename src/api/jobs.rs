@@ -17,7 +17,7 @@ use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use super::wait::WaitQuery;
 use crate::jobs::core::documents::JobList;
 use crate::jobs::core::resource::{JobResource, JobState};
-use crate::sim::model::params::{MAX_LABEL_VALUE, is_label_key};
+use crate::sim::spec::Label;
 use crate::store::JobFilter;
 
 /// Longest accepted `Idempotency-Key`.
@@ -133,28 +133,17 @@ pub async fn list(
 ) -> Result<Json<JobList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let (limit, cursor) = page(q.limit, q.cursor, 50, 500)?;
-    let label = match q.label {
-        None => None,
-        Some(text) => Some(parse_label(&text)?),
-    };
+    let label = q
+        .label
+        .as_deref()
+        .map(Label::parse)
+        .transpose()
+        .map_err(|e| ApiError::Invalid { field: "label".into(), message: e.message })?;
     if q.sweep.is_some_and(|s| s < 1) {
         return Err(ApiError::Invalid { field: "sweep".into(), message: "must be a sweep id (≥ 1)".into() });
     }
     let filter = JobFilter { state: q.state, sweep: q.sweep, label };
     Ok(Json(state.services.jobs.list(&filter, cursor, limit).await?))
-}
-
-/// `KEY=VALUE` of the list's `label` filter.
-fn parse_label(text: &str) -> Result<(String, String), ApiError> {
-    let invalid = |message: &str| ApiError::Invalid { field: "label".into(), message: message.into() };
-    let (key, value) = text.split_once('=').ok_or_else(|| invalid("must be KEY=VALUE"))?;
-    if !is_label_key(key) {
-        return Err(invalid("a label's key is 1 to 64 letters, digits, '_', '-' or '.'"));
-    }
-    if value.chars().count() > MAX_LABEL_VALUE {
-        return Err(invalid("a label's value is at most 200 characters"));
-    }
-    Ok((key.to_string(), value.to_string()))
 }
 
 /// A job: state, spec and progress.

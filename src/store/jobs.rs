@@ -10,6 +10,7 @@ use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
 use super::{JobState, Store, StoreError};
+use crate::sim::spec::Label;
 
 /// Unix milliseconds now.
 pub(crate) fn now_ms() -> i64 {
@@ -83,8 +84,8 @@ pub struct JobFilter {
     pub state: Option<JobState>,
     /// Only the runs of this sweep.
     pub sweep: Option<i64>,
-    /// Only jobs with this label (key, value).
-    pub label: Option<(String, String)>,
+    /// Only jobs with this label.
+    pub label: Option<Label>,
 }
 
 /// The outcome of an insert with an idempotency key.
@@ -225,9 +226,9 @@ impl Store {
         before: Option<i64>,
         limit: u32,
     ) -> Result<Vec<JobRow>, StoreError> {
-        // The label's JSON path is bound, never spliced: `$.labels."KEY"` (keys are validated to
+        // The label's JSON path is bound, never spliced: `$.labels."KEY"` (a `Label`'s key is
         // letters, digits, `_`, `-`, `.`, so the quoted member name needs no escaping).
-        let label_path = filter.label.as_ref().map(|(key, _)| format!("$.labels.\"{key}\""));
+        let label_path = filter.label.as_ref().map(|label| format!("$.labels.\"{}\"", label.key()));
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
@@ -240,7 +241,7 @@ impl Store {
         .bind(i64::from(limit))
         .bind(filter.sweep)
         .bind(label_path)
-        .bind(filter.label.as_ref().map(|(_, value)| value.clone()))
+        .bind(filter.label.as_ref().map(Label::value))
         .fetch_all(self.pool())
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)

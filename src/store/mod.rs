@@ -12,7 +12,7 @@
 //! (disk full, I/O error) is an error, never a success that was not kept. `/readyz` asks the
 //! database itself whether it has room for more (see [`Store::ready`]).
 //!
-//! Imports: nothing from the crate
+//! Imports: crate::sim::spec
 
 mod checkpoints;
 mod history;

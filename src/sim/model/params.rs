@@ -346,46 +346,6 @@ fn kind_differs(a: &Value, b: &Value) -> bool {
     }
 }
 
-/// Most labels on one job.
-pub const MAX_LABELS: usize = 32;
-
-/// Longest label value, in characters.
-pub const MAX_LABEL_VALUE: usize = 200;
-
-/// Whether `key` can be a label's key: 1 to 64 letters, digits, `_`, `-`, `.` (the job list's
-/// `label=` filter reads the same rule, and builds a JSON path from the key).
-pub fn is_label_key(key: &str) -> bool {
-    (1..=64).contains(&key.len()) && key.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
-}
-
-/// Checks a job's `name`, `labels` and `notes`: bounded, printable (they are shown in tables and
-/// pages), label keys of letters, digits, `_`, `-`, `.` (a list filters by them).
-pub fn validate_annotations(
-    name: Option<&str>,
-    labels: &std::collections::BTreeMap<String, String>,
-    notes: Option<&str>,
-) -> Result<(), SpecError> {
-    let printable = |s: &str| !s.chars().any(char::is_control);
-    if let Some(name) = name {
-        check(!name.trim().is_empty() && name.chars().count() <= 200 && printable(name), "name", || {
-            "must be 1 to 200 printable characters".to_string()
-        })?;
-    }
-    check(labels.len() <= MAX_LABELS, "labels", || format!("at most {MAX_LABELS} labels, got {}", labels.len()))?;
-    for (key, value) in labels {
-        check(is_label_key(key), &format!("labels.{key}"), || {
-            "a label's key is 1 to 64 letters, digits, '_', '-' or '.'".to_string()
-        })?;
-        check(value.chars().count() <= MAX_LABEL_VALUE && printable(value), &format!("labels.{key}"), || {
-            "a label's value is at most 200 printable characters".to_string()
-        })?;
-    }
-    if let Some(notes) = notes {
-        check(notes.chars().count() <= 4000, "notes", || "at most 4,000 characters".to_string())?;
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::parse_count;
