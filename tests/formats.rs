@@ -44,7 +44,7 @@ fn as_format_2(moments: &Moments, job: &ValidJob) -> Moments {
         fold.strategies.truncate(7);
         assert!(fold.components.is_none());
     }
-    old.check_well_formed().expect("a well-formed format-2 value");
+    optimis::sim::stats::well_formed::check_well_formed(&old).expect("a well-formed format-2 value");
     old
 }
 
@@ -145,8 +145,8 @@ fn format_4_components_are_format_3_s_over_the_predictable_prefix() {
     pool.install(|| run_iterations(config, 5, 0..300, &mut old, &never, |_, _| std::ops::ControlFlow::Continue(())))
         .unwrap();
     assert_eq!((old.format_version, new.format_version), (3, 4));
-    old.check_well_formed().expect("a well-formed format-3 value");
-    new.check_well_formed().expect("a well-formed format-4 value");
+    optimis::sim::stats::well_formed::check_well_formed(&old).expect("a well-formed format-3 value");
+    optimis::sim::stats::well_formed::check_well_formed(&new).expect("a well-formed format-4 value");
 
     // Everything but the components is the same, and the components agree on the prefix.
     let (n, n_c) = (new.layout().dimension(), new.layout().component_dimension());

@@ -164,7 +164,7 @@ fn exercise(base: Value, pointer: String, mutation: Mutation, target: Moments) {
             // What was merged reads back.
             let round = serde_json::to_vec(&merged).unwrap();
             let back: Moments = serde_json::from_slice(&round).expect("merged moments read back");
-            back.check_well_formed().expect("merged moments stay well formed");
+            optimis::sim::stats::well_formed::check_well_formed(&back).expect("merged moments stay well formed");
         }
         let _ = merge_documents(&[doc.clone(), doc]);
     });

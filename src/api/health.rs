@@ -48,7 +48,8 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
     )
 )]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
-    let states = state.services.jobs.store().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+    let states =
+        state.services.jobs.store().jobs().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
     let text = state.services.jobs.metrics().render(&states, &state.services.jobs.running_samples());
     Ok(([(header::CONTENT_TYPE, crate::metrics::CONTENT_TYPE)], text))
 }

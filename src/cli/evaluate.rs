@@ -12,6 +12,7 @@ use super::{CliError, table};
 use crate::sim::model::params::SpecError;
 use crate::sim::solve::evaluate::{Evaluation, GivenWeights, evaluate as score};
 use crate::sim::weights::artifact::{WEIGHTS_FORMAT, WeightsArtifact};
+use crate::sim::weights::build::given_weights;
 use crate::sim::weights::function::WeightFunction;
 
 #[derive(Debug, Args)]
@@ -41,7 +42,7 @@ pub fn evaluate(args: EvaluateArgs) -> Result<(), CliError> {
             serde_json::from_value(value).map_err(|source| CliError::Json { path: path.clone(), source })?;
         WeightFunction::new(artifact.clone())
             .map_err(|e| CliError::Unusable { path: path.clone(), detail: e.to_string() })?;
-        artifact.given().map_err(|detail| CliError::Unusable { path: path.clone(), detail })?
+        given_weights(&artifact).map_err(|detail| CliError::Unusable { path: path.clone(), detail })?
     } else {
         serde_json::from_value(value).map_err(|source| CliError::Json { path: path.clone(), source })?
     };

@@ -80,7 +80,7 @@ impl Solves {
         self.statistics.jobs.get(id).await?.spec.solver.patched(patch)?;
         // Solved before it is stored: a job without a checkpoint keeps no solve it cannot answer.
         let result = self.statistics.solve(id, patch, None).await?;
-        if !self.statistics.jobs.store().put_solve(id, name, &patch.to_string(), now_ms(), MAX_SOLVES).await? {
+        if !self.statistics.jobs.store().solves().put(id, name, &patch.to_string(), now_ms(), MAX_SOLVES).await? {
             return Err(JobError::Conflict(format!(
                 "job {id} keeps at most {MAX_SOLVES} named solves; delete one (DELETE /v1/jobs/{id}/solves/NAME)"
             )));
@@ -98,7 +98,7 @@ impl Solves {
             patch: Value::Object(Default::default()),
             created_at: job.created_at.clone(),
         }];
-        for row in self.statistics.jobs.store().list_solves(id).await? {
+        for row in self.statistics.jobs.store().solves().list(id).await? {
             let patch: Value = serde_json::from_str(&row.patch).map_err(|e| {
                 JobError::Internal(format!("stored solve {:?} of job {id} is unreadable: {e}", row.name))
             })?;
@@ -120,7 +120,7 @@ impl Solves {
             return self.statistics.result(id).await;
         }
         self.statistics.jobs.get(id).await?;
-        let row = self.statistics.jobs.store().get_solve(id, name).await?.ok_or_else(|| no_solve(id, name))?;
+        let row = self.statistics.jobs.store().solves().get(id, name).await?.ok_or_else(|| no_solve(id, name))?;
         let patch: Value = serde_json::from_str(&row.patch)
             .map_err(|e| JobError::Internal(format!("stored solve {name:?} of job {id} is unreadable: {e}")))?;
         self.statistics.solve(id, &patch, None).await
@@ -130,7 +130,7 @@ impl Solves {
     pub async fn delete_solve(&self, id: i64, name: &str) -> Result<(), JobError> {
         check_name(name)?;
         self.statistics.jobs.get(id).await?;
-        if self.statistics.jobs.store().delete_solve(id, name).await? { Ok(()) } else { Err(no_solve(id, name)) }
+        if self.statistics.jobs.store().solves().delete(id, name).await? { Ok(()) } else { Err(no_solve(id, name)) }
     }
 }
 

@@ -65,7 +65,7 @@ impl Statistics {
     pub async fn result(&self, id: i64) -> Result<JobResult, JobError> {
         let resource = self.jobs.get(id).await?;
         let (state, total) = (resource.state, resource.progress.iterations_total);
-        let stored = self.jobs.store().load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let stored = self.jobs.store().checkpoints().load_result(id).await?.ok_or_else(|| no_checkpoint(id))?;
         let known = self.jobs.recently_verified(id, &stored.checksum);
         let (done, json, result_checksum) = if known {
             (stored.iterations_done, stored.result, stored.result_checksum)
@@ -89,7 +89,7 @@ impl Statistics {
     /// keeps at most ~2,000 per job).
     pub async fn history(&self, id: i64) -> Result<JobHistory, JobError> {
         self.jobs.get(id).await?;
-        let rows = self.jobs.store().load_history(id, MAX_HISTORY_POINTS).await?;
+        let rows = self.jobs.store().history().load(id, MAX_HISTORY_POINTS).await?;
         let points = self
             .jobs
             .compute(move || {
@@ -112,7 +112,7 @@ impl Statistics {
     /// figures) starts here.
     pub(super) async fn latest(&self, id: i64) -> Result<Latest, JobError> {
         let resource = self.jobs.get(id).await?;
-        let checkpoint = self.jobs.store().load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+        let checkpoint = self.jobs.store().checkpoints().load(id).await?.ok_or_else(|| no_checkpoint(id))?;
         let (spec, merged) = (resource.spec, resource.merged);
         let (job, moments, iterations) = self
             .jobs

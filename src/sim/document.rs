@@ -32,6 +32,7 @@ use super::spec::JobSpec;
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::{MergeError, Moments};
+use crate::sim::stats::well_formed::check_well_formed;
 
 /// The `kind` of every moments document.
 pub const DOCUMENT_KIND: &str = "optimis-moments";
@@ -187,7 +188,7 @@ impl MomentsDocument {
         if checksum_of(&self.body()) != self.checksum {
             return Err(DocumentError::Checksum);
         }
-        self.moments.check_well_formed()?;
+        check_well_formed(&self.moments)?;
         if self.fingerprint != self.moments.fingerprint || self.coverage != self.moments.coverage {
             return Err(DocumentError::Inconsistent("fingerprint or coverage differ from the moments'".into()));
         }

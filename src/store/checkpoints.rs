@@ -8,9 +8,11 @@
 
 use sqlx::Row;
 
+use super::database::Database;
+use super::error::StoreError;
 use super::history::thin_history;
 use super::jobs::{JobRow, NewJob, job_columns, job_from_row};
-use super::{JobState, Store, StoreError};
+use super::state::JobState;
 
 /// A job's latest checkpoint: its statistics and what was computed from them. As read back by
 /// [`Store::load_checkpoint`], only the first four fields are filled (`best`, `warnings` and
@@ -93,26 +95,32 @@ async fn upsert_checkpoint(
     thin_history(tx, id).await
 }
 
-impl Store {
+/// The `checkpoints` table (with the merged and study rows it writes): its queries (`Store::checkpoints`).
+pub struct CheckpointsTable<'a> {
+    pub(super) db: &'a Database,
+}
+
+impl CheckpointsTable<'_> {
     /// Replaces a job's checkpoint and advances its `iterations_done`, in one transaction.
-    pub async fn write_checkpoint(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
+    pub async fn write(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
         self.write_checkpoint_tx(id, checkpoint, now).await
     }
 
     async fn write_checkpoint_tx(&self, id: i64, checkpoint: &Checkpoint, now: i64) -> Result<(), StoreError> {
-        self.transaction(async |tx| {
-            upsert_checkpoint(tx, id, checkpoint, now).await?;
-            sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, warnings = ?, updated_at = ? WHERE id = ?")
-                .bind(checkpoint.iterations_done as i64)
-                .bind(&checkpoint.best)
-                .bind(&checkpoint.warnings)
-                .bind(now)
-                .bind(id)
-                .execute(&mut *tx)
-                .await?;
-            Ok(())
-        })
-        .await
+        self.db
+            .transaction(async |tx| {
+                upsert_checkpoint(tx, id, checkpoint, now).await?;
+                sqlx::query("UPDATE jobs SET iterations_done = ?, best = ?, warnings = ?, updated_at = ? WHERE id = ?")
+                    .bind(checkpoint.iterations_done as i64)
+                    .bind(&checkpoint.best)
+                    .bind(&checkpoint.warnings)
+                    .bind(now)
+                    .bind(id)
+                    .execute(&mut *tx)
+                    .await?;
+                Ok(())
+            })
+            .await
     }
 
     /// Replaces the checkpoint of a finished job with merged statistics: the job becomes `merged`
@@ -126,24 +134,25 @@ impl Store {
         provenance: &str,
         now: i64,
     ) -> Result<(), StoreError> {
-        self.transaction(async |tx| {
-            upsert_checkpoint(tx, id, checkpoint, now).await?;
-            sqlx::query(
-                "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
+        self.db
+            .transaction(async |tx| {
+                upsert_checkpoint(tx, id, checkpoint, now).await?;
+                sqlx::query(
+                    "UPDATE jobs SET iterations_done = ?1, iterations_total = ?1, best = ?2, merged = 1, spec = ?3, \
                  updated_at = ?4, warnings = ?6, provenance = ?7 WHERE id = ?5",
-            )
-            .bind(checkpoint.iterations_done as i64)
-            .bind(&checkpoint.best)
-            .bind(spec)
-            .bind(now)
-            .bind(id)
-            .bind(&checkpoint.warnings)
-            .bind(provenance)
-            .execute(&mut *tx)
-            .await?;
-            Ok(())
-        })
-        .await
+                )
+                .bind(checkpoint.iterations_done as i64)
+                .bind(&checkpoint.best)
+                .bind(spec)
+                .bind(now)
+                .bind(id)
+                .bind(&checkpoint.warnings)
+                .bind(provenance)
+                .execute(&mut *tx)
+                .await?;
+                Ok(())
+            })
+            .await
     }
 
     /// Inserts a finished job holding merged statistics (a study), with its checkpoint, in one
@@ -154,7 +163,7 @@ impl Store {
         checkpoint: &Checkpoint,
         provenance: &str,
     ) -> Result<JobRow, StoreError> {
-        self.transaction(async |tx| {
+        self.db.transaction(async |tx| {
             let row = sqlx::query(concat!(
             "INSERT INTO jobs (state, spec, fingerprint, iterations_total, iterations_done, reference_luminance, best, \
              warnings, merged, created_at, updated_at, provenance) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, ?, ?, ?) RETURNING ",
@@ -181,12 +190,12 @@ impl Store {
     }
 
     /// A job's latest checkpoint, if any.
-    pub async fn load_checkpoint(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
+    pub async fn load(&self, id: i64) -> Result<Option<Checkpoint>, StoreError> {
         let row = sqlx::query(
             "SELECT iterations_done, moments, checksum, result, result_checksum FROM checkpoints WHERE job_id = ?",
         )
         .bind(id)
-        .fetch_optional(self.pool())
+        .fetch_optional(self.db.pool())
         .await?;
         row.map(|row| {
             Ok::<_, sqlx::Error>(Checkpoint {
@@ -210,7 +219,7 @@ impl Store {
         let row =
             sqlx::query("SELECT iterations_done, result, checksum, result_checksum FROM checkpoints WHERE job_id = ?")
                 .bind(id)
-                .fetch_optional(self.pool())
+                .fetch_optional(self.db.pool())
                 .await?;
         row.map(|row| {
             Ok(StoredResult {
@@ -229,7 +238,7 @@ impl Store {
     pub async fn results_without_checksum(&self, limit: u32) -> Result<Vec<(i64, String)>, StoreError> {
         let rows = sqlx::query("SELECT job_id, result FROM checkpoints WHERE result_checksum IS NULL LIMIT ?")
             .bind(limit)
-            .fetch_all(self.pool())
+            .fetch_all(self.db.pool())
             .await?;
         Ok(rows.iter().map(|r| Ok((r.try_get("job_id")?, r.try_get("result")?))).collect::<Result<_, sqlx::Error>>()?)
     }
@@ -239,7 +248,7 @@ impl Store {
         sqlx::query("UPDATE checkpoints SET result_checksum = ? WHERE job_id = ? AND result_checksum IS NULL")
             .bind(checksum)
             .bind(id)
-            .execute(self.pool())
+            .execute(self.db.pool())
             .await?;
         Ok(())
     }

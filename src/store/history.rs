@@ -3,7 +3,8 @@
 
 use sqlx::Row;
 
-use super::{Store, StoreError};
+use super::database::Database;
+use super::error::StoreError;
 
 /// The indices of at most `max` of `n` items, evenly spaced, the first and the last included (all
 /// of them when `n ≤ max`).
@@ -42,23 +43,28 @@ pub(super) async fn thin_history(tx: &mut sqlx::SqliteConnection, id: i64) -> Re
     Ok(())
 }
 
-impl Store {
+/// The checkpoints' history: its queries (`Store::history`).
+pub struct HistoryTable<'a> {
+    pub(super) db: &'a Database,
+}
+
+impl HistoryTable<'_> {
     /// A job's checkpoint history: (iterations, strategies JSON), oldest first.
     ///
     /// At most `max` rows, evenly spaced and with the first and the last ([`evenly_kept`]),
     /// streamed and thinned as they are read: memory holds `max` rows whatever the table holds
     /// (the writer keeps ~2,000 per job, but the table is only a file).
-    pub async fn load_history(&self, id: i64, max: usize) -> Result<Vec<(u64, String)>, StoreError> {
+    pub async fn load(&self, id: i64, max: usize) -> Result<Vec<(u64, String)>, StoreError> {
         use futures_util::TryStreamExt;
         let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM checkpoint_history WHERE job_id = ?")
             .bind(id)
-            .fetch_one(self.pool())
+            .fetch_one(self.db.pool())
             .await?;
         let keep = evenly_kept(n.max(0) as usize, max);
         let mut rows =
             sqlx::query("SELECT iterations, strategies FROM checkpoint_history WHERE job_id = ? ORDER BY iterations")
                 .bind(id)
-                .fetch(self.pool());
+                .fetch(self.db.pool());
         let (mut out, mut i) = (Vec::with_capacity(keep.len()), 0usize);
         while let Some(row) = rows.try_next().await? {
             // Rows appended since the count are past the last kept index: stop there.

@@ -9,13 +9,10 @@
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
-use super::{JobState, Store, StoreError};
+use super::database::Database;
+use super::error::StoreError;
+use super::state::JobState;
 use crate::sim::spec::Label;
-
-/// Unix milliseconds now.
-pub(crate) fn now_ms() -> i64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
-}
 
 /// A job as stored.
 #[derive(Debug, Clone, PartialEq)]
@@ -165,10 +162,15 @@ pub(super) async fn insert_queued_row(
     Ok(job_from_row(&row)?)
 }
 
-impl Store {
+/// The `jobs` table: its queries (`Store::jobs`).
+pub struct JobsTable<'a> {
+    pub(super) db: &'a Database,
+}
+
+impl JobsTable<'_> {
     /// Inserts a queued job, honouring an idempotency key. The row is committed before its id is
     /// returned.
-    pub async fn insert_job(&self, job: &NewJob) -> Result<Inserted, StoreError> {
+    pub async fn insert(&self, job: &NewJob) -> Result<Inserted, StoreError> {
         if let Some(key) = &job.idempotency_key
             && let Some(found) = self.find_by_key(key, job.request_hash.as_deref()).await?
         {
@@ -189,13 +191,13 @@ impl Store {
     }
 
     async fn insert_queued(&self, job: &NewJob) -> Result<JobRow, StoreError> {
-        self.transaction(async |tx| insert_queued_row(tx, job, None).await).await
+        self.db.transaction(async |tx| insert_queued_row(tx, job, None).await).await
     }
 
     async fn find_by_key(&self, key: &str, hash: Option<&str>) -> Result<Option<Inserted>, StoreError> {
         let row = sqlx::query(concat!("SELECT ", job_columns!(), ", request_hash FROM jobs WHERE idempotency_key = ?"))
             .bind(key)
-            .fetch_optional(self.pool())
+            .fetch_optional(self.db.pool())
             .await?;
         Ok(match row {
             None => None,
@@ -211,21 +213,16 @@ impl Store {
     }
 
     /// One job.
-    pub async fn get_job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+    pub async fn get(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
         let row = sqlx::query(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
             .bind(id)
-            .fetch_optional(self.pool())
+            .fetch_optional(self.db.pool())
             .await?;
         Ok(row.as_ref().map(job_from_row).transpose()?)
     }
 
     /// Jobs newest first, optionally in one state, with ids below `before` (keyset pagination).
-    pub async fn list_jobs(
-        &self,
-        filter: &JobFilter,
-        before: Option<i64>,
-        limit: u32,
-    ) -> Result<Vec<JobRow>, StoreError> {
+    pub async fn list(&self, filter: &JobFilter, before: Option<i64>, limit: u32) -> Result<Vec<JobRow>, StoreError> {
         // The label's JSON path is bound, never spliced: `$.labels."KEY"` (a `Label`'s key is
         // letters, digits, `_`, `-`, `.`, so the quoted member name needs no escaping).
         let label_path = filter.label.as_ref().map(|label| format!("$.labels.\"{}\"", label.key()));
@@ -242,13 +239,13 @@ impl Store {
         .bind(filter.sweep)
         .bind(label_path)
         .bind(filter.label.as_ref().map(Label::value))
-        .fetch_all(self.pool())
+        .fetch_all(self.db.pool())
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
 
     /// Jobs to pick up at start: those left running (in id order), then the queued ones.
-    pub async fn unfinished_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
+    pub async fn unfinished(&self) -> Result<Vec<JobRow>, StoreError> {
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
@@ -256,7 +253,7 @@ impl Store {
         ))
         .bind(JobState::Running.as_str())
         .bind(JobState::Queued.as_str())
-        .fetch_all(self.pool())
+        .fetch_all(self.db.pool())
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
@@ -268,7 +265,7 @@ impl Store {
             .bind(error)
             .bind(now)
             .bind(id)
-            .execute(self.pool())
+            .execute(self.db.pool())
             .await;
         Ok(done?.rows_affected() == 1)
     }
@@ -279,7 +276,7 @@ impl Store {
             .bind(reference)
             .bind(now)
             .bind(id)
-            .execute(self.pool())
+            .execute(self.db.pool())
             .await;
         Ok(done?.rows_affected() == 1)
     }
@@ -290,7 +287,7 @@ impl Store {
         let done = sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE id = ?")
             .bind(now)
             .bind(id)
-            .execute(self.pool())
+            .execute(self.db.pool())
             .await;
         Ok(done?.rows_affected() == 1)
     }
@@ -314,20 +311,21 @@ impl Store {
         .bind(state.as_str())
         .bind(now)
         .bind(id)
-        .execute(self.pool())
+        .execute(self.db.pool())
         .await;
         Ok(done?.rows_affected() == 1)
     }
 
     /// Deletes a job and its checkpoint, returning whether it existed.
-    pub async fn delete_job(&self, id: i64) -> Result<bool, StoreError> {
-        let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.pool()).await;
+    pub async fn delete(&self, id: i64) -> Result<bool, StoreError> {
+        let done = sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(self.db.pool()).await;
         Ok(done?.rows_affected() == 1)
     }
 
     /// Number of jobs in each state (every state listed, zero included).
     pub async fn count_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
-        let rows = sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state").fetch_all(self.pool()).await?;
+        let rows =
+            sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state").fetch_all(self.db.pool()).await?;
         let mut counts: Vec<(JobState, i64)> = JobState::ALL.iter().map(|&s| (s, 0)).collect();
         for row in rows {
             let state = decode_state(&row)?;

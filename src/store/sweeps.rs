@@ -5,8 +5,9 @@
 
 use sqlx::Row;
 
+use super::database::Database;
+use super::error::StoreError;
 use super::jobs::{JobRow, NewJob, insert_queued_row, job_columns, job_from_row};
-use super::{Store, StoreError};
 
 /// A sweep as stored.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,30 +20,36 @@ pub struct SweepRow {
     pub created_at: i64,
 }
 
-impl Store {
+/// The `sweeps` table and its runs: its queries (`Store::sweeps`).
+pub struct SweepsTable<'a> {
+    pub(super) db: &'a Database,
+}
+
+impl SweepsTable<'_> {
     /// Inserts a sweep and its runs (queued jobs, in run order); committed before it returns.
-    pub async fn insert_sweep(&self, spec: &str, runs: &[NewJob], now: i64) -> Result<(i64, Vec<JobRow>), StoreError> {
-        self.transaction(async |tx| {
-            let id: i64 = sqlx::query_scalar("INSERT INTO sweeps (spec, created_at) VALUES (?, ?) RETURNING id")
-                .bind(spec)
-                .bind(now)
-                .fetch_one(&mut *tx)
-                .await?;
-            let mut rows = Vec::with_capacity(runs.len());
-            for (run, job) in runs.iter().enumerate() {
-                let job = NewJob { now, ..job.clone() };
-                rows.push(insert_queued_row(tx, &job, Some((id, run))).await?);
-            }
-            Ok((id, rows))
-        })
-        .await
+    pub async fn insert(&self, spec: &str, runs: &[NewJob], now: i64) -> Result<(i64, Vec<JobRow>), StoreError> {
+        self.db
+            .transaction(async |tx| {
+                let id: i64 = sqlx::query_scalar("INSERT INTO sweeps (spec, created_at) VALUES (?, ?) RETURNING id")
+                    .bind(spec)
+                    .bind(now)
+                    .fetch_one(&mut *tx)
+                    .await?;
+                let mut rows = Vec::with_capacity(runs.len());
+                for (run, job) in runs.iter().enumerate() {
+                    let job = NewJob { now, ..job.clone() };
+                    rows.push(insert_queued_row(tx, &job, Some((id, run))).await?);
+                }
+                Ok((id, rows))
+            })
+            .await
     }
 
     /// One sweep.
-    pub async fn get_sweep(&self, id: i64) -> Result<Option<SweepRow>, StoreError> {
+    pub async fn get(&self, id: i64) -> Result<Option<SweepRow>, StoreError> {
         let row = sqlx::query("SELECT id, spec, created_at FROM sweeps WHERE id = ?")
             .bind(id)
-            .fetch_optional(self.pool())
+            .fetch_optional(self.db.pool())
             .await?;
         row.map(|r| {
             Ok(SweepRow { id: r.try_get("id")?, spec: r.try_get("spec")?, created_at: r.try_get("created_at")? })
@@ -52,11 +59,11 @@ impl Store {
     }
 
     /// Sweeps newest first, with ids below `before`.
-    pub async fn list_sweeps(&self, before: Option<i64>, limit: u32) -> Result<Vec<SweepRow>, StoreError> {
+    pub async fn list(&self, before: Option<i64>, limit: u32) -> Result<Vec<SweepRow>, StoreError> {
         let rows = sqlx::query("SELECT id, spec, created_at FROM sweeps WHERE id < ? ORDER BY id DESC LIMIT ?")
             .bind(before.unwrap_or(i64::MAX))
             .bind(i64::from(limit))
-            .fetch_all(self.pool())
+            .fetch_all(self.db.pool())
             .await?;
         rows.iter()
             .map(|r| {
@@ -67,14 +74,14 @@ impl Store {
     }
 
     /// The jobs of a sweep with their run index, in run order (a job deleted alone is missing).
-    pub async fn sweep_jobs(&self, id: i64) -> Result<Vec<(usize, JobRow)>, StoreError> {
+    pub async fn runs(&self, id: i64) -> Result<Vec<(usize, JobRow)>, StoreError> {
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
             ", sweep_run FROM jobs WHERE sweep_id = ? ORDER BY sweep_run"
         ))
         .bind(id)
-        .fetch_all(self.pool())
+        .fetch_all(self.db.pool())
         .await?;
         rows.iter()
             .map(|r| Ok((r.try_get::<i64, _>("sweep_run")? as usize, job_from_row(r)?)))
@@ -83,12 +90,13 @@ impl Store {
     }
 
     /// Deletes a sweep and its jobs (with their checkpoints), returning whether it existed.
-    pub async fn delete_sweep(&self, id: i64) -> Result<bool, StoreError> {
-        self.transaction(async |tx| {
-            sqlx::query("DELETE FROM jobs WHERE sweep_id = ?").bind(id).execute(&mut *tx).await?;
-            let done = sqlx::query("DELETE FROM sweeps WHERE id = ?").bind(id).execute(&mut *tx).await?;
-            Ok(done.rows_affected() == 1)
-        })
-        .await
+    pub async fn delete(&self, id: i64) -> Result<bool, StoreError> {
+        self.db
+            .transaction(async |tx| {
+                sqlx::query("DELETE FROM jobs WHERE sweep_id = ?").bind(id).execute(&mut *tx).await?;
+                let done = sqlx::query("DELETE FROM sweeps WHERE id = ?").bind(id).execute(&mut *tx).await?;
+                Ok(done.rows_affected() == 1)
+            })
+            .await
     }
 }

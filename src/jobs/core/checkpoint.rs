@@ -19,6 +19,7 @@ use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
+use crate::sim::stats::well_formed::check_well_formed;
 use crate::store::{Checkpoint, Store, StoreError};
 
 /// How long a verification of a job's stored moments stands: a result read after it hashes them
@@ -65,7 +66,7 @@ pub(crate) async fn verified_checkpoint(
     verified: &Verified,
     id: i64,
 ) -> Result<Checkpoint, JobError> {
-    let checkpoint = store.load_checkpoint(id).await?.ok_or_else(|| no_checkpoint(id))?;
+    let checkpoint = store.checkpoints().load(id).await?.ok_or_else(|| no_checkpoint(id))?;
     let checkpoint = pools
         .light(move || {
             let actual = sha256_hex(&checkpoint.moments);
@@ -130,7 +131,7 @@ pub(crate) fn decode_checkpoint(
     }
     let moments: Moments = serde_json::from_slice(&checkpoint.moments)
         .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
-    moments.check_well_formed().map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
+    check_well_formed(&moments).map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
     // A job an earlier build started keeps its checkpoint's format (and resumes in it).
     if moments.fingerprint != job.config().fingerprint_of_format(moments.format_version) {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));

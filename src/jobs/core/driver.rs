@@ -89,7 +89,7 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
     let rt = &inner.runtime;
     let valid = &job.job;
     let config = &valid.config();
-    let mut moments = match rt.block_on(inner.store.load_checkpoint(job.id))? {
+    let mut moments = match rt.block_on(inner.store.checkpoints().load(job.id))? {
         Some(checkpoint) => decode_checkpoint(job.id, &checkpoint, valid, true)?,
         None => Moments::new(config),
     };
@@ -106,7 +106,7 @@ fn run(inner: &Inner, job: &ActiveJob) -> Result<(), JobError> {
             Ok(value) => {
                 reference = value;
                 if !persist(inner, job, "store the reference luminance", || {
-                    rt.block_on(inner.store.set_reference(job.id, value, now_ms()))?;
+                    rt.block_on(inner.store.jobs().set_reference(job.id, value, now_ms()))?;
                     Ok(())
                 })? {
                     return stopped(inner, job);
@@ -329,7 +329,7 @@ fn write_checkpoint(
     let mut now = now_ms();
     let stored = persist(inner, job, "write a checkpoint", || {
         now = now_ms();
-        inner.runtime.block_on(inner.store.write_checkpoint(job.id, &checkpoint, now)).map_err(JobError::from)
+        inner.runtime.block_on(inner.store.checkpoints().write(job.id, &checkpoint, now)).map_err(JobError::from)
     })?;
     if !stored {
         return Ok(false);

@@ -261,7 +261,7 @@ impl JobManager {
         if self.is_shutting_down() {
             return Err(JobError::ShuttingDown);
         }
-        match self.inner.store.insert_job(&new).await? {
+        match self.inner.store.jobs().insert(&new).await? {
             Inserted::Created(row) => {
                 let resource = resource_from_row(&row)?;
                 self.enqueue(row.id, job, resource.clone());
@@ -303,13 +303,13 @@ impl JobManager {
         if let Some(job) = self.active(id) {
             return Ok(job.view.borrow().clone());
         }
-        let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+        let row = self.inner.store.jobs().get(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
         resource_from_row(&row)
     }
 
     /// A page of jobs, newest first, optionally in one state, after `cursor` (the last id seen).
     pub async fn list(&self, filter: &JobFilter, cursor: Option<i64>, limit: u32) -> Result<JobList, JobError> {
-        let mut rows = self.inner.store.list_jobs(filter, cursor, limit + 1).await?;
+        let mut rows = self.inner.store.jobs().list(filter, cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
         let next_cursor = if more { rows.last().map(|r| r.id.to_string()) } else { None };
@@ -330,7 +330,7 @@ impl JobManager {
     pub async fn cancel(&self, id: i64) -> Result<JobResource, JobError> {
         let _guard = self.inner.lifecycle.lock().await;
         let Some(job) = self.active(id) else {
-            let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+            let row = self.inner.store.jobs().get(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
             return Err(JobError::Conflict(format!(
                 "job {id} is already {}; only queued or running jobs can be cancelled",
                 row.state
@@ -338,7 +338,7 @@ impl JobManager {
         };
         let waiting = self.inner.queue.lock().expect("queue").contains(&id);
         if waiting {
-            self.inner.store.set_state(id, JobState::Cancelled, None, now_ms()).await?;
+            self.inner.store.jobs().set_state(id, JobState::Cancelled, None, now_ms()).await?;
             self.inner.queue.lock().expect("queue").retain(|&q| q != id);
             self.inner.active.lock().expect("active map").remove(&id);
             job.view.send_modify(|r| {
@@ -350,7 +350,7 @@ impl JobManager {
             let executor = self.inner.executor.clone();
             tokio::task::spawn_blocking(move || executor.cancel(id));
         } else {
-            self.inner.store.request_cancel(id, now_ms()).await?;
+            self.inner.store.jobs().request_cancel(id, now_ms()).await?;
             job.request_stop(StopReason::Cancel);
         }
         let resource = job.view.borrow().clone();
@@ -367,7 +367,7 @@ impl JobManager {
         // corrupted rather than queue a job that can only fail. Verified before the lifecycle
         // lock (hashing the moments is work); only a merge could change the checkpoint meanwhile,
         // and it writes a verified one.
-        if self.active(id).is_none() && self.inner.store.load_result(id).await?.is_some() {
+        if self.active(id).is_none() && self.inner.store.checkpoints().load_result(id).await?.is_some() {
             self.verified_checkpoint(id).await?;
         }
         let _guard = self.inner.lifecycle.lock().await;
@@ -380,7 +380,7 @@ impl JobManager {
             check_budget(&self.inner.policy, job.job.spec(), new_total)?;
             let mut spec = job.view.borrow().spec.clone();
             spec.iterations = new_total;
-            self.inner.store.set_total(id, new_total, &spec_json(&spec)?, job.state(), now).await?;
+            self.inner.store.jobs().set_total(id, new_total, &spec_json(&spec)?, job.state(), now).await?;
             job.total.store(new_total, Ordering::SeqCst);
             job.view.send_modify(|r| {
                 r.progress.iterations_total = new_total;
@@ -390,7 +390,7 @@ impl JobManager {
             let resource = job.view.borrow().clone();
             return Ok(resource);
         }
-        let row = self.inner.store.get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+        let row = self.inner.store.jobs().get(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
         if row.merged {
             return Err(JobError::Conflict(format!(
                 "job {id} holds merged statistics and cannot run more iterations; extend one of its sources instead"
@@ -411,7 +411,7 @@ impl JobManager {
         self.check_queue()?;
         spec.iterations = new_total;
         let job = spec.validate()?;
-        self.inner.store.set_total(id, new_total, &spec_json(&spec)?, JobState::Queued, now).await?;
+        self.inner.store.jobs().set_total(id, new_total, &spec_json(&spec)?, JobState::Queued, now).await?;
         let mut resource = resource_from_row(&row)?;
         resource.state = JobState::Queued;
         resource.spec.iterations = new_total;
@@ -441,13 +441,13 @@ impl JobManager {
             if !self.is_queued(id) {
                 return Err(JobError::Conflict(format!("job {id} is running; cancel it before deleting it")));
             }
-            if !self.inner.store.delete_job(id).await? {
+            if !self.inner.store.jobs().delete(id).await? {
                 return Err(JobError::NotFound(id.to_string()));
             }
             self.discard_queued(id);
             return Ok(());
         }
-        if self.inner.store.delete_job(id).await? { Ok(()) } else { Err(JobError::NotFound(id.to_string())) }
+        if self.inner.store.jobs().delete(id).await? { Ok(()) } else { Err(JobError::NotFound(id.to_string())) }
     }
 
     /// A receiver of the job's resource as it changes, for active jobs.

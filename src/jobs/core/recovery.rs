@@ -10,7 +10,7 @@ use crate::store::StoreError;
 /// starts find none), in bounded batches hashed on the request pool.
 async fn checksum_old_results(inner: &Inner) -> Result<(), StoreError> {
     loop {
-        let rows = inner.store.results_without_checksum(64).await?;
+        let rows = inner.store.checkpoints().results_without_checksum(64).await?;
         if rows.is_empty() {
             return Ok(());
         }
@@ -21,7 +21,7 @@ async fn checksum_old_results(inner: &Inner) -> Result<(), StoreError> {
             .map_err(|e| StoreError::Corrupt { job: 0, detail: e.to_string() })?;
         let hashed: Vec<(i64, String)> = hashed;
         for (id, checksum) in hashed {
-            inner.store.fill_result_checksum(id, &checksum).await?;
+            inner.store.checkpoints().fill_result_checksum(id, &checksum).await?;
         }
     }
 }
@@ -29,10 +29,10 @@ async fn checksum_old_results(inner: &Inner) -> Result<(), StoreError> {
 /// Re-queues, cancels or fails each job a previous server left queued or running.
 pub(in crate::jobs) async fn recover(inner: &Inner) -> Result<(), StoreError> {
     checksum_old_results(inner).await?;
-    for row in inner.store.unfinished_jobs().await? {
+    for row in inner.store.jobs().unfinished().await? {
         if row.cancel_requested {
             // The cancel was acknowledged before the server stopped: honour it.
-            inner.store.set_state(row.id, JobState::Cancelled, None, now_ms()).await?;
+            inner.store.jobs().set_state(row.id, JobState::Cancelled, None, now_ms()).await?;
             tracing::info!(job = row.id, iterations_done = row.iterations_done, "cancelled job stays cancelled");
             continue;
         }
@@ -41,7 +41,7 @@ pub(in crate::jobs) async fn recover(inner: &Inner) -> Result<(), StoreError> {
         match valid {
             Ok(job) => {
                 if row.state != JobState::Queued {
-                    inner.store.set_state(row.id, JobState::Queued, None, now_ms()).await?;
+                    inner.store.jobs().set_state(row.id, JobState::Queued, None, now_ms()).await?;
                 }
                 let mut resource =
                     resource_from_row(&row).map_err(|e| StoreError::Corrupt { job: row.id, detail: e.to_string() })?;
@@ -51,7 +51,7 @@ pub(in crate::jobs) async fn recover(inner: &Inner) -> Result<(), StoreError> {
             }
             Err(e) => {
                 let reason = format!("the stored specification is no longer valid: {e}");
-                inner.store.set_state(row.id, JobState::Failed, Some(&reason), now_ms()).await?;
+                inner.store.jobs().set_state(row.id, JobState::Failed, Some(&reason), now_ms()).await?;
             }
         }
     }

@@ -181,7 +181,7 @@ impl Inner {
     pub(crate) async fn mark_running(&self, job: &ActiveJob) -> Result<(), JobError> {
         let _guard = self.lifecycle.lock().await;
         let now = now_ms();
-        self.store.set_state(job.id, JobState::Running, None, now).await?;
+        self.store.jobs().set_state(job.id, JobState::Running, None, now).await?;
         job.view.send_modify(|r| {
             r.state = JobState::Running;
             r.updated_at = rfc3339(now);
@@ -207,7 +207,7 @@ impl Inner {
     /// Leaves a job interrupted by shutdown as queued (it resumes at the next start).
     pub(crate) async fn mark_interrupted(&self, job: &ActiveJob) -> Result<(), JobError> {
         let _guard = self.lifecycle.lock().await;
-        self.store.set_state(job.id, JobState::Queued, None, now_ms()).await?;
+        self.store.jobs().set_state(job.id, JobState::Queued, None, now_ms()).await?;
         self.active.lock().expect("active map").remove(&job.id);
         job.view.send_modify(|r| r.state = JobState::Queued);
         Ok(())
@@ -218,9 +218,13 @@ impl Inner {
         let job = self.active.lock().expect("active map").get(&id).cloned();
         match job {
             Some(job) => self.end(&job, JobState::Failed, Some(reason)).await,
-            None => {
-                self.store.set_state(id, JobState::Failed, Some(reason), now_ms()).await.map(|_| ()).map_err(Into::into)
-            }
+            None => self
+                .store
+                .jobs()
+                .set_state(id, JobState::Failed, Some(reason), now_ms())
+                .await
+                .map(|_| ())
+                .map_err(Into::into),
         }
     }
 
@@ -231,7 +235,7 @@ impl Inner {
 
     async fn end(&self, job: &ActiveJob, state: JobState, error: Option<&str>) -> Result<(), JobError> {
         let now = now_ms();
-        self.store.set_state(job.id, state, error, now).await?;
+        self.store.jobs().set_state(job.id, state, error, now).await?;
         self.active.lock().expect("active map").remove(&job.id);
         job.view.send_modify(|r| {
             r.state = state;

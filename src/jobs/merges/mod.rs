@@ -143,8 +143,14 @@ impl Merges {
                     "job {id} is queued or running; merge into it once it has finished, or cancel it first"
                 )));
             }
-            let row =
-                self.statistics.jobs().store().get_job(id).await?.ok_or_else(|| JobError::NotFound(id.to_string()))?;
+            let row = self
+                .statistics
+                .jobs()
+                .store()
+                .jobs()
+                .get(id)
+                .await?
+                .ok_or_else(|| JobError::NotFound(id.to_string()))?;
             if !matches!(row.state, JobState::Succeeded | JobState::Cancelled) {
                 return Err(JobError::Conflict(format!(
                     "job {id} is {}; only a succeeded or cancelled job takes merges",
@@ -157,7 +163,7 @@ impl Merges {
         // Verify, merge and summarise with the lock released (the reservation keeps extend and
         // delete away), on the heavy pool (the summary re-fits), into a copy of the target's
         // statistics.
-        let checkpoint = self.statistics.jobs().store().load_checkpoint(id).await?;
+        let checkpoint = self.statistics.jobs().store().checkpoints().load(id).await?;
         let policy = self.statistics.jobs().policy().clone();
         let _slot = self.processing_slot().await?;
         let (checkpoint, spec, provenance) = self
@@ -189,7 +195,12 @@ impl Merges {
             .await??;
         {
             let _guard = self.statistics.jobs().transition().await;
-            self.statistics.jobs().store().write_merged(id, &checkpoint, &spec, &provenance, now_ms()).await?;
+            self.statistics
+                .jobs()
+                .store()
+                .checkpoints()
+                .write_merged(id, &checkpoint, &spec, &provenance, now_ms())
+                .await?;
         }
         self.statistics.result(id).await
     }
@@ -284,7 +295,7 @@ impl Merges {
             })
             .await??;
         let provenance = MergeProvenance::of(records.into_iter().map(|(_, r)| r).collect()).to_json();
-        let row = self.statistics.jobs().store().insert_study(&new, &checkpoint, &provenance).await?;
+        let row = self.statistics.jobs().store().checkpoints().insert_study(&new, &checkpoint, &provenance).await?;
         resource_from_row(&row)
     }
 }

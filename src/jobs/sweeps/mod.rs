@@ -206,7 +206,7 @@ impl Sweeps {
             return Err(JobError::ShuttingDown);
         }
         let now = now_ms();
-        let (id, rows) = self.jobs.store().insert_sweep(&spec_text, &new_jobs, now).await?;
+        let (id, rows) = self.jobs.store().sweeps().insert(&spec_text, &new_jobs, now).await?;
         for (row, job) in rows.iter().zip(valid) {
             self.jobs.enqueue(row.id, job, resource_from_row(row)?);
         }
@@ -230,6 +230,12 @@ impl Sweeps {
         Ok(())
     }
 
+    /// Returns once every run of sweep `id` has ended, `wait` has passed or the server stops
+    /// (`?wait=` of `GET /v1/sweeps/{id}`; see `wait`).
+    pub async fn wait_for_end(&self, id: i64, wait: std::time::Duration) -> Result<(), JobError> {
+        wait::until_ended(&self.jobs, id, wait).await
+    }
+
     /// A sweep with every point's figures.
     pub async fn get_sweep(&self, id: i64) -> Result<SweepResource, JobError> {
         let (row, plan) = self.sweep_plan(id).await?;
@@ -238,7 +244,7 @@ impl Sweeps {
 
     /// A page of sweeps, newest first (without figures).
     pub async fn list_sweeps(&self, cursor: Option<i64>, limit: u32) -> Result<SweepList, JobError> {
-        let mut rows = self.jobs.store().list_sweeps(cursor, limit + 1).await?;
+        let mut rows = self.jobs.store().sweeps().list(cursor, limit + 1).await?;
         let more = rows.len() > limit as usize;
         rows.truncate(limit as usize);
         let next_cursor = if more { rows.last().map(|r| r.id.to_string()) } else { None };
@@ -262,7 +268,7 @@ impl Sweeps {
     /// Cancels every queued or running run of a sweep (each keeps the iterations it completed).
     pub async fn cancel_sweep(&self, id: i64) -> Result<SweepResource, JobError> {
         let (row, plan) = self.sweep_plan(id).await?;
-        for (_, job) in self.jobs.store().sweep_jobs(id).await? {
+        for (_, job) in self.jobs.store().sweeps().runs(id).await? {
             if matches!(job.state, JobState::Queued | JobState::Running) {
                 match self.jobs.cancel(job.id).await {
                     // It ended meanwhile: nothing to cancel.
@@ -276,9 +282,9 @@ impl Sweeps {
 
     /// Deletes a sweep and its jobs; refused while one of them runs (cancel the sweep first).
     pub async fn delete_sweep(&self, id: i64) -> Result<(), JobError> {
-        let jobs = self.jobs.store().sweep_jobs(id).await?;
+        let jobs = self.jobs.store().sweeps().runs(id).await?;
         let _guard = self.jobs.transition().await;
-        if self.jobs.store().get_sweep(id).await?.is_none() {
+        if self.jobs.store().sweeps().get(id).await?.is_none() {
             return Err(no_sweep(id));
         }
         for (_, job) in &jobs {
@@ -292,7 +298,7 @@ impl Sweeps {
                 return Err(JobError::Conflict(format!("job {} of sweep {id} is taking a merge; retry", job.id)));
             }
         }
-        if !self.jobs.store().delete_sweep(id).await? {
+        if !self.jobs.store().sweeps().delete(id).await? {
             return Err(no_sweep(id));
         }
         for (_, job) in &jobs {
@@ -302,7 +308,7 @@ impl Sweeps {
     }
 
     async fn sweep_plan(&self, id: i64) -> Result<(SweepRow, SweepPlan), JobError> {
-        let row = self.jobs.store().get_sweep(id).await?.ok_or_else(|| no_sweep(id))?;
+        let row = self.jobs.store().sweeps().get(id).await?.ok_or_else(|| no_sweep(id))?;
         let plan = self.replan(&row).await?;
         Ok((row, plan))
     }
@@ -323,7 +329,7 @@ impl Sweeps {
     }
 
     async fn sweep_resource(&self, row: &SweepRow, plan: &SweepPlan, figures: bool) -> Result<SweepResource, JobError> {
-        let jobs: BTreeMap<usize, JobRow> = self.jobs.store().sweep_jobs(row.id).await?.into_iter().collect();
+        let jobs: BTreeMap<usize, JobRow> = self.jobs.store().sweeps().runs(row.id).await?.into_iter().collect();
         let mut by_state: BTreeMap<String, usize> = BTreeMap::new();
         let (mut done, mut total) = (0, 0);
         let mut states = Vec::new();
@@ -408,7 +414,7 @@ impl Sweeps {
             let answered = |p: &&crate::sim::sweep::PlannedPoint| p.run == r || p.measured_run == Some(r);
             return Ok(plan.points.iter().filter(answered).map(|p| (p.index, f.clone())).collect());
         }
-        let Some(stored) = self.jobs.store().load_result(job).await? else { return Ok(Vec::new()) };
+        let Some(stored) = self.jobs.store().checkpoints().load_result(job).await? else { return Ok(Vec::new()) };
         let checksum = stored.checksum;
         let running = self.jobs.active(job).is_some();
         let cached = || {

@@ -13,7 +13,7 @@ pub mod accumulator;
 pub mod bounded;
 pub mod components;
 pub mod coverage;
-mod fold_checks;
 pub mod merge_error;
 pub mod moments;
 pub mod terms;
+pub mod well_formed;

@@ -21,7 +21,7 @@
 //!
 //! Documents and checkpoints are parsed straight into these types with every list bounded by what
 //! the largest grid needs ([`crate::sim::model::cells::MAX_CELLS`]), so a hostile body cannot make the
-//! parser allocate beyond a few times its size. [`Moments::check_well_formed`] then checks what a
+//! parser allocate beyond a few times its size. [`check_well_formed`](super::well_formed::check_well_formed) then checks what a
 //! parser cannot: the shapes, the coverage, and that the sums agree with their counts (no sum over
 //! zero iterations, no negative sum of squares, events per cell adding up to events per plane).
 //! Merges add counters with checked arithmetic and check, before changing anything, that no exact
@@ -309,7 +309,7 @@ impl Moments {
         }
     }
 
-    /// What these moments' format holds (checked supported by [`Moments::check_well_formed`]).
+    /// What these moments' format holds (checked supported by [`check_well_formed`](super::well_formed::check_well_formed)).
     pub fn layout(&self) -> Layout {
         Layout { cells: self.cells, format: self.format_version }
     }

@@ -205,49 +205,47 @@ pub fn recommended_row(report: &RunReport) -> Option<RowWeights<'_>> {
     })
 }
 
-impl WeightsArtifact {
-    /// The weights `solve::evaluate` scores (a table with its cell bounds, the heuristics and their
-    /// β, or the per-path strategy), with the coverage the weights were fitted on.
-    pub fn given(&self) -> Result<GivenWeights, String> {
-        let strategy: Strategy = serde_json::from_value(serde_json::Value::String(self.strategy.clone()))
-            .map_err(|_| format!("strategy {:?} is not a strategy of this optimis", self.strategy))?;
-        let named = |h: &ArtifactHeuristic| -> Result<GivenHeuristic, String> {
-            let strategy = serde_json::from_value(serde_json::Value::String(h.name.clone()))
-                .map_err(|_| format!("heuristic {:?} is not a strategy of this optimis", h.name))?;
-            Ok(GivenHeuristic { strategy, beta: h.beta })
-        };
-        let heuristics = self.heuristics.iter().map(named).collect::<Result<Vec<_>, _>>()?;
-        let coverage = Some(self.provenance.coverage.clone());
-        let lambda = self.provenance.lambda;
-        let Some(axes) = &self.cells else {
-            return Ok(GivenWeights {
-                recommended: Some(GivenRecommendation { strategy, lambda, heuristics: Vec::new() }),
-                coverage,
-                ..GivenWeights::default()
-            });
-        };
-        // In the run's cell order, whatever order the artifact lists them in.
-        let (n3, nphi) = (axes.r3_edges.len(), axes.phi_bins as usize);
-        let mut cells = self.table.clone();
-        cells.sort_by_key(|c| (c.r2 * n3 + c.r3) * nphi + c.phi);
-        let width = PI / f64::from(axes.phi_bins);
-        let span = |edges: &[f64], i: usize| [edges.get(i).copied(), edges.get(i + 1).copied()];
-        let weights = cells
-            .iter()
-            .map(|c| GivenCell {
-                r2: span(&axes.r2_edges, c.r2),
-                r3: span(&axes.r3_edges, c.r3),
-                phi: [Some(c.phi as f64 * width), Some((c.phi + 1) as f64 * width)],
-                w0: c.w[0],
-                w1: c.w[1],
-                w2: c.w[2],
-            })
-            .collect();
-        Ok(GivenWeights {
-            weights,
-            heuristics: Vec::new(),
-            recommended: Some(GivenRecommendation { strategy, lambda, heuristics }),
+/// The weights `solve::evaluate` scores from `artifact` (a table with its cell bounds, the
+/// heuristics and their β, or the per-path strategy), with the coverage the weights were fitted on.
+pub fn given_weights(artifact: &WeightsArtifact) -> Result<GivenWeights, String> {
+    let strategy: Strategy = serde_json::from_value(serde_json::Value::String(artifact.strategy.clone()))
+        .map_err(|_| format!("strategy {:?} is not a strategy of this optimis", artifact.strategy))?;
+    let named = |h: &ArtifactHeuristic| -> Result<GivenHeuristic, String> {
+        let strategy = serde_json::from_value(serde_json::Value::String(h.name.clone()))
+            .map_err(|_| format!("heuristic {:?} is not a strategy of this optimis", h.name))?;
+        Ok(GivenHeuristic { strategy, beta: h.beta })
+    };
+    let heuristics = artifact.heuristics.iter().map(named).collect::<Result<Vec<_>, _>>()?;
+    let coverage = Some(artifact.provenance.coverage.clone());
+    let lambda = artifact.provenance.lambda;
+    let Some(axes) = &artifact.cells else {
+        return Ok(GivenWeights {
+            recommended: Some(GivenRecommendation { strategy, lambda, heuristics: Vec::new() }),
             coverage,
+            ..GivenWeights::default()
+        });
+    };
+    // In the run's cell order, whatever order the artifact lists them in.
+    let (n3, nphi) = (axes.r3_edges.len(), axes.phi_bins as usize);
+    let mut cells = artifact.table.clone();
+    cells.sort_by_key(|c| (c.r2 * n3 + c.r3) * nphi + c.phi);
+    let width = PI / f64::from(axes.phi_bins);
+    let span = |edges: &[f64], i: usize| [edges.get(i).copied(), edges.get(i + 1).copied()];
+    let weights = cells
+        .iter()
+        .map(|c| GivenCell {
+            r2: span(&axes.r2_edges, c.r2),
+            r3: span(&axes.r3_edges, c.r3),
+            phi: [Some(c.phi as f64 * width), Some((c.phi + 1) as f64 * width)],
+            w0: c.w[0],
+            w1: c.w[1],
+            w2: c.w[2],
         })
-    }
+        .collect();
+    Ok(GivenWeights {
+        weights,
+        heuristics: Vec::new(),
+        recommended: Some(GivenRecommendation { strategy, lambda, heuristics }),
+        coverage,
+    })
 }

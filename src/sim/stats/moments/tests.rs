@@ -1,6 +1,7 @@
 //! Tests of the moments: exact accumulation, merges, the packed layout and their checks.
 
 use super::*;
+use crate::sim::stats::well_formed::check_well_formed;
 
 #[test]
 fn packed_index_enumerates_the_upper_triangle() {
@@ -25,13 +26,13 @@ fn old_formats_and_foreign_fold_layouts_are_refused() {
     let config = spec.validate().unwrap().config().clone();
     let mut old = Moments::new(&config);
     old.format_version = 1;
-    let message = old.check_well_formed().unwrap_err().to_string();
+    let message = check_well_formed(&old).unwrap_err().to_string();
     assert!(message.contains("format 1") && message.contains("K folds") && message.contains("again"), "{message}");
     let mut one_fold = Moments::new(&config);
     one_fold.folds.truncate(1);
-    assert!(matches!(one_fold.check_well_formed(), Err(MergeError::Malformed(_))));
+    assert!(matches!(check_well_formed(&one_fold), Err(MergeError::Malformed(_))));
     let mut other = Moments::new(&config);
     other.coverage.insert(1, 0, 1); // iteration 0 belongs to fold 0, which counts none
-    let message = other.check_well_formed().unwrap_err().to_string();
+    let message = check_well_formed(&other).unwrap_err().to_string();
     assert!(message.contains("≡ 0 (mod 3)"), "{message}");
 }
