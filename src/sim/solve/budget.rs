@@ -27,7 +27,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::SolverOptions;
-use super::predict::{Budget, PredictError, Predictor, supported};
+use super::predict::{Budget, PredictError, Prediction, Predictor, supported};
 use super::strategy::Strategy;
 use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::Moments;
@@ -267,8 +267,37 @@ pub fn plan(
     };
     let own = evaluate(measured, &mut Vec::new());
     let recommended = own.recommended.as_ref().map(|r| r.strategy);
+    let (headline, headline_note) = headline_of(&own, recommended);
+    let (points, search) = search(measured, headline, |budget, points| {
+        evaluate(budget, points);
+    });
+    let mut at_paper = Vec::new();
+    evaluate(PAPER_BUDGET, &mut at_paper);
+    let paper = at_paper.iter().find(|p| p.strategy == Strategy::Switch).copied();
+    let best = ranked(&points, paper.as_ref(), &search);
+    let order: Vec<Strategy> = best.iter().map(|b| b.point.strategy).collect();
+    let supported: Vec<BudgetPoint> = points.iter().filter(|p| p.supported()).copied().collect();
+    let fixed_time = paper.map(|p| fixed_time(&supported, p.seconds_to_target, &order));
+    Ok(BudgetPlan {
+        target_rms_percent: target,
+        costs,
+        recommended,
+        headline,
+        headline_note,
+        search,
+        support_relative_se: SUPPORT_RELATIVE_SE,
+        best,
+        paper,
+        points,
+        fixed_time,
+    })
+}
+
+/// The strategy a plan headlines: the run's recommendation when its noise at other budgets can be
+/// predicted, else the stacked or cross-fitted optimum (with a note saying why).
+fn headline_of(own: &Prediction, recommended: Option<Strategy>) -> (Option<Strategy>, Option<String>) {
     let predictable = |s: Strategy| s.path().is_none_or(|p| !p.depends_on_budget());
-    let (headline, headline_note) = match recommended {
+    match recommended {
         Some(s) if predictable(s) => (Some(s), None),
         Some(s) => {
             let fallback = [Strategy::OptimalStacked, Strategy::OptimalCv]
@@ -281,7 +310,17 @@ pub fn plan(
             (fallback, Some(note))
         }
         None => (None, None),
-    };
+    }
+}
+
+/// The half-decade grid around `measured`, every budget of it `evaluate`d: a decade each way
+/// first, widened by half-decade steps while the `headline` strategy's fastest budget lies on the
+/// grid's edge, up to [`MAX_DECADES`]. The points, and the range searched.
+fn search(
+    measured: Budget,
+    headline: Option<Strategy>,
+    mut evaluate: impl FnMut(Budget, &mut Vec<BudgetPoint>),
+) -> (Vec<BudgetPoint>, SearchRange) {
     let (f, b) = (measured.light_paths as f64, measured.camera_paths as f64);
     let limit = 10f64.powf(MAX_DECADES);
     let light_limit = [(f / limit).max(1.0), (f * limit).min(1e12)];
@@ -337,26 +376,26 @@ pub fn plan(
         camera_paths: [camera[0], camera[camera.len() - 1]],
         at_limit,
     };
-    let mut at_paper = Vec::new();
-    evaluate(PAPER_BUDGET, &mut at_paper);
-    let paper = at_paper.iter().find(|p| p.strategy == Strategy::Switch).copied();
+    (points, search)
+}
+
+/// Each strategy's fastest supported budget with its speed-up over the paper's setup, ranked:
+/// strategies that respect the fixed weights first, then the supported ones, then by time.
+fn ranked(points: &[BudgetPoint], paper: Option<&BudgetPoint>, search: &SearchRange) -> Vec<BestBudget> {
     let mut strategies: Vec<Strategy> = Vec::new();
-    for p in &points {
+    for p in points {
         if !strategies.contains(&p.strategy) {
             strategies.push(p.strategy);
         }
     }
     let edge = |p: &BudgetPoint| {
-        p.budget.light_paths == light[0]
-            || p.budget.light_paths == light[light.len() - 1]
-            || p.budget.camera_paths == camera[0]
-            || p.budget.camera_paths == camera[camera.len() - 1]
+        search.light_paths.contains(&p.budget.light_paths) || search.camera_paths.contains(&p.budget.camera_paths)
     };
     let mut best: Vec<BestBudget> = strategies
         .iter()
-        .filter_map(|&s| fastest(&points, s))
+        .filter_map(|&s| fastest(points, s))
         .map(|Fastest { point, supported, faster_unsupported }| {
-            let (speedup, speedup_stderr) = speedup(&point, paper.as_ref());
+            let (speedup, speedup_stderr) = speedup(&point, paper);
             BestBudget { point, speedup, speedup_stderr, at_edge: edge(&point), supported, faster_unsupported }
         })
         .collect();
@@ -365,22 +404,7 @@ pub fn plan(
             .partial_cmp(&(!b.point.respects_fixed, !b.supported, b.point.seconds_to_target))
             .unwrap_or(std::cmp::Ordering::Equal)
     });
-    let order: Vec<Strategy> = best.iter().map(|b| b.point.strategy).collect();
-    let supported: Vec<BudgetPoint> = points.iter().filter(|p| p.supported()).copied().collect();
-    let fixed_time = paper.map(|p| fixed_time(&supported, p.seconds_to_target, &order));
-    Ok(BudgetPlan {
-        target_rms_percent: target,
-        costs,
-        recommended,
-        headline,
-        headline_note,
-        search,
-        support_relative_se: SUPPORT_RELATIVE_SE,
-        best,
-        paper,
-        points,
-        fixed_time,
-    })
+    best
 }
 
 /// A strategy's fastest point, and what the guard on support left aside.
