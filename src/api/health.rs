@@ -10,6 +10,7 @@ use utoipa::ToSchema;
 use super::AppState;
 use super::error::{ApiError, Problem};
 use super::responses::ServerFailure;
+use crate::jobs::JobManager;
 
 /// Health status.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
@@ -33,8 +34,8 @@ pub async fn healthz() -> Json<Health> {
         (status = 503, description = "Not ready, and why", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
-    state.services.jobs.store().ready().await.map_err(ApiError::Unavailable)?;
+pub async fn readyz(State(jobs): State<JobManager>) -> Result<Json<Health>, ApiError> {
+    jobs.store().ready().await.map_err(ApiError::Unavailable)?;
     Ok(Json(Health { status: "ok".into() }))
 }
 
@@ -47,10 +48,9 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
         ServerFailure,
     )
 )]
-pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
-    let states =
-        state.services.jobs.store().jobs().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
-    let text = state.services.jobs.metrics().render(&states, &state.services.jobs.running_samples());
+pub async fn metrics(State(jobs): State<JobManager>) -> Result<impl IntoResponse, ApiError> {
+    let states = jobs.store().jobs().count_by_state().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+    let text = jobs.metrics().render(&states, &jobs.running_samples());
     Ok(([(header::CONTENT_TYPE, crate::metrics::CONTENT_TYPE)], text))
 }
 

@@ -15,6 +15,7 @@ use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, page, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use super::wait::WaitQuery;
+use crate::jobs::JobManager;
 use crate::jobs::core::documents::JobList;
 use crate::jobs::core::resource::{JobResource, JobState};
 use crate::sim::spec::Label;
@@ -90,7 +91,7 @@ fn accepted(resource: &JobResource) -> Response {
     )
 )]
 pub async fn submit(
-    State(state): State<AppState>,
+    State(jobs): State<JobManager>,
     headers: HeaderMap,
     JsonBody(doc): JsonBody,
 ) -> Result<Response, ApiError> {
@@ -110,7 +111,7 @@ pub async fn submit(
             )
         }
     };
-    let (resource, replayed) = state.services.jobs.submit(doc, key).await?;
+    let (resource, replayed) = jobs.submit(doc, key).await?;
     let mut response = accepted(&resource);
     if replayed {
         response.headers_mut().insert("idempotent-replayed", HeaderValue::from_static("true"));
@@ -189,8 +190,8 @@ pub async fn get(
         ServerFailure,
     )
 )]
-pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
-    Ok(accepted(&state.services.jobs.cancel(id).await?))
+pub async fn cancel(State(jobs): State<JobManager>, JobId(id): JobId) -> Result<Response, ApiError> {
+    Ok(accepted(&jobs.cancel(id).await?))
 }
 
 /// Add iterations to a job; they continue the same deterministic sequence.
@@ -209,12 +210,12 @@ pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<R
     )
 )]
 pub async fn extend(
-    State(state): State<AppState>,
+    State(jobs): State<JobManager>,
     JobId(id): JobId,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let request: ExtendRequest = typed(&body)?;
-    Ok(accepted(&state.services.jobs.extend(id, request.iterations, request.total).await?))
+    Ok(accepted(&jobs.extend(id, request.iterations, request.total).await?))
 }
 
 /// Delete a job that is not running, with its checkpoint.
@@ -227,7 +228,7 @@ pub async fn extend(
         ServerFailure,
     )
 )]
-pub async fn delete(State(state): State<AppState>, JobId(id): JobId) -> Result<StatusCode, ApiError> {
-    state.services.jobs.delete(id).await?;
+pub async fn delete(State(jobs): State<JobManager>, JobId(id): JobId) -> Result<StatusCode, ApiError> {
+    jobs.delete(id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -5,10 +5,10 @@
 use axum::Json;
 use axum::extract::State;
 
-use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, typed};
 use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
+use crate::jobs::prediction::Predictions;
 use crate::jobs::prediction::{BudgetRequest, JobBudget, JobPrediction, PredictRequest};
 
 /// Predict the noise table at another ray budget (N_F, N_B) from the job's latest checkpoint, and
@@ -28,12 +28,12 @@ use crate::jobs::prediction::{BudgetRequest, JobBudget, JobPrediction, PredictRe
     )
 )]
 pub async fn predict(
-    State(state): State<AppState>,
+    State(predictions): State<Predictions>,
     JobId(id): JobId,
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobPrediction>, ApiError> {
     let request: PredictRequest = typed(&body)?;
-    Ok(Json(state.services.predictions.predict(id, &request).await?))
+    Ok(Json(predictions.predict(id, &request).await?))
 }
 
 /// The ray budget (N_F, N_B) that reaches a target RMS soonest, per strategy, for a renderer of
@@ -55,10 +55,10 @@ pub async fn predict(
     )
 )]
 pub async fn budget(
-    State(state): State<AppState>,
+    State(predictions): State<Predictions>,
     JobId(id): JobId,
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobBudget>, ApiError> {
     let request: BudgetRequest = typed(&body)?;
-    Ok(Json(state.services.predictions.budget(id, &request).await?))
+    Ok(Json(predictions.budget(id, &request).await?))
 }

@@ -6,13 +6,13 @@ use axum::extract::{FromRequestParts, Path, State};
 use axum::http::StatusCode;
 use axum::http::request::Parts;
 
-use super::AppState;
 use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody};
 use super::responses::{NoSuchJob, NotJson, ServerFailure, TooLarge};
 use crate::jobs::core::documents::JobResult;
 use crate::jobs::solves::SolveList;
+use crate::jobs::solves::Solves;
 
 /// The `{id}` and `{name}` of a solve route; an id that names no job is a 404.
 pub struct SolvePath(pub i64, pub String);
@@ -43,8 +43,8 @@ impl<S: Send + Sync> FromRequestParts<S> for SolvePath {
         ServerFailure,
     )
 )]
-pub async fn list(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<SolveList>, ApiError> {
-    Ok(Json(state.services.solves.list_solves(id).await?))
+pub async fn list(State(solves): State<Solves>, JobId(id): JobId) -> Result<Json<SolveList>, ApiError> {
+    Ok(Json(solves.list_solves(id).await?))
 }
 
 /// Keep solver options under a name (replacing any of that name; at most 32 per job) and answer
@@ -65,11 +65,11 @@ pub async fn list(State(state): State<AppState>, JobId(id): JobId) -> Result<Jso
     )
 )]
 pub async fn save(
-    State(state): State<AppState>,
+    State(solves): State<Solves>,
     SolvePath(id, name): SolvePath,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.services.solves.save_solve(id, &name, &patch).await?))
+    Ok(Json(solves.save_solve(id, &name, &patch).await?))
 }
 
 /// The results of a kept solve, re-solved from the job's latest checkpoint.
@@ -83,8 +83,8 @@ pub async fn save(
         ServerFailure,
     )
 )]
-pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.services.solves.solve_result(id, &name).await?))
+pub async fn get(State(solves): State<Solves>, SolvePath(id, name): SolvePath) -> Result<Json<JobResult>, ApiError> {
+    Ok(Json(solves.solve_result(id, &name).await?))
 }
 
 /// Forget a kept solve (`default` cannot be).
@@ -98,7 +98,7 @@ pub async fn get(State(state): State<AppState>, SolvePath(id, name): SolvePath) 
         ServerFailure,
     )
 )]
-pub async fn delete(State(state): State<AppState>, SolvePath(id, name): SolvePath) -> Result<StatusCode, ApiError> {
-    state.services.solves.delete_solve(id, &name).await?;
+pub async fn delete(State(solves): State<Solves>, SolvePath(id, name): SolvePath) -> Result<StatusCode, ApiError> {
+    solves.delete_solve(id, &name).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -17,7 +17,9 @@ use super::error::{ApiError, Problem};
 use super::extract::{JobId, JsonBody, query_problem, typed};
 use super::responses::{BadQuery, NoSuchJob, NotJson, ServerFailure, TooLarge};
 use crate::jobs::core::documents::{JobHistory, JobResult};
+use crate::jobs::evaluation::Evaluations;
 use crate::jobs::evaluation::JobEvaluation;
+use crate::jobs::statistics::Statistics;
 use crate::sim::checks::published::{figures, paper_columns};
 use crate::sim::document::MomentsDocument;
 use crate::sim::solve::evaluate::GivenWeights;
@@ -182,11 +184,11 @@ pub async fn result(
     )
 )]
 pub async fn solve(
-    State(state): State<AppState>,
+    State(statistics): State<Statistics>,
     JobId(id): JobId,
     JsonBody(patch): JsonBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.services.statistics.solve(id, &patch, None).await?))
+    Ok(Json(statistics.solve(id, &patch, None).await?))
 }
 
 /// Score given weights on the job's latest checkpoint: another run's `/result` (its recommended
@@ -207,12 +209,12 @@ pub async fn solve(
     )
 )]
 pub async fn evaluate(
-    State(state): State<AppState>,
+    State(evaluations): State<Evaluations>,
     JobId(id): JobId,
     JsonBody(body): JsonBody,
 ) -> Result<Json<JobEvaluation>, ApiError> {
     let given: GivenWeights = typed(&body)?;
-    Ok(Json(state.services.evaluations.evaluate(id, given).await?))
+    Ok(Json(evaluations.evaluate(id, given).await?))
 }
 
 /// The job's moments (additive statistics) from its latest checkpoint, as a checksummed document.
@@ -226,9 +228,9 @@ pub async fn evaluate(
         ServerFailure,
     )
 )]
-pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, ApiError> {
+pub async fn moments(State(statistics): State<Statistics>, JobId(id): JobId) -> Result<Response, ApiError> {
     // Serialised on the job layer's request pool (a document can be megabytes), sent as is.
-    let bytes = state.services.statistics.moments_json(id).await?;
+    let bytes = statistics.moments_json(id).await?;
     let disposition = HeaderValue::from_str(&format!("attachment; filename=\"optimis-job-{id}-moments.json\""))
         .expect("an ASCII header");
     Ok((
@@ -254,14 +256,14 @@ pub async fn moments(State(state): State<AppState>, JobId(id): JobId) -> Result<
     )
 )]
 pub async fn history(
-    State(state): State<AppState>,
+    State(statistics): State<Statistics>,
     JobId(id): JobId,
     headers: HeaderMap,
     query: Result<Query<HistoryQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let csv = wants_csv(&headers, q.format.as_deref())?;
-    let history = state.services.statistics.history(id).await?;
+    let history = statistics.history(id).await?;
     if csv {
         return Ok(csv_response(history.to_csv(), &format!("optimis-job-{id}-history.csv")));
     }

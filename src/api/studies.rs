@@ -12,13 +12,13 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use super::AppState;
 use super::bodies::SolverPatch;
 use super::error::{ApiError, Problem};
 use super::extract::{DocumentBody, JobId};
 use super::responses::{NoSuchJob, NotJson, ServerFailure};
 use crate::jobs::core::documents::JobResult;
 use crate::jobs::core::resource::JobResource;
+use crate::jobs::merges::Merges;
 use crate::sim::document::MomentsDocument;
 
 /// A job on a peer optimis server whose moments are pulled over http or https. The peer must be
@@ -73,11 +73,11 @@ pub struct StudyRequest {
     )
 )]
 pub async fn merge(
-    State(state): State<AppState>,
+    State(merges): State<Merges>,
     JobId(id): JobId,
     body: DocumentBody,
 ) -> Result<Json<JobResult>, ApiError> {
-    Ok(Json(state.services.merges.merge_into(id, body.bytes.clone(), body.client).await?))
+    Ok(Json(merges.merge_into(id, body.bytes.clone(), body.client).await?))
 }
 
 /// Create a finished job from merged statistics of several documents or peer jobs.
@@ -97,8 +97,8 @@ pub async fn merge(
         ServerFailure,
     )
 )]
-pub async fn create(State(state): State<AppState>, body: DocumentBody) -> Result<Response, ApiError> {
-    let resource = state.services.merges.create_study(body.bytes.clone(), body.client).await?;
+pub async fn create(State(merges): State<Merges>, body: DocumentBody) -> Result<Response, ApiError> {
+    let resource = merges.create_study(body.bytes.clone(), body.client).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/jobs/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);

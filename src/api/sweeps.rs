@@ -16,6 +16,7 @@ use super::extract::query_problem;
 use super::extract::{JsonBody, SweepId, page};
 use super::responses::{BadQuery, NoSuchSweep, NotJson, ServerFailure, TooLarge};
 use super::wait::WaitQuery;
+use crate::jobs::sweeps::Sweeps;
 use crate::jobs::sweeps::{SweepList, SweepResource};
 use crate::sim::sweep::{SweepSpec, SweepTable};
 
@@ -57,8 +58,8 @@ pub struct TableQuery {
         ServerFailure,
     )
 )]
-pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> Result<Response, ApiError> {
-    let resource = state.services.sweeps.create_sweep(doc).await?;
+pub async fn create(State(sweeps): State<Sweeps>, JsonBody(doc): JsonBody) -> Result<Response, ApiError> {
+    let resource = sweeps.create_sweep(doc).await?;
     let mut response = (StatusCode::CREATED, Json(&resource)).into_response();
     let location = HeaderValue::from_str(&format!("/v1/sweeps/{}", resource.id)).expect("an ASCII path");
     response.headers_mut().insert(header::LOCATION, location);
@@ -75,12 +76,12 @@ pub async fn create(State(state): State<AppState>, JsonBody(doc): JsonBody) -> R
     )
 )]
 pub async fn list(
-    State(state): State<AppState>,
+    State(sweeps): State<Sweeps>,
     query: Result<Query<SweepListQuery>, QueryRejection>,
 ) -> Result<Json<SweepList>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let (limit, cursor) = page(q.limit, q.cursor, 20, 100)?;
-    Ok(Json(state.services.sweeps.list_sweeps(cursor, limit).await?))
+    Ok(Json(sweeps.list_sweeps(cursor, limit).await?))
 }
 
 /// A sweep: progress, and per point the swept values, its job, its honest noise table and
@@ -125,14 +126,14 @@ pub async fn get(
     )
 )]
 pub async fn table(
-    State(state): State<AppState>,
+    State(sweeps): State<Sweeps>,
     SweepId(id): SweepId,
     headers: HeaderMap,
     query: Result<Query<TableQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
     let csv = wants_csv(&headers, q.format.as_deref())?;
-    let table = state.services.sweeps.sweep_table(id).await?;
+    let table = sweeps.sweep_table(id).await?;
     if !csv {
         return Ok(Json(table).into_response());
     }
@@ -148,8 +149,8 @@ pub async fn table(
         ServerFailure,
     )
 )]
-pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
-    Ok(Json(state.services.sweeps.cancel_sweep(id).await?))
+pub async fn cancel(State(sweeps): State<Sweeps>, SweepId(id): SweepId) -> Result<Json<SweepResource>, ApiError> {
+    Ok(Json(sweeps.cancel_sweep(id).await?))
 }
 
 /// Delete a sweep and its jobs (refused while one runs: cancel the sweep first).
@@ -162,7 +163,7 @@ pub async fn cancel(State(state): State<AppState>, SweepId(id): SweepId) -> Resu
         ServerFailure,
     )
 )]
-pub async fn delete(State(state): State<AppState>, SweepId(id): SweepId) -> Result<StatusCode, ApiError> {
-    state.services.sweeps.delete_sweep(id).await?;
+pub async fn delete(State(sweeps): State<Sweeps>, SweepId(id): SweepId) -> Result<StatusCode, ApiError> {
+    sweeps.delete_sweep(id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -9,10 +9,10 @@ use axum::extract::{Query, State};
 use serde::Deserialize;
 use utoipa::IntoParams;
 
-use super::AppState;
 use super::error::{ApiError, Problem};
 use super::extract::{JobId, query_problem};
 use super::responses::{BadQuery, NoSuchJob, ServerFailure};
+use crate::jobs::artifacts::Artifacts;
 use crate::sim::solve::effective::EffectiveWeights;
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::weights::artifact::WeightsArtifact;
@@ -45,12 +45,12 @@ pub struct WeightsParams {
     )
 )]
 pub async fn weights(
-    State(state): State<AppState>,
+    State(artifacts): State<Artifacts>,
     JobId(id): JobId,
     query: Result<Query<WeightsParams>, QueryRejection>,
 ) -> Result<Json<WeightsArtifact>, ApiError> {
     let Query(q) = query.map_err(query_problem)?;
-    Ok(Json(state.services.artifacts.weights(id, parse_strategy(q.strategy)?).await?))
+    Ok(Json(artifacts.weights(id, parse_strategy(q.strategy)?).await?))
 }
 
 /// A strategy named in a query, as a noise-table row.
@@ -90,7 +90,7 @@ pub struct EffectiveParams {
     )
 )]
 pub async fn effective(
-    State(state): State<AppState>,
+    State(artifacts): State<Artifacts>,
     JobId(id): JobId,
     query: Result<Query<EffectiveParams>, QueryRejection>,
 ) -> Result<Json<EffectiveWeights>, ApiError> {
@@ -103,5 +103,5 @@ pub async fn effective(
         });
     }
     let strategy = parse_strategy(q.strategy)?;
-    Ok(Json(state.services.artifacts.effective(id, strategy, paths as usize).await?))
+    Ok(Json(artifacts.effective(id, strategy, paths as usize).await?))
 }
