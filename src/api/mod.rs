@@ -57,7 +57,7 @@ use guard::Guard;
 pub use limits::{BearerToken, DEFAULT_DOCUMENT_LIMIT, HttpLimits};
 
 /// What every handler can reach; cheap to clone. A route file takes only the handle it needs
-/// (`State<Statistics>`: axum's substates, see [`substates`]); the rest is the HTTP layer's own.
+/// (`State<Statistics>`: axum's substates, see `substates!`); the rest is the HTTP layer's own.
 #[derive(Clone)]
 pub struct AppState {
     /// The job layer's handles: the lifecycle and the feature services.

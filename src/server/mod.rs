@@ -2,7 +2,7 @@
 //! listener) and graceful shutdown.
 //!
 //! * [`listener`] — the accept loop: connection limit, timeouts, TLS, graceful shutdown;
-//! * [`tls`] — the server's certificate and key.
+//! * `crate::trust::acceptor` — the server's certificate and key.
 //!
 //! Imports: crate::api, crate::jobs, crate::metrics, crate::store, crate::trust
 

@@ -15,7 +15,7 @@ use super::jobs::{JobRow, NewJob, job_columns, job_from_row};
 use super::state::JobState;
 
 /// A job's latest checkpoint: its statistics and what was computed from them. As read back by
-/// [`Store::load_checkpoint`], only the first four fields are filled (`best`, `warnings` and
+/// [`CheckpointsTable::load`], only the first four fields are filled (`best`, `warnings` and
 /// `history` live in the job row and the history table).
 #[derive(Debug, Clone)]
 pub struct Checkpoint {

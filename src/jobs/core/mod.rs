@@ -8,7 +8,7 @@
 //!
 //! Layout, top down (each module imports only those below it):
 //! * [`manager`] — the handle: start, submit, get, list, cancel, extend, delete, shutdown, and the
-//!   small toolbox the features use; [`recovery`] — what a previous server left unfinished;
+//!   small toolbox the features use; `recovery` — what a previous server left unfinished;
 //! * [`scheduler`] — starts queued jobs in submission order while workers are free;
 //! * [`driver`] — runs one job segment by segment and writes its checkpoints;
 //! * [`state`] — the jobs in memory (`ActiveJob`, `StopReason`, `Hold`) and the transitions of
