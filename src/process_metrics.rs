@@ -51,7 +51,7 @@ fn open_fds() -> Option<i64> {
 }
 
 impl Collector for ProcessCollector {
-    fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+    fn encode(&self, mut encoder: DescriptorEncoder<'_>) -> Result<(), std::fmt::Error> {
         if let Some(cpu) = cpu_seconds() {
             let c = ConstCounter::new(cpu);
             c.encode(encoder.encode_descriptor(

@@ -232,7 +232,7 @@ async fn a_full_disk_acknowledges_nothing_and_loses_nothing() {
 async fn odd_methods_do_not_grow_the_metrics() {
     let server = TestServer::start().await;
     for i in 0..3000 {
-        let method = reqwest::Method::from_bytes(format!("ODD{i:05}{}", "X".repeat(40)).as_bytes()).unwrap();
+        let method = Method::from_bytes(format!("ODD{i:05}{}", "X".repeat(40)).as_bytes()).unwrap();
         server.request(method, &format!("/v1/jobs/{i}"), None).await;
     }
     let metrics = server.get("/metrics").await.text();

@@ -329,7 +329,7 @@ async fn named_solves_are_kept_listed_and_bounded() {
     assert_eq!(assert_problem(put("default", json!({})).await, 422)["field"], "name");
     assert_eq!(assert_problem(put("x", json!({ "lambda": -1 })).await, 422)["field"], "solver.lambda");
     for k in 1..32 {
-        assert_eq!(put(&format!("s{k}"), json!({ "lambda": k as f64 / 100.0 })).await.status, 200);
+        assert_eq!(put(&format!("s{k}"), json!({ "lambda": f64::from(k) / 100.0 })).await.status, 200);
     }
     assert_problem(put("one-too-many", json!({})).await, 409);
     assert_eq!(put("s1", json!({ "lambda": 0.5 })).await.status, 200, "replacing one is not one more");

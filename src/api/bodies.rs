@@ -231,7 +231,7 @@ mod tests {
         let lengths = both(MIN_LENGTH, MAX_LENGTH);
         let counts = |hi: u64| both(1.0, hi as f64);
         let iterations = counts(MAX_ITERATIONS);
-        let rows: &[Row] = &[
+        let rows: &[Row<'_>] = &[
             ("JobSubmission", "merge_radius", &lengths),
             ("JobSubmission", "light_paths", &counts(MAX_LIGHT_PATHS)),
             ("JobSubmission", "camera_paths", &counts(MAX_CAMERA_PATHS)),

@@ -167,7 +167,7 @@ fn api_router(document_limit: usize) -> OpenApiRouter<AppState> {
 }
 
 /// The routes and their finished OpenAPI document (security scheme and common responses added).
-fn routes_and_document(document_limit: usize) -> (axum::Router<AppState>, utoipa::openapi::OpenApi) {
+fn routes_and_document(document_limit: usize) -> (Router<AppState>, utoipa::openapi::OpenApi) {
     let (router, mut api) = api_router(document_limit).split_for_parts();
     utoipa::Modify::modify(&openapi::Security, &mut api);
     utoipa::Modify::modify(&openapi::Links, &mut api);

@@ -328,7 +328,7 @@ fn checkpoint_seconds(text: &str) -> Result<f64, String> {
 }
 
 /// `--out` with `{shard}` replaced by the shard's index.
-fn out_path(out: &Path, spec: &crate::sim::spec::JobSpec) -> PathBuf {
+fn out_path(out: &Path, spec: &JobSpec) -> PathBuf {
     match (out.to_str(), spec.shard) {
         (Some(text), Some(shard)) if text.contains("{shard}") => {
             PathBuf::from(text.replace("{shard}", &shard.index.to_string()))

@@ -314,7 +314,7 @@ mod tests {
         let mut t = Tracking::new(job.spec(), record());
         let round = dir.round(0, true).unwrap();
         let write = |k: u64, seed: u64, range: Range<u64>| {
-            let other = super::super::tracking::tests::job(seed);
+            let other = tests::job(seed);
             let moments = run(other.config(), seed, range);
             round.write(&document_name(k), &MomentsDocument::new(other.spec().clone(), moments).to_json()).unwrap();
         };

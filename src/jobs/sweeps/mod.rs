@@ -232,7 +232,7 @@ impl Sweeps {
 
     /// Returns once every run of sweep `id` has ended, `wait` has passed or the server stops
     /// (`?wait=` of `GET /v1/sweeps/{id}`; see `wait`).
-    pub async fn wait_for_end(&self, id: i64, wait: std::time::Duration) -> Result<(), JobError> {
+    pub async fn wait_for_end(&self, id: i64, wait: Duration) -> Result<(), JobError> {
         wait::until_ended(&self.jobs, id, wait).await
     }
 

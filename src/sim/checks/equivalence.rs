@@ -162,7 +162,7 @@ mod tests {
         // Noise shared by both runs (10·b, as from the cameras of block b) cancels in the block
         // differences: the first figure differs by 1 or 1.5 per block, the second not at all.
         let a = f((0..4).map(|b| vec![10.0 * b as f64 + [1.0, 1.5, 1.0, 1.5][b], 5.0, 0.0, 1.0, 2.0]).collect());
-        let b = f((0..4).map(|b| vec![10.0 * b as f64, 5.0, 0.0, 1.0, 2.0]).collect());
+        let b = f((0..4).map(|b| vec![10.0 * f64::from(b), 5.0, 0.0, 1.0, 2.0]).collect());
         let c = compare(&a, &b);
         assert_eq!(
             c.iter().map(|c| c.what.as_str()).collect::<Vec<_>>()[..4],

@@ -250,7 +250,7 @@ impl<'a> Setup<'a> {
     }
 
     /// Σ_m E_m for every strategy (module doc), or why not.
-    fn integrate(&self, budget: &Budget) -> Result<Values, ReferenceError> {
+    fn integrate(&self, budget: &Budget<'_>) -> Result<Values, ReferenceError> {
         let panels = self.breakpoints();
         let f = |panel: usize, t: f64| -> Values {
             let (r0, r1) = (panels[panel], panels[panel + 1]);
@@ -301,7 +301,7 @@ impl<'a> Setup<'a> {
 
     /// ∫dA2 of every strategy's Σ_m (light side)·(integrand)·w_m at x3 = (r3, 0), without the
     /// 1/π² (module doc), in the stretched polar coordinates of [`super::quadrature`].
-    fn inner(&self, r3: f64, budget: &Budget) -> Values {
+    fn inner(&self, r3: f64, budget: &Budget<'_>) -> Values {
         let outer = self.outer(r3);
         if outer.light == 0.0 && outer.rings.is_empty() || budget.spent() {
             return [0.0; PathStrategy::COUNT];

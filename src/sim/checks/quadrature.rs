@@ -162,7 +162,7 @@ pub fn kernel_g(scene: &Scene, r3: f64) -> f64 {
     kernel_within(scene, r3, &Budget::new(u64::MAX))
 }
 
-fn kernel_within(scene: &Scene, r3: f64, budget: &Budget) -> f64 {
+fn kernel_within(scene: &Scene, r3: f64, budget: &Budget<'_>) -> f64 {
     if budget.spent() {
         return 0.0;
     }
@@ -227,7 +227,7 @@ fn kernel_within(scene: &Scene, r3: f64, budget: &Budget) -> f64 {
 
 /// The s > 0 with f(s) = target for f increasing from f(0) = 0, starting from a guess. Each step
 /// is charged to `budget`; at most ~1,100 doublings (to overflow) and 200 bisections.
-pub(super) fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, budget: &Budget) -> f64 {
+pub(super) fn solve_monotone(f: impl Fn(f64) -> f64, target: f64, guess: f64, budget: &Budget<'_>) -> f64 {
     let (mut lo, mut hi) = (0.0, guess);
     while budget.charge(1) && f(hi) < target {
         lo = hi;
@@ -334,7 +334,7 @@ pub fn adaptive_gk(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64) -> f64 {
 
 /// [`adaptive_gk`] that stops splitting once `budget` is spent (the caller then reports the result
 /// as not converged).
-fn adaptive_gk_within(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64, budget: &Budget) -> f64 {
+fn adaptive_gk_within(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64, budget: &Budget<'_>) -> f64 {
     fn recurse(
         f: &dyn Fn(f64) -> f64,
         a: f64,
@@ -342,7 +342,7 @@ fn adaptive_gk_within(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64, budget: 
         whole: (f64, f64),
         abs_tol: f64,
         depth: u32,
-        budget: &Budget,
+        budget: &Budget<'_>,
     ) -> f64 {
         let (value, error) = whole;
         if error <= abs_tol || depth == 0 || budget.spent() {
@@ -371,12 +371,12 @@ mod tests {
     #[test]
     fn quadrature_rules_are_exact_on_polynomials() {
         for k in 0..=22 {
-            let exact = 1.0 / (k as f64 + 1.0);
+            let exact = 1.0 / (f64::from(k) + 1.0);
             let (gk, _) = gk15(&|x: f64| x.powi(k), 0.0, 1.0);
             assert!((gk - exact).abs() < 1e-14, "GK15 x^{k}: {gk}");
         }
         for k in 0..=39 {
-            let exact = 1.0 / (k as f64 + 1.0);
+            let exact = 1.0 / (f64::from(k) + 1.0);
             let gl = gauss_legendre(&|x: f64| x.powi(k), 0.0, 1.0);
             assert!((gl - exact).abs() < 1e-14, "GL20 x^{k}: {gl}");
         }
@@ -406,11 +406,11 @@ mod tests {
             let centre = r3 * 0.25;
             let half = 0.3 * (1.0 + r3);
             let n = 1500;
-            let h = 2.0 * half / n as f64;
+            let h = 2.0 * half / f64::from(n);
             let mut sum = 0.0;
             for i in 0..n {
                 for j in 0..n {
-                    let x2 = [centre - half + (i as f64 + 0.5) * h, -half + (j as f64 + 0.5) * h];
+                    let x2 = [centre - half + (f64::from(i) + 0.5) * h, -half + (f64::from(j) + 0.5) * h];
                     let u = Vector3::new(x2[0], x2[1], 1.0);
                     let v = Vector3::new(r3 - x2[0], -x2[1], 3.0);
                     let theta = u.cross(&v).norm().atan2(u.dot(&v));

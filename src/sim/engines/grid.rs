@@ -169,7 +169,7 @@ mod tests {
     fn crowded_buckets_list_each_vertex_once_in_order() {
         let r = 0.01;
         let points: Vec<(u32, [f64; 2])> =
-            (0..900u32).map(|k| (k, [(k % 30) as f64 * 0.08 - 1.2, (k / 30) as f64 * 0.08 - 1.2])).collect();
+            (0..900u32).map(|k| (k, [f64::from(k % 30) * 0.08 - 1.2, f64::from(k / 30) * 0.08 - 1.2])).collect();
         let grid = MergeGrid::new(points.iter().copied(), r);
         let mut rng = stream(8, 8, 8);
         for _ in 0..20_000 {

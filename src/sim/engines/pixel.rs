@@ -229,7 +229,7 @@ mod tests {
         let mut rng = stream(9, 9, 9);
         let (mut hits, mut skipped) = (0, 0);
         for _ in 0..200_000 {
-            let u = |rng: &mut _| crate::sim::math::rng::uniform(rng);
+            let u = |rng: &mut _| uniform(rng);
             let x2 = [u(&mut rng) * 2.0 - 1.0, u(&mut rng) * 2.0 - 1.0];
             let (t, _) = crate::sim::model::scene::Scene::from_spec(&crate::sim::model::params::SceneSpec {
                 l2,
@@ -239,13 +239,13 @@ mod tests {
             })
             .towards_pixel(x2);
             // An incident direction up to 10β away from the pixel direction…
-            let d = deflect(&t, u(&mut rng) * 10.0 * beta, u(&mut rng) * std::f64::consts::TAU);
+            let d = deflect(&t, u(&mut rng) * 10.0 * beta, u(&mut rng) * TAU);
             if d.z >= 0.0 {
                 continue;
             }
             // …deflected by up to the lobe's largest angle.
             let theta = u(&mut rng) * LOBE_MAX_SIGMAS * beta;
-            let out = deflect(&d, theta, u(&mut rng) * std::f64::consts::TAU);
+            let out = deflect(&d, theta, u(&mut rng) * TAU);
             let deflect_ok = cone.may_deflect_to_pixel(x2[0], x2[1], &d, theta, l2);
             skipped += usize::from(!deflect_ok);
             if out.z >= 0.0 {

@@ -254,7 +254,7 @@ impl<'de> Deserialize<'de> for ExactSum {
         impl<'de> de::Visitor<'de> for SumVisitor {
             type Value = ExactSum;
 
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
                 write!(f, "a number or a list of at most {MAX_PARTS} numbers")
             }
 

@@ -57,11 +57,11 @@ mod tests {
         for mean in [0.05, 2.5, 40.0] {
             let n = 200_000;
             let draws: Vec<f64> = (0..n).map(|_| poisson(&mut rng, mean) as f64).collect();
-            let m = draws.iter().sum::<f64>() / n as f64;
-            let var = draws.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n as f64 - 1.0);
+            let m = draws.iter().sum::<f64>() / f64::from(n);
+            let var = draws.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (f64::from(n) - 1.0);
             // Mean: standard error √(mean/n); variance: standard error ≈ mean·√(2/n) (+ tail).
-            assert!((m - mean).abs() < 4.0 * (mean / n as f64).sqrt(), "mean {m} vs {mean}");
-            assert!((var - mean).abs() < 5.0 * mean * (2.0 / n as f64).sqrt() + 0.01 * mean, "var {var} vs {mean}");
+            assert!((m - mean).abs() < 4.0 * (mean / f64::from(n)).sqrt(), "mean {m} vs {mean}");
+            assert!((var - mean).abs() < 5.0 * mean * (2.0 / f64::from(n)).sqrt() + 0.01 * mean, "var {var} vs {mean}");
         }
     }
 }

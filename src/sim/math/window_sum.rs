@@ -235,7 +235,7 @@ mod tests {
         let mut window = WindowSum::new();
         let mut exact = ExactSum::new();
         for k in 0..10_000 {
-            let v = (k as f64 + 0.5) * 1.000_000_1e7;
+            let v = (f64::from(k) + 0.5) * 1.000_000_1e7;
             window.add(v);
             exact.add(v);
             if k % 7 == 0 {

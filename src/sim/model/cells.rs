@@ -167,7 +167,7 @@ mod tests {
     /// edge, in the tail, at 0 and for NaN; unequal edges keep the bisection.
     #[test]
     fn equally_spaced_axes_index_as_the_bisection_does() {
-        let edges: Vec<f64> = (0..26).map(|k| k as f64 * 0.002).collect();
+        let edges: Vec<f64> = (0..26).map(|k| f64::from(k) * 0.002).collect();
         let inv = uniform_inv_step(&edges);
         assert!(inv > 0.0);
         let bisect = |r: f64| edges.partition_point(|&e| e <= r).saturating_sub(1);
@@ -175,7 +175,7 @@ mod tests {
         for &e in &edges {
             probes.extend([e, f64::from_bits(e.to_bits().saturating_sub(1)), f64::from_bits(e.to_bits() + 1)]);
         }
-        probes.extend((0..10_000).map(|k| k as f64 * 0.000_005_3));
+        probes.extend((0..10_000).map(|k| f64::from(k) * 0.000_005_3));
         for r in probes {
             assert_eq!(axis_index(&edges, inv, r), bisect(r), "r = {r:e}");
         }

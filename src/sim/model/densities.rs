@@ -105,13 +105,13 @@ mod tests {
         let mut sum = 0.0;
         for i in 0..nr {
             // Equal-area rings: r² uniform.
-            let r = radius * ((i as f64 + 0.5) / nr as f64).sqrt();
+            let r = radius * ((f64::from(i) + 0.5) / f64::from(nr)).sqrt();
             for k in 0..na {
-                let phi = 2.0 * PI * (k as f64 + 0.5) / na as f64;
+                let phi = 2.0 * PI * (f64::from(k) + 0.5) / f64::from(na);
                 sum += f([c[0] + r * phi.cos(), c[1] + r * phi.sin()]);
             }
         }
-        sum * PI * radius * radius / (nr * na) as f64
+        sum * PI * radius * radius / f64::from(nr * na)
     }
 
     #[test]
@@ -144,9 +144,9 @@ mod tests {
         let mass: f64 = (0..n)
             .map(|i| {
                 // r = ρ_max·t², denser near the centre where the density lives.
-                let t = (i as f64 + 0.5) / n as f64;
+                let t = (f64::from(i) + 0.5) / f64::from(n);
                 let r = rho_max * t * t;
-                arrival_density(&spot, l3, [r, 0.0]) * 2.0 * PI * r * 2.0 * rho_max * t / n as f64
+                arrival_density(&spot, l3, [r, 0.0]) * 2.0 * PI * r * 2.0 * rho_max * t / f64::from(n)
             })
             .sum();
         assert!((mass - 1.0).abs() < 2e-5, "{mass}");

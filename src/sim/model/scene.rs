@@ -198,7 +198,7 @@ mod tests {
         let mut it = draws.iter();
         assert_close("E[ϑ²]", mean_se(n, || it.next().unwrap().1.powi(2)), 2.0 * beta * beta);
         let mut it = draws.iter();
-        assert_close("E[ϑ]", mean_se(n, || it.next().unwrap().1), beta * (std::f64::consts::PI / 2.0).sqrt());
+        assert_close("E[ϑ]", mean_se(n, || it.next().unwrap().1), beta * (PI / 2.0).sqrt());
         // Azimuth: the deflection's components along t and b have mean zero and equal spread.
         let mut it = draws.iter();
         assert_close(
@@ -236,10 +236,10 @@ mod tests {
         let lobe = Lobe::new(3f64.to_radians());
         let n = 200_000;
         let upper = 12.0 * lobe.beta;
-        let h = upper / n as f64;
+        let h = upper / f64::from(n);
         let integral: f64 = (0..n)
             .map(|i| {
-                let t = (i as f64 + 0.5) * h;
+                let t = (f64::from(i) + 0.5) * h;
                 lobe.pdf_w(t) * libm::sin(t) * 2.0 * PI * h
             })
             .sum();
@@ -253,10 +253,10 @@ mod tests {
         let lobe = Lobe::new(beta);
         let n = 200_000;
         let upper = 12.0 * beta;
-        let h = upper / n as f64;
+        let h = upper / f64::from(n);
         let integral: f64 = (0..n)
             .map(|i| {
-                let t = (i as f64 + 0.5) * h;
+                let t = (f64::from(i) + 0.5) * h;
                 lobe.g(t) * libm::sin(t) * 2.0 * PI * h
             })
             .sum();

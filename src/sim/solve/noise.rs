@@ -220,7 +220,7 @@ mod tests {
                 s[2] += x * x * x;
                 s[3] += x * x * x * x;
             }
-            let mf = m as f64;
+            let mf = f64::from(m);
             let row = NoiseRow::from_sums(Strategy::Plane1, mf, s[0], s[1], Some(central_3_4(mf, s)));
             rms_values.push(row.rms_percent.unwrap());
             ses.push(row.rms_percent_stderr.unwrap());

@@ -195,7 +195,7 @@ mod tests {
 
     #[test]
     fn a_bad_patch_names_the_field_as_a_job_specification_does() {
-        let field = |patch: serde_json::Value| base().patched(&patch).unwrap_err().field;
+        let field = |patch: Value| base().patched(&patch).unwrap_err().field;
         assert_eq!(field(json!({ "lambda": -1 })), "solver.lambda");
         assert_eq!(field(json!({ "lambda": "x" })), "solver.lambda");
         assert_eq!(field(json!({ "fixed": { "w1": 2e6 } })), "solver.fixed.w1");

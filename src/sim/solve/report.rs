@@ -205,7 +205,12 @@ pub struct ReportInputs<'a> {
 
 /// Builds the report of `moments` with the given solver options. The weights table holds the
 /// recommended weights, or with `inputs.weights` the in-sample fit of all iterations asked for.
-pub fn build_report(moments: &Moments, grid: &CellGrid, solver: &SolverOptions, inputs: &ReportInputs) -> RunReport {
+pub fn build_report(
+    moments: &Moments,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    inputs: &ReportInputs<'_>,
+) -> RunReport {
     let mut table = noise_table_with(moments, grid, solver, inputs.expected);
     let warnings = warnings(moments, &table);
     if let Some(expected) = inputs.expected {

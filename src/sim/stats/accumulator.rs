@@ -174,7 +174,7 @@ fn check_counters(workers: &[MomentsAccumulator], moments: &Moments) -> Result<(
         merges_sq: &f.merges_sq,
         cell_counts: &f.cell_counts,
     });
-    let folds: Vec<Counters> = moments.folds.iter().map(FoldMoments::counters).chain(worker_folds).collect();
+    let folds: Vec<Counters<'_>> = moments.folds.iter().map(FoldMoments::counters).chain(worker_folds).collect();
     if counters_fit(&folds) { Ok(()) } else { Err(MergeError::Overflow("pooled counts".to_string())) }
 }
 

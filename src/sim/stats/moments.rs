@@ -214,7 +214,7 @@ impl FoldMoments {
 }
 
 /// Whether the counters of `folds` added together fit their types.
-pub(super) fn counters_fit(folds: &[Counters]) -> bool {
+pub(super) fn counters_fit(folds: &[Counters<'_>]) -> bool {
     let fits = |total: u128| total <= u128::from(u64::MAX);
     (0..3).all(|m| {
         fits(folds.iter().map(|f| u128::from(f.merges[m])).sum())

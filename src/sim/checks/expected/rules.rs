@@ -114,7 +114,7 @@ pub(super) fn adaptive_gk(
     f: &(dyn Fn(usize, f64) -> Values + Sync),
     panels: usize,
     tol: f64,
-    budget: &Budget,
+    budget: &Budget<'_>,
 ) -> Result<Values, ReferenceError> {
     struct Piece {
         panel: usize,

@@ -33,7 +33,7 @@ fn disc_rules_are_exact_on_polynomials() {
                             * factorial(i)
                             * factorial(j)
                             * factorial(i + j)
-                            * (2 * (i + j + 1)) as f64)
+                            * f64::from(2 * (i + j + 1)))
                 } else {
                     0.0
                 };
@@ -55,7 +55,7 @@ fn disc_rules_average_a_gaussian_lobe() {
         let mut worst: f64 = 0.0;
         for step in 0..=60 {
             for angle in [0.0, 0.4, 1.1] {
-                let r = 0.1 * step as f64;
+                let r = 0.1 * f64::from(step);
                 let c = [r * f64::cos(angle), r * f64::sin(angle)];
                 let got = rule.centre * lobe(0.0, 0.0, c)
                     + rule.points.iter().map(|&([x, y], w)| w * lobe(x, y, c)).sum::<f64>();
@@ -64,7 +64,7 @@ fn disc_rules_average_a_gaussian_lobe() {
                     let rho = kappa * (0.5 * (1.0 + t)).sqrt();
                     let ring: f64 = (0..96)
                         .map(|l| {
-                            let (s, co) = (2.0 * PI * (l as f64 + 0.5) / 96.0).sin_cos();
+                            let (s, co) = (2.0 * PI * (f64::from(l) + 0.5) / 96.0).sin_cos();
                             lobe(rho * co, rho * s, c)
                         })
                         .sum();
@@ -86,12 +86,12 @@ fn ring_areas_are_exact() {
         [(0.5, 1.0, 0.7), (1.2, 0.5, 1.0), (0.3, 1.0, 0.2), (0.9, 0.2, 1.0), (1.15, 0.2, 1.0), (0.0, 1.0, 0.5)]
     {
         let n = 2000;
-        let h = 2.0 * r / n as f64;
+        let h = 2.0 * r / f64::from(n);
         let mut inside = 0u64;
         let mut total = 0u64;
         for i in 0..n {
             for j in 0..n {
-                let (x, y) = (-r + (i as f64 + 0.5) * h, -r + (j as f64 + 0.5) * h);
+                let (x, y) = (-r + (f64::from(i) + 0.5) * h, -r + (f64::from(j) + 0.5) * h);
                 if x * x + y * y <= r * r {
                     total += 1;
                     inside += u64::from((d + x).powi(2) + y * y <= rho * rho);
@@ -268,7 +268,7 @@ fn unresolvable_configurations_return_errors() {
         json!({ "preset": "paper-table1", "scene": { "beta_deg": 1e-4 }, "merge_radius": 1e-9 }),
         json!({ "preset": "paper-table1", "scene": { "l2": 1e-6, "beta_deg": 45.0 }, "merge_radius": 1e-7 }),
         json!({ "preset": "paper-table1", "scene": { "illumination": { "kind": "rings", "rings":
-            (1..=64).map(|k| json!({ "outer_radius": 0.3 * k as f64, "level": (k % 3) as f64 })).collect::<Vec<_>>() } } }),
+            (1..=64).map(|k| json!({ "outer_radius": 0.3 * f64::from(k), "level": f64::from(k % 3) })).collect::<Vec<_>>() } } }),
         json!({ "preset": "paper-table1", "merge_radius": 1e5, "scene": { "l2": 1e6, "l3": 1e6, "beta_deg": 45.0,
             "illumination": { "kind": "spot", "a": 1e-9, "r_ls": 1e6, "contrast": 1e6 } } }),
     ]

@@ -193,7 +193,7 @@ fn trace_chunk_with(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,bmi1,bmi2")]
 fn trace_blocks_avx2(
-    setup: &Chunk,
+    setup: &Chunk<'_>,
     b: &mut Block,
     lanes: &mut LaneRng,
     rng: &mut StreamRng,
@@ -214,7 +214,7 @@ fn trace_blocks_avx2(
 /// CPU has AVX2 (in [`trace_blocks_avx2`]).
 #[inline(always)]
 fn trace_blocks<const AVX2: bool>(
-    setup: &Chunk,
+    setup: &Chunk<'_>,
     b: &mut Block,
     mut fill: impl FnMut(&mut [u64]),
     rng: &mut StreamRng,
@@ -272,7 +272,7 @@ fn trace_blocks<const AVX2: bool>(
 /// in f32), cosine directions and plane-2 hits, the pixel-cone test and the near-filter cells (see
 /// [`Filter32::path`]).
 #[inline(always)]
-fn filter_block(setup: &Chunk, b: &mut Block) {
+fn filter_block(setup: &Chunk<'_>, b: &mut Block) {
     setup.config.scene.illumination.radius2_block(&b.bits[0], &mut b.r2);
     for i in 0..BLOCK {
         let p = Filter32::inputs(b.r2[i], b.bits[1][i], b.bits[2][i]);
@@ -299,7 +299,7 @@ fn filter_block(setup: &Chunk, b: &mut Block) {
 /// with its exact flags; returns the mask of the flagged paths (bit i for path i). For chunks
 /// whose f32 filter would pass every path ([`Chunk::screen`] false).
 #[inline(always)]
-fn exact_block(setup: &Chunk, b: &mut Block) -> u64 {
+fn exact_block(setup: &Chunk<'_>, b: &mut Block) -> u64 {
     let scene = &setup.config.scene;
     let e = &mut b.exact;
     scene.illumination.sample_block(&b.bits[0], &b.bits[2], &mut e.x3);
@@ -384,7 +384,7 @@ impl ExactPath {
 
     /// The exact tests: may it reach the pixel, is a camera vertex near its start or its hit.
     #[inline(always)]
-    fn flags(&self, setup: &Chunk) -> u32 {
+    fn flags(&self, setup: &Chunk<'_>) -> u32 {
         let l2 = setup.config.scene.l2;
         let [x2, y2] = self.x2;
         let reach = setup.cone.may_reach_polar(x2, y2, self.cos_phi, self.sin_phi, self.tan, self.cos2, l2);
@@ -444,7 +444,7 @@ fn candidates_avx2(filter: &Filter32, b: &Block) -> u64 {
 #[cold]
 #[inline(never)]
 fn trace_flagged(
-    setup: &Chunk,
+    setup: &Chunk<'_>,
     flags: u32,
     x3: [f64; 2],
     x2: [f64; 2],

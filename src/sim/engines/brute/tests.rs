@@ -91,7 +91,7 @@ fn simd_and_portable_loops_agree() {
 /// cameras, uniform light with a wide R (plane-1 hits), a wide lobe (every path may reach the
 /// pixel), a close plane 2 (the f32 cone margin gives up: e > 0.03) and a deep, wide scene with a
 /// tiny R (large f32 errors relative to R).
-fn filter_configs() -> Vec<std::sync::Arc<crate::sim::model::config::SimConfig>> {
+fn filter_configs() -> Vec<std::sync::Arc<SimConfig>> {
     [
         serde_json::json!({ "preset": "paper-table1", "light_paths": 131_072 }),
         serde_json::json!({ "preset": "paper-table1", "light_paths": 140_000, "camera_paths": 300, "merge_radius": 0.02 }),
@@ -109,7 +109,7 @@ fn filter_configs() -> Vec<std::sync::Arc<crate::sim::model::config::SimConfig>>
 }
 
 /// Whether the f32 filter makes the path of the words `w` a candidate (as the block loop does).
-fn is_candidate(setup: &Chunk, w: [u64; 3]) -> bool {
+fn is_candidate(setup: &Chunk<'_>, w: [u64; 3]) -> bool {
     let mut r2 = [0.0; 1];
     setup.config.scene.illumination.radius2_block(&[w[0]], &mut r2);
     let (cell3, cell2, candidate) = setup.filter.path(Filter32::inputs(r2[0], w[1], w[2]));
@@ -119,7 +119,7 @@ fn is_candidate(setup: &Chunk, w: [u64; 3]) -> bool {
 /// What the exact tests need of a path: it may reach the pixel (the f64 cone test, which decides
 /// the lobe draws), or it merges at plane 3 or plane 2 (the merge functions' exact distance test,
 /// against every camera vertex).
-fn needs_work(setup: &Chunk, path: &ExactPath) -> bool {
+fn needs_work(setup: &Chunk<'_>, path: &ExactPath) -> bool {
     let within = |a: [f64; 2], b: [f64; 2]| crate::sim::engines::merge::within(a, b, setup.config.merge_radius);
     path.flags(setup) & MAY_REACH_PIXEL != 0
         || setup.cameras.paths.iter().any(|c| c.x3.is_some_and(|x3| within(path.x3, x3)) || within(path.x2, c.x2))

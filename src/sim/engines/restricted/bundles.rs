@@ -103,7 +103,7 @@ fn for_each_candidate(
 }
 
 pub(super) fn plane1_bundle(
-    it: &Iteration,
+    it: &Iteration<'_>,
     rng: &mut StreamRng,
     scratch: &mut ChunkScratch,
     buffers: &mut RestrictedScratch,
@@ -184,7 +184,7 @@ pub(super) fn build_plane2(
 }
 
 pub(super) fn plane2_bundle(
-    it: &Iteration,
+    it: &Iteration<'_>,
     rng: &mut StreamRng,
     scratch: &mut ChunkScratch,
     buffers: &mut RestrictedScratch,
@@ -249,7 +249,7 @@ pub(super) fn build_plane3(
 }
 
 pub(super) fn plane3_bundle(
-    it: &Iteration,
+    it: &Iteration<'_>,
     rng: &mut StreamRng,
     scratch: &mut ChunkScratch,
     buffers: &mut RestrictedScratch,
