@@ -6,13 +6,16 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use optimis::jobs::cluster::SlurmOptions;
+use optimis::jobs::cluster::{BatchSystemKind, ClusterOptions, SlurmOptions};
 use serde_json::{Value, json};
 
 use crate::common::{TestServer, small_job, uninterrupted_moments};
 
+/// The same executor on a second batch system: the stand-in of `jobs::cluster::fake`.
+mod fake;
+
 /// A copy of the stand-ins in `dir/bin` (their state beside them) and the executor's options.
-fn options(dir: &Path, binary: PathBuf, retries: u32) -> SlurmOptions {
+fn options(dir: &Path, binary: PathBuf, retries: u32) -> ClusterOptions {
     let bin = dir.join("bin");
     std::fs::create_dir_all(bin.join("state")).unwrap();
     for name in ["sbatch", "squeue", "scancel"] {
@@ -24,20 +27,23 @@ fn options(dir: &Path, binary: PathBuf, retries: u32) -> SlurmOptions {
             std::fs::set_permissions(&to, std::fs::Permissions::from_mode(0o755)).unwrap();
         }
     }
-    SlurmOptions {
-        cluster_dir: dir.join("cluster"),
-        binary,
-        slurm_bin_dir: Some(bin),
+    let slurm = SlurmOptions {
+        bin_dir: Some(bin),
         partition: None,
         account: None,
-        cpus_per_task: 1,
         time_limit: None,
         sbatch_options: vec!["--qos=test".into()],
+        command_timeout: Duration::from_secs(20),
+    };
+    ClusterOptions {
+        system: BatchSystemKind::Slurm(slurm),
+        cluster_dir: dir.join("cluster"),
+        binary,
+        cpus_per_task: 1,
         default_tasks: 1,
         max_tasks: 8,
         retries,
         poll_interval: Duration::from_millis(200),
-        command_timeout: Duration::from_secs(20),
         missing_grace: Duration::from_secs(30),
         task_checkpoint_seconds: 0.2,
     }
@@ -46,7 +52,7 @@ fn options(dir: &Path, binary: PathBuf, retries: u32) -> SlurmOptions {
 async fn start(retries: u32, binary: PathBuf) -> TestServer {
     let dir = tempfile::tempdir().unwrap();
     let slurm = options(dir.path(), binary, retries);
-    TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await
+    TestServer::start_in(dir, move |c| c.cluster = Some(slurm)).await
 }
 
 fn optimis() -> PathBuf {
@@ -155,7 +161,7 @@ async fn a_restarted_server_adopts_the_running_tasks_and_a_cancel_stops_them() {
     let dir = server.stop().await;
     std::fs::remove_file(&hold).unwrap();
     let slurm = options(dir.path(), optimis(), 1);
-    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let server = TestServer::start_in(dir, move |c| c.cluster = Some(slurm)).await;
     let job = settle(&server, id).await;
     assert_eq!(job["state"], "succeeded", "{job}");
     let mut plain = spec.clone();
@@ -227,7 +233,7 @@ async fn a_corrupted_document_of_a_finished_task_is_run_again_not_fatal() {
     let mut slurm = options(dir.path(), optimis(), 1);
     slurm.missing_grace = Duration::from_millis(500);
     let again = slurm.clone();
-    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let server = TestServer::start_in(dir, move |c| c.cluster = Some(slurm)).await;
     let hold = server.dir.path().join("bin/state/hold");
     std::fs::write(&hold, "").unwrap();
     let mut spec = small_job(20, 11);
@@ -250,7 +256,7 @@ async fn a_corrupted_document_of_a_finished_task_is_run_again_not_fatal() {
     }
     let bytes = std::fs::read(&document).unwrap();
     std::fs::write(&document, &bytes[..bytes.len() / 2]).unwrap();
-    let server = TestServer::start_in(dir, move |c| c.slurm = Some(again)).await;
+    let server = TestServer::start_in(dir, move |c| c.cluster = Some(again)).await;
     let job = settle(&server, id).await;
     assert_eq!(job["state"], "succeeded", "{job}");
     let mut plain = spec.clone();
@@ -310,7 +316,7 @@ async fn a_full_cluster_directory_makes_the_job_wait_not_fail() {
         return;
     };
     let slurm = options(dir.path(), optimis(), 1);
-    let server = TestServer::start_in(dir, move |c| c.slurm = Some(slurm)).await;
+    let server = TestServer::start_in(dir, move |c| c.cluster = Some(slurm)).await;
     let hold = server.dir.path().join("bin/state/hold");
     std::fs::write(&hold, "").unwrap();
     // Full before the job: the server cannot write the tasks' specification, and waits.

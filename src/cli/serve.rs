@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use super::{CliError, cores};
 use crate::api::{BearerToken, HttpLimits};
 use crate::jobs::RunPolicy;
-use crate::jobs::cluster::SlurmOptions;
+use crate::jobs::cluster::{BatchSystemKind, ClusterOptions, SlurmOptions};
 use crate::jobs::merges::peers::Peer;
 use crate::server::{ConnectionLimits, ServerConfig, TlsFiles, serve, termination_signal};
 use crate::trust::secrets::{check_owner_only, read_secret};
@@ -196,11 +196,19 @@ pub struct ClusterArgs {
 }
 
 impl ClusterArgs {
-    /// The Slurm executor's options, if it is asked for.
-    fn slurm_options(&self) -> Result<Option<SlurmOptions>, CliError> {
-        if self.executor == ExecutorName::Local {
-            return Ok(None);
-        }
+    /// The cluster executor's options, if it is asked for: the batch system named once, here.
+    fn cluster_options(&self) -> Result<Option<ClusterOptions>, CliError> {
+        let system = match self.executor {
+            ExecutorName::Local => return Ok(None),
+            ExecutorName::Slurm => BatchSystemKind::Slurm(SlurmOptions {
+                bin_dir: self.slurm_bin_dir.clone(),
+                partition: self.slurm_partition.clone(),
+                account: self.slurm_account.clone(),
+                time_limit: self.slurm_time.clone(),
+                sbatch_options: self.sbatch_options.clone(),
+                command_timeout: Duration::from_secs_f64(self.slurm_command_timeout),
+            }),
+        };
         let binary = match &self.slurm_binary {
             Some(path) => path.clone(),
             None => std::env::current_exe().map_err(|e| {
@@ -210,20 +218,15 @@ impl ClusterArgs {
         let dir =
             self.cluster_dir.clone().ok_or_else(|| CliError::Config("--executor slurm needs --cluster-dir".into()))?;
         let cluster_dir = std::path::absolute(&dir).map_err(|e| CliError::Config(format!("--cluster-dir: {e}")))?;
-        let options = SlurmOptions {
+        let options = ClusterOptions {
+            system,
             cluster_dir,
             binary,
-            slurm_bin_dir: self.slurm_bin_dir.clone(),
-            partition: self.slurm_partition.clone(),
-            account: self.slurm_account.clone(),
             cpus_per_task: self.slurm_cpus_per_task,
-            time_limit: self.slurm_time.clone(),
-            sbatch_options: self.sbatch_options.clone(),
             default_tasks: self.default_tasks,
             max_tasks: self.max_tasks,
             retries: self.task_retries,
             poll_interval: Duration::from_secs_f64(self.slurm_poll_seconds),
-            command_timeout: Duration::from_secs_f64(self.slurm_command_timeout),
             missing_grace: Duration::from_secs_f64(self.task_grace_seconds),
             task_checkpoint_seconds: self.task_checkpoint_seconds,
         };
@@ -293,7 +296,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         // The key is a secret like the token: refuse one that other users can read.
         check_owner_only(key).map_err(|e| CliError::Config(format!("--tls-key: {e}")))?;
     }
-    let slurm = args.cluster.slurm_options()?;
+    let cluster = args.cluster.cluster_options()?;
     let config = ServerConfig {
         bind: args.bind,
         database: args.database,
@@ -329,7 +332,7 @@ pub fn serve_command(args: ServeArgs) -> Result<(), CliError> {
         signing_key: args.signing_key,
         trust: args.trust,
         allowed_hosts: args.allowed_hosts,
-        slurm,
+        cluster,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(async {

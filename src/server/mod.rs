@@ -17,7 +17,7 @@ use tokio::net::TcpListener;
 
 use crate::api::guard::Guard;
 use crate::api::{BearerToken, HttpLimits};
-use crate::jobs::cluster::{SlurmExecutor, SlurmOptions};
+use crate::jobs::cluster::{ClusterExecutor, ClusterOptions};
 use crate::jobs::core::compute::Pools;
 use crate::jobs::merges::peers::{Peer, PeerConfigError, Peers};
 use crate::jobs::{Executor, JobManager, LocalPool, RunPolicy, Services};
@@ -56,8 +56,9 @@ pub struct ServerConfig {
     pub trust: Vec<PathBuf>,
     /// Host names this server also answers to, besides loopback ones (a proxy's public name).
     pub allowed_hosts: Vec<String>,
-    /// Where jobs run: the server's own pool (None, the default), or a Slurm cluster.
-    pub slurm: Option<SlurmOptions>,
+    /// Where jobs run: the server's own pool (None, the default), or a cluster's batch system
+    /// (Slurm), named in the options.
+    pub cluster: Option<ClusterOptions>,
 }
 
 /// The PEM files of the server's TLS certificate chain and private key.
@@ -98,8 +99,8 @@ pub enum ServerError {
     /// An I/O error of the listener (its local address, the accept loop).
     #[error("server error: {0}")]
     Io(#[from] std::io::Error),
-    /// The executor could not start (`--executor slurm`: the cluster directory, Slurm's
-    /// commands, the controller).
+    /// The executor could not start (`--executor slurm`: the cluster directory, the batch
+    /// system's commands, its controller).
     #[error("{0}")]
     Executor(String),
     /// Anything else that stopped the start-up.
@@ -164,12 +165,13 @@ async fn build(config: &ServerConfig, bound: SocketAddr) -> Result<App, ServerEr
     // running job's chunks, and their light work never waits behind their heavy work.
     let pools = Pools::new()?;
     let metrics = Arc::new(crate::metrics::Metrics::new());
-    let executor: Arc<dyn Executor> = match &config.slurm {
+    let executor: Arc<dyn Executor> = match &config.cluster {
         None => Arc::new(LocalPool::new(pool)),
         Some(options) => {
             let (options, metrics) = (options.clone(), metrics.clone());
-            // Slurm's commands answer within their timeouts; off the tokio workers all the same.
-            let started = tokio::task::spawn_blocking(move || SlurmExecutor::start(options, metrics))
+            // The batch system's commands answer within their timeouts; off the tokio workers all
+            // the same.
+            let started = tokio::task::spawn_blocking(move || ClusterExecutor::start(options, metrics))
                 .await
                 .map_err(|e| ServerError::Other(e.to_string()))?;
             Arc::new(started.map_err(ServerError::Executor)?)

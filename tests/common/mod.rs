@@ -46,7 +46,7 @@ pub fn config(dir: &tempfile::TempDir) -> ServerConfig {
         signing_key: None,
         trust: Vec::new(),
         allowed_hosts: Vec::new(),
-        slurm: None,
+        cluster: None,
     }
 }
 

@@ -184,7 +184,8 @@ function renderSpec(dl, job) {
   dl.replaceChildren(...rows.map(([term, value, path]) => h('div', { 'data-field': path }, h('dt', {}, term), h('dd', {}, value))));
 }
 
-/** The job's cluster tasks (`execution`, on a server with --executor slurm), while it runs. */
+/** The job's cluster tasks (`execution`, on a server with --executor slurm), while it runs; each
+ * task's id is the batch system's (`batch_job_id`: Slurm's job id). */
 function renderTasks(refs, job) {
   const tasks = job.execution ? job.execution.tasks : [];
   refs.tasks.hidden = tasks.length === 0;
@@ -193,7 +194,7 @@ function renderTasks(refs, job) {
     h('td', {}, `${formatCount(t.first_iteration)} – ${formatCount(t.first_iteration + t.iterations)}`),
     h('td', {}, `${formatCount(t.iterations_done)} of ${formatCount(t.iterations)}`),
     h('td', {}, badge(t.state)),
-    h('td', {}, t.slurm_job_id || '—'),
+    h('td', {}, t.batch_job_id || '—'),
     h('td', {}, String(t.attempts)),
     h('td', {}, h('code', {}, t.log)))));
 }

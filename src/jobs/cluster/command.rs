@@ -1,6 +1,6 @@
-//! External commands (Slurm's) run with a deadline and a bounded capture of their output: a
-//! controller that does not answer, or a command that prints without end, costs the follower a
-//! timeout and a few MiB, never a hung thread.
+//! External commands (a batch system's: Slurm's `sbatch`, `squeue`, `scancel`) run with a deadline
+//! and a bounded capture of their output: a controller that does not answer, or a command that
+//! prints without end, costs the follower a timeout and a few MiB, never a hung thread.
 
 use std::io::Read;
 use std::process::{Child, Command, Stdio};

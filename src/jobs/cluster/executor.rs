@@ -1,18 +1,20 @@
-//! The Slurm executor: a job's iterations as one Slurm job array per round (the job's first
-//! iterations; each extension's), followed from the server until every task's document is
-//! complete.
+//! The cluster executor: a job's iterations as one array of a batch system per round (the job's
+//! first iterations; each extension's), followed from the server until every task's document is
+//! complete. What is asked of the batch system is [`BatchSystem`]'s few calls; the rounds, the
+//! retries, the adoption and the merges here are the same for every system.
 //!
 //! One look at a job (every `--slurm-poll-seconds`, on the job's driver thread — a blocking
 //! thread, never a tokio worker): plan a round for iterations no round covers yet and submit it
 //! (its intent recorded first, so a restart finds the array by its name instead of submitting it
-//! again); ask `squeue` once for all of the job's tasks; read the documents that changed; judge
-//! each task, resubmitting one that ended without its iterations (same shard, so the same
-//! iterations, up to `--task-retries` times, then the job fails naming the task, its Slurm job id
-//! and its log); merge the tasks' latest documents and hand them to the driver, which checkpoints
-//! them as it does a local run's. Because each document holds only its task's iterations and
-//! merges are exact, the merged statistics never count an iteration twice, whatever ran twice.
+//! again); ask the system's queue once for all of the job's tasks; read the documents that
+//! changed; judge each task, resubmitting one that ended without its iterations (same shard, so
+//! the same iterations, up to `--task-retries` times, then the job fails naming the task, its id
+//! in the batch system and its log); merge the tasks' latest documents and hand them to the
+//! driver, which checkpoints them as it does a local run's. Because each document holds only its
+//! task's iterations and merges are exact, the merged statistics never count an iteration twice,
+//! whatever ran twice.
 //!
-//! A shutdown leaves the tasks running (the next start adopts them); a cancel `scancel`s them.
+//! A shutdown leaves the tasks running (the next start adopts them); a cancel cancels them.
 
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
@@ -21,9 +23,9 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::files::{ClusterDir, JobDir, Record, Round};
-use super::options::SlurmOptions;
+use super::options::ClusterOptions;
 use super::private::FileError;
-use super::slurm::{QueueEntry, Slurm, SlurmError};
+use super::system::{BatchError, BatchSystem, QueueEntry, Submission, Tasks};
 use super::tracking::{Tracking, round_spec};
 use crate::jobs::core::executor::{Executor, OnBatch, Segment, SegmentError};
 use crate::metrics::Metrics;
@@ -31,11 +33,11 @@ use crate::sim::runner::RunError;
 use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::moments::Moments;
 
-/// Runs jobs as Slurm job arrays.
-pub struct SlurmExecutor {
-    options: SlurmOptions,
+/// Runs jobs as arrays of a batch system.
+pub struct ClusterExecutor {
+    options: ClusterOptions,
     dir: ClusterDir,
-    slurm: Slurm,
+    system: Box<dyn BatchSystem>,
     metrics: Arc<Metrics>,
     /// What is known of each followed job between two segments; std Mutex, map operations only.
     tracking: Mutex<HashMap<i64, Tracking>>,
@@ -43,44 +45,53 @@ pub struct SlurmExecutor {
     counts: Mutex<HashMap<i64, BTreeMap<String, i64>>>,
 }
 
-impl SlurmExecutor {
-    /// Checks the options, the cluster directory and that Slurm answers: a clear error at
-    /// start-up rather than failed jobs later.
-    pub fn start(options: SlurmOptions, metrics: Arc<Metrics>) -> Result<Self, String> {
+impl ClusterExecutor {
+    /// Checks the options, the cluster directory and that the batch system answers: a clear error
+    /// at start-up rather than failed jobs later.
+    pub fn start(options: ClusterOptions, metrics: Arc<Metrics>) -> Result<Self, String> {
         options.validate()?;
         let dir = ClusterDir::open(&options.cluster_dir)?;
-        let slurm = Slurm { timeout: options.command_timeout, bin_dir: options.slurm_bin_dir.clone() };
-        let version = slurm.check().map_err(|e| format!("--executor slurm: Slurm does not answer: {e}"))?;
+        let system = options.system.start();
+        let name = system.name();
+        let version = system
+            .check()
+            .map_err(|e| format!("--executor {}: {name} does not answer: {e}", name.to_ascii_lowercase()))?;
         if !options.binary.exists() {
             tracing::warn!(binary = %options.binary.display(),
                 "--slurm-binary does not exist on this machine; it must on the nodes");
         }
-        tracing::info!(%version, cluster_dir = %options.cluster_dir.display(), binary = %options.binary.display(),
-            "running jobs on Slurm (squeue and the task documents are followed; sacct is not needed)");
-        Ok(Self { options, dir, slurm, metrics, tracking: Mutex::default(), counts: Mutex::default() })
+        tracing::info!(system = name, %version, cluster_dir = %options.cluster_dir.display(),
+            binary = %options.binary.display(),
+            "running jobs on a batch system (its queue and the task documents are followed)");
+        Ok(Self { options, dir, system, metrics, tracking: Mutex::default(), counts: Mutex::default() })
     }
 
-    /// The tasks of round `r`: its options and the task command.
-    fn submit_round(&self, dir: &JobDir, r: usize, round: &Round) -> Result<String, SlurmError> {
-        let mut options = self.options.common_sbatch_options();
-        options.push(format!("--job-name={}", dir.round_name(r)));
-        options.push(format!("--array=0-{}", round.tasks - 1));
-        options.push(format!("--output={}", path(&dir.log(r, "%a"))));
-        self.slurm.submit(&options, &self.task_command(dir, r, round, None))
+    /// The tasks of round `r`, as one array.
+    fn submit_round(&self, dir: &JobDir, r: usize, round: &Round) -> Result<String, BatchError> {
+        self.system.submit(&Submission {
+            name: &dir.round_name(r),
+            tasks: Tasks::Array(round.tasks),
+            command: &self.task_command(dir, r, round, None),
+            cpus: self.options.cpus_per_task,
+            log: &|k| dir.log(r, k),
+        })
     }
 
     /// Task `k` of round `r` again, on its own (same shard: the same iterations).
-    fn resubmit_task(&self, dir: &JobDir, r: usize, round: &Round, k: u64) -> Result<String, SlurmError> {
-        let mut options = self.options.common_sbatch_options();
-        options.push(format!("--job-name={}", dir.task_name(r, k)));
-        options.push(format!("--output={}", path(&dir.log(r, &k.to_string()))));
-        self.slurm.submit(&options, &self.task_command(dir, r, round, Some(k)))
+    fn resubmit_task(&self, dir: &JobDir, r: usize, round: &Round, k: u64) -> Result<String, BatchError> {
+        self.system.submit(&Submission {
+            name: &dir.task_name(r, k),
+            tasks: Tasks::One(k),
+            command: &self.task_command(dir, r, round, Some(k)),
+            cpus: self.options.cpus_per_task,
+            log: &|k| dir.log(r, k),
+        })
     }
 
-    /// `optimis cluster-task` for task `k` of round `r` (none: each task of the array, by its
-    /// `SLURM_ARRAY_TASK_ID`): it reads the round's spec, writes its document every few seconds
-    /// and resumes from one a retry finds. Given to Slurm as argv (`sbatch --wrap`), so that no
-    /// script in the shared directory is ever run.
+    /// `optimis cluster-task` for task `k` of round `r` (none: each task of the array, its index
+    /// given by the batch system): it reads the round's spec, writes its document every few
+    /// seconds and resumes from one a retry finds. Given to the system as argv, so that no script
+    /// in the shared directory is ever run.
     fn task_command(&self, dir: &JobDir, r: usize, round: &Round, k: Option<u64>) -> Vec<String> {
         let mut argv = vec![
             path(&self.options.binary),
@@ -104,7 +115,7 @@ impl SlurmExecutor {
         argv
     }
 
-    /// Every Slurm id the job's record holds (arrays whole, resubmissions).
+    /// Every id in the batch system the job's record holds (arrays whole, resubmissions).
     fn submitted_ids(record: &Record) -> Vec<String> {
         let mut ids = Vec::new();
         for round in &record.rounds {
@@ -117,11 +128,11 @@ impl SlurmExecutor {
     /// Cancels every task of a job, those whose id is not recorded yet included (by name).
     fn cancel_all(&self, dir: &JobDir, record: &Record) {
         let mut ids = Self::submitted_ids(record);
-        if let Ok(queue) = self.slurm.queue(&dir.prefix) {
-            ids.extend(queue.into_iter().map(|e| e.key));
+        if let Ok(queue) = self.system.queue(&dir.prefix) {
+            ids.extend(queue.into_iter().map(|e| e.id));
         }
-        if let Err(e) = self.slurm.cancel(&ids) {
-            tracing::error!(prefix = %dir.prefix, error = %e, "scancel failed; the tasks may still run");
+        if let Err(e) = self.system.cancel(&ids) {
+            tracing::error!(prefix = %dir.prefix, error = %e, "the cancel failed; the tasks may still run");
         }
     }
 
@@ -181,33 +192,36 @@ impl SlurmExecutor {
             }
             t.add_tasks(spec);
         }
-        let queue = match self.slurm.queue(&dir.prefix) {
+        let queue = match self.system.queue(&dir.prefix) {
             Ok(entries) => {
-                Some(entries.into_iter().map(|e| (e.key.clone(), e)).collect::<HashMap<String, QueueEntry>>())
+                Some(entries.into_iter().map(|e| (e.id.clone(), e)).collect::<HashMap<String, QueueEntry>>())
             }
             Err(e) => {
-                tracing::warn!(job = segment.id, error = %e, "squeue did not answer; the tasks are judged at the next look");
+                tracing::warn!(job = segment.id, error = %e,
+                    "the queue did not answer; the tasks are judged at the next look");
                 None
             }
         };
         let changed = t.read_documents(dir, segment.job).map_err(RunError::from)?;
-        for (i, why) in t.judge(queue.as_ref(), self.options.missing_grace) {
+        for (i, why) in t.judge(queue.as_ref(), self.options.missing_grace, &*self.system) {
             let task = &t.tasks[i];
             let (r, k, attempts) = (task.round, task.k, t.attempts(task));
-            let key = t.key(task).unwrap_or_default();
+            let key = t.key(task, &*self.system).unwrap_or_default();
             let log = dir.log(r, &k.to_string());
             if attempts > self.options.retries {
                 self.cancel_all(dir, &t.record);
                 return Err(SegmentError::Failed(format!(
-                    "task {i} (iterations [{}, {})) failed: Slurm job {key} {why}, after {attempts} attempts; its log: {}",
+                    "task {i} (iterations [{}, {})) failed: {} job {key} {why}, after {attempts} attempts; its log: {}",
                     task.range.start,
                     task.range.end,
+                    self.system.name(),
                     log.display()
                 )));
             }
-            tracing::warn!(job = segment.id, task = i, slurm_job = %key, %why, log = %log.display(), "resubmitting a task");
+            tracing::warn!(job = segment.id, task = i, batch_job = %key, %why, log = %log.display(),
+                "resubmitting a task");
             // The intent first (a restart adopts or repeats it); `submit_pending` submits it, with
-            // the same retry of transient sbatch errors as a round's.
+            // the same retry of transient submission errors as a round's.
             t.record.rounds[r].resubmits.entry(k).or_default().push(None);
             if let Err(e) = dir.save_record(&t.record) {
                 // Not recorded, not submitted: judged again at the next look.
@@ -226,7 +240,7 @@ impl SlurmExecutor {
     }
 
     /// Submits what the record says is to be submitted: a round or a resubmission whose intent
-    /// was recorded without sbatch's answer (a restart, or a timeout) — unless the queue shows
+    /// was recorded without the system's answer (a restart, or a timeout) — unless the queue shows
     /// it under its name, then it is adopted.
     fn submit_pending(
         &self,
@@ -236,17 +250,15 @@ impl SlurmExecutor {
         queue: Option<&HashMap<String, QueueEntry>>,
     ) -> Result<(), SegmentError> {
         let Some(queue) = queue else { return Ok(()) };
-        let named = |name: &str| queue.values().find(|e| e.name == name).map(|e| e.key.clone());
+        let named = |name: &str| queue.values().find(|e| e.name == name).map(|e| e.submission.clone());
         for r in 0..t.record.rounds.len() {
             if t.record.rounds[r].array.is_none() {
-                let adopted =
-                    named(&dir.round_name(r)).map(|key| key.split('_').next().unwrap_or_default().to_string());
-                let array = match adopted {
+                let array = match named(&dir.round_name(r)) {
                     Some(array) => array,
                     None => match self.submit_round(dir, r, &t.record.rounds[r]) {
                         Ok(array) => array,
                         Err(e) if e.is_transient() => {
-                            tracing::warn!(job, round = r, error = %e, "sbatch: retrying at the next look");
+                            tracing::warn!(job, round = r, error = %e, "submission: retrying at the next look");
                             continue;
                         }
                         Err(e) => return Err(self.refused(e)),
@@ -267,7 +279,7 @@ impl SlurmExecutor {
                 .collect();
             for k in waiting {
                 let id = match named(&dir.task_name(r, k)) {
-                    Some(key) => key,
+                    Some(id) => id,
                     None => match self.resubmit_task(dir, r, &t.record.rounds[r], k) {
                         Ok(id) => id,
                         Err(e) if e.is_transient() => continue,
@@ -285,8 +297,8 @@ impl SlurmExecutor {
         Ok(())
     }
 
-    fn refused(&self, e: SlurmError) -> SegmentError {
-        SegmentError::Failed(format!("Slurm refused the job's tasks: {e}"))
+    fn refused(&self, e: BatchError) -> SegmentError {
+        SegmentError::Failed(format!("{} refused the job's tasks: {e}", self.system.name()))
     }
 
     /// Sleeps for the poll interval in short steps; true if the job was asked to stop meanwhile.
@@ -319,7 +331,7 @@ fn path(p: &std::path::Path) -> String {
     p.to_string_lossy().into_owned()
 }
 
-impl Executor for SlurmExecutor {
+impl Executor for ClusterExecutor {
     fn admit(&self, spec: &JobSpec) -> Result<(), SpecError> {
         match spec.execution {
             Some(e) if e.tasks > self.options.max_tasks => Err(SpecError::new(
@@ -370,7 +382,7 @@ impl Executor for SlurmExecutor {
     }
 }
 
-impl SlurmExecutor {
+impl ClusterExecutor {
     /// Looks at the job until it is complete, a checkpoint is due or it is asked to stop.
     fn follow(
         &self,
@@ -389,7 +401,7 @@ impl SlurmExecutor {
                 return Err(RunError::Cancelled.into());
             }
             let changed = self.look(segment, dir, t)?;
-            (segment.report)(t.view(dir));
+            (segment.report)(t.view(dir, &*self.system));
             self.count(segment.id, Some(t));
             if changed || first_look {
                 first_look = false;

@@ -9,8 +9,8 @@
 //! ```
 //!
 //! A round is one array: the job's first iterations, or those an extension added. Nothing here is
-//! run: the tasks' command goes to Slurm itself (`sbatch --wrap`), so no script in the directory
-//! could be replaced. The directory, its parents and every folder in it must be this user's alone,
+//! run: the tasks' command goes to the batch system itself (Slurm's `sbatch --wrap`), so no script
+//! in the directory could be replaced. The directory, its parents and every folder in it must be this user's alone,
 //! and nothing in it is read or written through a link ([`super::private`]): another local user
 //! can neither plant what the server reads nor redirect what it writes.
 
@@ -80,14 +80,15 @@ fn valid_tag(tag: &str) -> bool {
     (1..=16).contains(&tag.len()) && tag.bytes().all(|b| b.is_ascii_hexdigit())
 }
 
-/// One job's files and Slurm names. Every folder is opened and checked again each time it is used.
+/// One job's files, and its names in the batch system. Every folder is opened and checked again
+/// each time it is used.
 #[derive(Debug, Clone)]
 pub struct JobDir {
     root: PrivateDir,
     id: i64,
     /// `job-ID`.
     name: String,
-    /// The start of every Slurm job name of this job: `optimis-TAG-ID-`.
+    /// The start of every name of this job in the batch system: `optimis-TAG-ID-`.
     pub prefix: String,
 }
 
@@ -127,7 +128,8 @@ impl JobDir {
         self.folder(create)?.subdir(&format!("round-{r}"), create)
     }
 
-    /// Task `k`'s log (`%a` for the array's): a path for Slurm's `--output`.
+    /// Task `k`'s log (or the batch system's placeholder for an array's index, Slurm's `%a`): a
+    /// path the batch system writes the task's output to.
     pub fn log(&self, r: usize, k: &str) -> PathBuf {
         self.path().join(format!("round-{r}")).join(format!("task-{k}.log"))
     }
@@ -187,9 +189,10 @@ pub struct Round {
     pub iterations: u64,
     /// Its tasks.
     pub tasks: u64,
-    /// The array's Slurm job id; null between the intent and sbatch's answer.
+    /// The array's id in the batch system; null between the intent and the system's answer.
     pub array: Option<String>,
-    /// Resubmissions by task index: each a Slurm job id (null between the intent and the answer).
+    /// Resubmissions by task index: each an id in the batch system (null between the intent and
+    /// the answer).
     #[serde(default)]
     pub resubmits: BTreeMap<u64, Vec<Option<String>>>,
 }

@@ -1,18 +1,68 @@
-//! Slurm's own commands, driven with argv (nothing user-given is ever interpolated into a script)
-//! and a timeout each, and their output parsed defensively: `sbatch --parsable` to submit,
-//! `squeue` (one query per poll for all of a job's tasks, finished ones included while Slurm
-//! keeps them) to follow, `scancel` to stop.
+//! Slurm as the cluster executor's batch system ([`BatchSystem`]): its settings (the
+//! `--slurm-*` and `--sbatch-option` flags), and its own commands, driven with argv (nothing
+//! user-given is ever interpolated into a script) and a timeout each, their output parsed
+//! defensively: `sbatch --parsable` to submit, `squeue` (one query per poll for all of a job's
+//! tasks, finished ones included while Slurm keeps them) to follow, `scancel` to stop.
 
 use std::collections::HashMap;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use super::command::{CommandError, run};
+use super::system::{BatchError, BatchSystem, Phase, QueueEntry, Submission, Tasks};
 
 /// Most lines of a `squeue` answer looked at (the server's own jobs: far fewer).
 const MAX_QUEUE_LINES: usize = 200_000;
 
 /// Most job ids per `scancel` call (long argument lists hit limits).
 const CANCEL_BATCH: usize = 100;
+
+/// sbatch options this server sets itself; `--sbatch-option` may not set them.
+const RESERVED: &[&str] =
+    &["--array", "--output", "--error", "--job-name", "--parsable", "--open-mode", "--wrap", "-a", "-o", "-e", "-J"];
+
+/// Slurm's own settings (those of every batch system are [`super::options::ClusterOptions`]).
+#[derive(Debug, Clone)]
+pub struct SlurmOptions {
+    /// Where `sbatch`, `squeue` and `scancel` are (None: on the PATH).
+    pub bin_dir: Option<PathBuf>,
+    /// `--partition`, if any.
+    pub partition: Option<String>,
+    /// `--account`, if any.
+    pub account: Option<String>,
+    /// `--time`, if any.
+    pub time_limit: Option<String>,
+    /// Further sbatch options, passed as they are (one argument each).
+    pub sbatch_options: Vec<String>,
+    /// Deadline of each Slurm command.
+    pub command_timeout: Duration,
+}
+
+impl SlurmOptions {
+    /// Checks the settings that need no cluster: the extra sbatch options, the one-word values.
+    pub fn validate(&self) -> Result<(), String> {
+        for option in &self.sbatch_options {
+            if !option.starts_with('-') || option.chars().any(char::is_control) {
+                return Err(format!("--sbatch-option {option:?}: expected one sbatch option such as --qos=normal"));
+            }
+            let name = option.split('=').next().unwrap_or(option);
+            if RESERVED.contains(&name) {
+                return Err(format!("--sbatch-option {option:?}: {name} is set by the server"));
+            }
+        }
+        for (flag, value) in [
+            ("--slurm-partition", &self.partition),
+            ("--slurm-account", &self.account),
+            ("--slurm-time", &self.time_limit),
+        ] {
+            if value.as_deref().is_some_and(|v| v.is_empty() || v.chars().any(|c| c.is_control() || c.is_whitespace()))
+            {
+                return Err(format!("{flag} must be one word"));
+            }
+        }
+        Ok(())
+    }
+}
 
 /// Why Slurm gave no usable answer.
 #[derive(Debug, thiserror::Error)]
@@ -55,73 +105,117 @@ impl SlurmError {
     }
 }
 
-/// The Slurm commands, each with a timeout.
-#[derive(Debug, Clone)]
-pub struct Slurm {
-    /// Deadline of each command.
-    pub timeout: Duration,
-    /// Where the commands are (None: on the PATH).
-    pub bin_dir: Option<std::path::PathBuf>,
+impl From<SlurmError> for BatchError {
+    fn from(e: SlurmError) -> Self {
+        if e.is_transient() { BatchError::Transient(Box::new(e)) } else { BatchError::Refused(Box::new(e)) }
+    }
 }
 
-/// One line of `squeue -r`: a job, or one task of an array.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct QueueEntry {
-    /// `ARRAY_TASK` for a task of an array, else the job id: how this server records submissions.
-    pub key: String,
-    /// Slurm's state, upper case (`PENDING`, `RUNNING`, `COMPLETED`, `FAILED`, `CANCELLED`…).
-    pub state: String,
-    /// The job's name.
-    pub name: String,
+/// Slurm, driven through its commands.
+#[derive(Debug, Clone)]
+pub struct Slurm {
+    options: SlurmOptions,
 }
 
 impl Slurm {
+    /// Slurm with these settings (checked by [`SlurmOptions::validate`]).
+    pub fn new(options: SlurmOptions) -> Self {
+        Self { options }
+    }
+
     /// The path of command `name`.
     fn program(&self, name: &str) -> String {
-        match &self.bin_dir {
+        match &self.options.bin_dir {
             Some(dir) => dir.join(name).to_string_lossy().into_owned(),
             None => name.to_string(),
         }
     }
 
-    /// `sbatch --version`, and `squeue` answering: that Slurm is installed and its controller
-    /// reachable.
-    pub fn check(&self) -> Result<String, SlurmError> {
-        let version = run(&self.program("sbatch"), &["--version".to_string()], self.timeout)?;
-        self.queue("optimis-check-")?;
-        Ok(version.trim().to_string())
-    }
-
-    /// Submits the command `command` (argv) with `options` (sbatch's): the job id `sbatch
-    /// --parsable` prints. The command goes to Slurm as `--wrap`, each argument quoted for the
-    /// shell Slurm wraps it in: Slurm keeps the script it makes in its own spool, so that no file
-    /// another user could replace is ever run.
-    pub fn submit(&self, options: &[String], command: &[String]) -> Result<String, SlurmError> {
-        let mut argv = vec!["--parsable".to_string()];
-        argv.extend(options.iter().cloned());
-        argv.push(format!("--wrap=exec {}", shell_words(command)));
-        parse_submission(&run(&self.program("sbatch"), &argv, self.timeout)?)
+    /// sbatch's arguments for `submission`. The command goes to Slurm as `--wrap`, each argument
+    /// quoted for the shell Slurm wraps it in: Slurm keeps the script it makes in its own spool, so
+    /// that no file another user could replace is ever run.
+    fn sbatch_argv(&self, submission: &Submission<'_>) -> Vec<String> {
+        let o = &self.options;
+        // A clean environment: the server's own (its tokens, its database URL) stays out of the
+        // cluster's jobs; paths are absolute, so nothing needs the PATH.
+        let mut argv = vec!["--parsable".to_string(), "--export=NONE".to_string(), "--open-mode=append".to_string()];
+        argv.push(format!("--cpus-per-task={}", submission.cpus));
+        if let Some(p) = &o.partition {
+            argv.push(format!("--partition={p}"));
+        }
+        if let Some(a) = &o.account {
+            argv.push(format!("--account={a}"));
+        }
+        if let Some(t) = &o.time_limit {
+            argv.push(format!("--time={t}"));
+        }
+        argv.extend(o.sbatch_options.iter().cloned());
+        argv.push(format!("--job-name={}", submission.name));
+        let log = match submission.tasks {
+            Tasks::Array(count) => {
+                argv.push(format!("--array=0-{}", count - 1));
+                (submission.log)("%a")
+            }
+            Tasks::One(k) => (submission.log)(&k.to_string()),
+        };
+        argv.push(format!("--output={}", log.to_string_lossy()));
+        argv.push(format!("--wrap=exec {}", shell_words(submission.command)));
+        argv
     }
 
     /// This user's jobs (array tasks one per line, finished ones while Slurm keeps them) whose
     /// names start with `prefix`.
-    pub fn queue(&self, prefix: &str) -> Result<Vec<QueueEntry>, SlurmError> {
+    fn squeue(&self, prefix: &str) -> Result<Vec<QueueEntry>, SlurmError> {
         let args = ["--me", "--noheader", "--array", "--states=all", "--format=%A|%F|%K|%T|%j"];
-        let out = run(&self.program("squeue"), &args.map(str::to_string), self.timeout)?;
+        let out = run(&self.program("squeue"), &args.map(str::to_string), self.options.command_timeout)?;
         Ok(parse_queue(&out, prefix))
     }
 
-    /// Cancels jobs by id (`ID` or `ARRAY_TASK` or a whole array's `ID`), in batches. Ids Slurm
-    /// has forgotten are not an error.
-    pub fn cancel(&self, ids: &[String]) -> Result<(), SlurmError> {
+    /// `scancel` in batches; ids Slurm has forgotten are not an error.
+    fn scancel(&self, ids: &[String]) -> Result<(), SlurmError> {
         for batch in ids.chunks(CANCEL_BATCH) {
-            match run(&self.program("scancel"), batch, self.timeout) {
+            match run(&self.program("scancel"), batch, self.options.command_timeout) {
                 Ok(_) => {}
                 Err(CommandError::Failed { stderr, .. }) if stderr.contains("Invalid job id") => {}
                 Err(e) => return Err(e.into()),
             }
         }
         Ok(())
+    }
+}
+
+impl BatchSystem for Slurm {
+    fn name(&self) -> &'static str {
+        "Slurm"
+    }
+
+    /// `sbatch --version`, and `squeue` answering: that Slurm is installed and its controller
+    /// reachable. `sacct` is not needed: the queue and the task documents say everything.
+    fn check(&self) -> Result<String, BatchError> {
+        let version = run(&self.program("sbatch"), &["--version".to_string()], self.options.command_timeout)
+            .map_err(SlurmError::from)?;
+        self.squeue("optimis-check-")?;
+        Ok(version.trim().to_string())
+    }
+
+    /// `sbatch --parsable`: the job id it prints (an array's for an array).
+    fn submit(&self, submission: &Submission<'_>) -> Result<String, BatchError> {
+        let out = run(&self.program("sbatch"), &self.sbatch_argv(submission), self.options.command_timeout)
+            .map_err(SlurmError::from)?;
+        Ok(parse_submission(&out)?)
+    }
+
+    fn queue(&self, prefix: &str) -> Result<Vec<QueueEntry>, BatchError> {
+        Ok(self.squeue(prefix)?)
+    }
+
+    /// `ARRAY_TASK`, as squeue and scancel write it.
+    fn array_task_id(&self, array: &str, k: u64) -> String {
+        format!("{array}_{k}")
+    }
+
+    fn cancel(&self, ids: &[String]) -> Result<(), BatchError> {
+        Ok(self.scancel(ids)?)
     }
 }
 
@@ -157,14 +251,25 @@ pub fn parse_queue(out: &str, prefix: &str) -> Vec<QueueEntry> {
             continue;
         }
         let digits = |s: &str| !s.is_empty() && s.len() <= 20 && s.bytes().all(|b| b.is_ascii_digit());
-        let key = if digits(array) && digits(task) {
-            format!("{array}_{task}")
+        let (key, submission) = if digits(array) && digits(task) {
+            (format!("{array}_{task}"), array)
         } else if digits(job) {
-            job.to_string()
+            (job.to_string(), job)
         } else {
             continue;
         };
-        let entry = QueueEntry { key: key.clone(), state: state.to_string(), name: name.to_string() };
+        let phase = match state {
+            "COMPLETED" => Phase::Completed,
+            _ if is_active(state) => Phase::Active,
+            _ => Phase::Ended,
+        };
+        let entry = QueueEntry {
+            id: key.clone(),
+            submission: submission.to_string(),
+            state: state.to_string(),
+            phase,
+            name: name.to_string(),
+        };
         match seen.get(&key) {
             Some(&at) => entries[at] = entry,
             None => {
@@ -197,7 +302,7 @@ pub fn is_active(state: &str) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -219,11 +324,23 @@ garbage line
 106|105|N/A|PENDING|optimis-ab-7-r0-t1
 ";
         let q = parse_queue(out, "optimis-ab-7-");
-        let keys: Vec<(&str, &str)> = q.iter().map(|e| (e.key.as_str(), e.state.as_str())).collect();
+        let keys: Vec<(&str, &str, &str)> =
+            q.iter().map(|e| (e.id.as_str(), e.submission.as_str(), e.state.as_str())).collect();
         assert_eq!(
             keys,
-            [("100_0", "RUNNING"), ("100_1", "PENDING"), ("100", "PENDING"), ("105", "FAILED"), ("106", "PENDING")]
+            [
+                ("100_0", "100", "RUNNING"),
+                ("100_1", "100", "PENDING"),
+                ("100", "100", "PENDING"),
+                ("105", "105", "FAILED"),
+                ("106", "106", "PENDING")
+            ]
         );
+        let phases: Vec<Phase> = parse_queue("1|1|0|COMPLETED|x\n1|1|1|NODE_FAIL|x\n1|1|2|REQUEUED|x\n", "x")
+            .into_iter()
+            .map(|e| e.phase)
+            .collect();
+        assert_eq!(phases, [Phase::Completed, Phase::Ended, Phase::Active]);
         assert!(is_active("PENDING") && is_active("RUNNING") && !is_active("COMPLETED") && !is_active("NODE_FAIL"));
         let transient = SlurmError::Command(CommandError::Failed {
             program: "sbatch".into(),
@@ -239,6 +356,68 @@ garbage line
                     .into(),
         });
         assert!(!permanent.is_transient());
+        assert!(BatchError::from(transient).is_transient() && !BatchError::from(permanent).is_transient());
+    }
+
+    pub(crate) fn options() -> SlurmOptions {
+        SlurmOptions {
+            bin_dir: None,
+            partition: Some("batch".into()),
+            account: None,
+            time_limit: Some("01:00:00".into()),
+            sbatch_options: vec!["--qos=normal".into()],
+            command_timeout: Duration::from_secs(20),
+        }
+    }
+
+    #[test]
+    fn options_are_checked_at_the_edge_and_submissions_become_sbatch_argv() {
+        assert!(options().validate().is_ok());
+        let broken = |f: fn(&mut SlurmOptions)| {
+            let mut o = options();
+            f(&mut o);
+            o.validate().unwrap_err()
+        };
+        assert!(broken(|o| o.sbatch_options = vec!["--array=0-9".into()]).contains("set by the server"));
+        assert!(broken(|o| o.sbatch_options = vec!["qos".into()]).contains("expected one sbatch option"));
+        assert!(broken(|o| o.partition = Some("a b".into())).contains("one word"));
+        let slurm = Slurm::new(options());
+        let command = ["/opt/optimis".to_string(), "cluster-task".to_string()];
+        let log = |k: &str| PathBuf::from(format!("/shared/job-1/round-0/task-{k}.log"));
+        let mut submission =
+            Submission { name: "optimis-ab-1-r0", tasks: Tasks::Array(4), command: &command, cpus: 2, log: &log };
+        let common = [
+            "--parsable",
+            "--export=NONE",
+            "--open-mode=append",
+            "--cpus-per-task=2",
+            "--partition=batch",
+            "--time=01:00:00",
+            "--qos=normal",
+        ];
+        let array: Vec<String> = common
+            .iter()
+            .map(|s| s.to_string())
+            .chain([
+                "--job-name=optimis-ab-1-r0".into(),
+                "--array=0-3".into(),
+                "--output=/shared/job-1/round-0/task-%a.log".into(),
+                "--wrap=exec /opt/optimis cluster-task".into(),
+            ])
+            .collect();
+        assert_eq!(slurm.sbatch_argv(&submission), array);
+        submission.name = "optimis-ab-1-r0-t2";
+        submission.tasks = Tasks::One(2);
+        let one = slurm.sbatch_argv(&submission);
+        assert_eq!(
+            one[common.len()..],
+            [
+                "--job-name=optimis-ab-1-r0-t2",
+                "--output=/shared/job-1/round-0/task-2.log",
+                "--wrap=exec /opt/optimis cluster-task"
+            ]
+        );
+        assert_eq!(slurm.array_task_id("100", 3), "100_3");
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! One task on a node (`optimis cluster-task`, the command the executor hands to `sbatch --wrap`):
+//! One task on a node (`optimis cluster-task`, the command the executor hands to the batch system):
 //! its round's specification and shard read from the cluster directory, the iterations run, the
 //! moments document written every few seconds and at the end.
 //!
@@ -10,7 +10,7 @@
 //!   one task's iterations, not the job;
 //! * a full disk or quota — the iterations stay in memory, a periodic document is skipped, and the
 //!   final one is retried with a growing pause until it fits (as a local job waits for its
-//!   database to have room), until Slurm's time limit or a cancel ends the task.
+//!   database to have room), until the batch system's time limit or a cancel ends the task.
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -44,8 +44,8 @@ pub struct TaskOptions {
     pub job: i64,
     /// The round.
     pub round: usize,
-    /// The task's index in its round (the command line takes it from `SLURM_ARRAY_TASK_ID` for
-    /// an array's tasks).
+    /// The task's index in its round (for an array's tasks the command line takes it from the
+    /// batch system's environment, `SLURM_ARRAY_TASK_ID`, unless `--task` gives it).
     pub task: u64,
     /// Tasks in the round.
     pub tasks: u64,

@@ -1,6 +1,8 @@
 //! What the server knows of one job's tasks between two looks at the cluster: each task's
-//! iterations, its latest verified document, its Slurm state and how long it has been missing —
-//! and the steps of one look: plan the rounds, read the documents, judge each task.
+//! iterations, its latest verified document, its state in the batch system and how long it has
+//! been missing — and the steps of one look: plan the rounds, read the documents, judge each task.
+//! Nothing here is a particular batch system's: states arrive as [`Phase`]s, ids through
+//! [`BatchSystem::array_task_id`].
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -8,7 +10,7 @@ use std::time::{Instant, SystemTime};
 
 use super::files::{JobDir, MAX_TASK_DOCUMENT, Record, Round, document_name};
 use super::private::PrivateDir;
-use super::slurm::{QueueEntry, is_active};
+use super::system::{BatchSystem, Phase, QueueEntry};
 use crate::jobs::core::executor::{ExecutionView, TaskView};
 use crate::sim::document::MomentsDocument;
 use crate::sim::spec::{JobSpec, Shard, ValidJob};
@@ -98,13 +100,13 @@ impl Tracking {
         self.record.rounds.last().map_or(first, |r| r.first + r.iterations)
     }
 
-    /// Task `t`'s current Slurm key (`ARRAY_TASK` or a resubmission's id); None while its latest
-    /// submission awaits sbatch's answer.
-    pub fn key(&self, t: &Task) -> Option<String> {
+    /// Task `t`'s current id in the batch system (its array's task, or a resubmission's id); None
+    /// while its latest submission awaits the system's answer.
+    pub fn key(&self, t: &Task, system: &dyn BatchSystem) -> Option<String> {
         let round = &self.record.rounds[t.round];
         match round.resubmits.get(&t.k).and_then(|r| r.last()) {
             Some(last) => last.clone(),
-            None => round.array.as_ref().map(|a| format!("{a}_{}", t.k)),
+            None => round.array.as_ref().map(|a| system.array_task_id(a, t.k)),
         }
     }
 
@@ -178,16 +180,17 @@ impl Tracking {
         Ok(merged)
     }
 
-    /// The tasks that need a (re)submission: judged from the queue (None when it did not
+    /// The tasks that need a (re)submission: judged from the queue by id (None when it did not
     /// answer). A task on its way keeps its state; one that ended without a complete document —
-    /// failed, cancelled, timed out, or gone from the queue (or `COMPLETED`) for longer than
+    /// failed, cancelled, timed out, or gone from the queue (or completed) for longer than
     /// `grace` — is returned with why.
     pub fn judge(
         &mut self,
         queue: Option<&HashMap<String, QueueEntry>>,
         grace: std::time::Duration,
+        system: &dyn BatchSystem,
     ) -> Vec<(usize, String)> {
-        let keys: Vec<Option<String>> = self.tasks.iter().map(|t| self.key(t)).collect();
+        let keys: Vec<Option<String>> = self.tasks.iter().map(|t| self.key(t, system)).collect();
         let mut failed = Vec::new();
         for (i, (task, key)) in self.tasks.iter_mut().zip(keys).enumerate() {
             if task.complete() {
@@ -206,16 +209,16 @@ impl Tracking {
                     failed.push((i, why));
                 }
             };
-            match queue.get(&key).map(|e| e.state.as_str()) {
-                Some(state) if is_active(state) => {
+            match queue.get(&key).map(|e| (e.phase, e.state.as_str())) {
+                Some((Phase::Active, state)) => {
                     task.state = state.to_ascii_lowercase();
                     task.missing_since = None;
                 }
-                Some("COMPLETED") => {
+                Some((Phase::Completed, state)) => {
                     task.state = "completed".into();
-                    missing(task, "ended COMPLETED without a complete document".into());
+                    missing(task, format!("ended {state} without a complete document"));
                 }
-                Some(state) => {
+                Some((Phase::Ended, state)) => {
                     task.state = state.to_ascii_lowercase();
                     failed.push((i, format!("ended {state}")));
                 }
@@ -231,7 +234,7 @@ impl Tracking {
     }
 
     /// The tasks as the job resource shows them.
-    pub fn view(&self, dir: &JobDir) -> ExecutionView {
+    pub fn view(&self, dir: &JobDir, system: &dyn BatchSystem) -> ExecutionView {
         let tasks = self
             .tasks
             .iter()
@@ -242,12 +245,12 @@ impl Tracking {
                 iterations: t.range.end - t.range.start,
                 iterations_done: t.done,
                 state: t.state.clone(),
-                slurm_job_id: self.key(t),
+                batch_job_id: self.key(t, system),
                 attempts: self.attempts(t),
                 log: dir.log(t.round, &t.k.to_string()).display().to_string(),
             })
             .collect();
-        ExecutionView { executor: "slurm".into(), tasks }
+        ExecutionView { executor: system.name().to_ascii_lowercase(), tasks }
     }
 }
 
@@ -260,6 +263,7 @@ mod tests {
 
     use super::*;
     use crate::jobs::cluster::files::ClusterDir;
+    use crate::jobs::cluster::slurm::{Slurm, tests::options};
     use crate::sim::runner::run;
     use crate::sim::spec::parse_job_spec;
 
@@ -280,8 +284,12 @@ mod tests {
         Record { rounds: vec![round] }
     }
 
-    fn entry(key: &str, state: &str) -> (String, QueueEntry) {
-        (key.to_string(), QueueEntry { key: key.into(), state: state.into(), name: "optimis-x-1-r0".into() })
+    fn entry(id: &str, state: &str, phase: Phase) -> (String, QueueEntry) {
+        let submission = id.split('_').next().unwrap().into();
+        (
+            id.to_string(),
+            QueueEntry { id: id.into(), submission, state: state.into(), phase, name: "optimis-x-1-r0".into() },
+        )
     }
 
     #[test]
@@ -290,19 +298,25 @@ mod tests {
         let mut t = Tracking::new(job.spec(), record());
         let ranges: Vec<_> = t.tasks.iter().map(|t| t.range.clone()).collect();
         assert_eq!(ranges, [0..2, 2..4, 4..6, 6..8]);
-        let keys: Vec<_> = t.tasks.iter().map(|task| t.key(task)).collect();
+        let slurm = Slurm::new(options());
+        let keys: Vec<_> = t.tasks.iter().map(|task| t.key(task, &slurm)).collect();
         assert_eq!(keys, [Some("7_0".into()), Some("7_1".into()), Some("9".into()), Some("7_3".into())]);
         assert_eq!(t.attempts(&t.tasks[2]), 2);
-        let queue: HashMap<_, _> = [entry("7_0", "RUNNING"), entry("7_1", "FAILED"), entry("9", "COMPLETED")].into();
-        // Slurm did not answer: nothing is judged.
-        assert!(t.judge(None, Duration::ZERO).is_empty());
-        // A long grace: only what Slurm says failed fails.
-        let failed = t.judge(Some(&queue), Duration::from_secs(3600));
+        let queue: HashMap<_, _> = [
+            entry("7_0", "RUNNING", Phase::Active),
+            entry("7_1", "FAILED", Phase::Ended),
+            entry("9", "COMPLETED", Phase::Completed),
+        ]
+        .into();
+        // The system did not answer: nothing is judged.
+        assert!(t.judge(None, Duration::ZERO, &slurm).is_empty());
+        // A long grace: only what the system says failed fails.
+        let failed = t.judge(Some(&queue), Duration::from_secs(3600), &slurm);
         assert_eq!(failed, [(1, "ended FAILED".to_string())]);
         let states: Vec<_> = t.tasks.iter().map(|t| t.state.as_str()).collect();
         assert_eq!(states, ["running", "failed", "completed", "submitted"]);
         // Past the grace, a task completed or gone without its document fails too.
-        let failed: Vec<usize> = t.judge(Some(&queue), Duration::ZERO).into_iter().map(|(i, _)| i).collect();
+        let failed: Vec<usize> = t.judge(Some(&queue), Duration::ZERO, &slurm).into_iter().map(|(i, _)| i).collect();
         assert_eq!(failed, [1, 2, 3]);
     }
 
@@ -334,7 +348,8 @@ mod tests {
         assert!(t.tasks.iter().all(Task::complete));
         let whole = run(job.config(), 3, 0..8);
         assert_eq!(serde_json::to_vec(&t.merged(&job).unwrap()).unwrap(), serde_json::to_vec(&whole).unwrap());
-        let view = t.view(&dir);
+        let view = t.view(&dir, &Slurm::new(options()));
+        assert_eq!(view.executor, "slurm");
         assert_eq!(view.tasks.iter().map(|t| t.iterations_done).sum::<u64>(), 8);
         assert!(view.tasks[3].log.ends_with("round-0/task-3.log"));
     }

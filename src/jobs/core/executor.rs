@@ -3,8 +3,9 @@
 //! The driver (`driver`) owns a job's life — its checkpoints, progress, stop requests and storage
 //! retries — and asks an [`Executor`] for the work itself: "run these iterations of this job into
 //! these moments, and give control back after each batch". The local rayon pool ([`LocalPool`])
-//! is the default; `cluster::SlurmExecutor` runs them as a Slurm job array whose tasks write
-//! moments documents it merges. The driver, the scheduler and the lifecycle do not change.
+//! is the default; `cluster::ClusterExecutor` runs them as arrays of a batch system (Slurm) whose
+//! tasks write moments documents it merges. The driver, the scheduler and the lifecycle do not
+//! change.
 //!
 //! Because iteration s draws only from the streams of (seed, s), any executor that runs the same
 //! iterations returns bit-identical moments, however it divides them.
@@ -95,7 +96,7 @@ pub trait Executor: Send + Sync {
 /// How a job's work is divided, as the job resource shows it (absent for the local pool).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ExecutionView {
-    /// `slurm`.
+    /// The batch system the tasks run on, as `--executor` names it: `slurm`.
     pub executor: String,
     /// The job's tasks, in the order of their iterations.
     pub tasks: Vec<TaskView>,
@@ -113,10 +114,11 @@ pub struct TaskView {
     /// Iterations its latest document holds.
     pub iterations_done: u64,
     /// `submitting`, `pending`, `running`, `completed`, `failed` (being resubmitted) or the state
-    /// Slurm reports (`cancelled`, `timeout`, `node_fail`…), lower case.
+    /// the batch system reports (Slurm's `cancelled`, `timeout`, `node_fail`…), lower case.
     pub state: String,
-    /// Its Slurm job id (`ARRAY_TASK` for an array task), once submitted.
-    pub slurm_job_id: Option<String>,
+    /// Its id in the batch system, once submitted: Slurm's job id (`ARRAY_TASK` for a task of an
+    /// array). Named `slurm_job_id` until the executor could drive batch systems other than Slurm.
+    pub batch_job_id: Option<String>,
     /// Submissions so far (1 + resubmissions).
     pub attempts: u32,
     /// The task's log file (stdout and stderr, every attempt appended).
