@@ -11,7 +11,7 @@
 //!   inline in code, such as `super::illumination::Illumination::from_spec(..)` in a function body —
 //!   is resolved to the file of the longest module prefix that exists;
 //! * **re-exports**: a path through a module file to a name that file imports leads on to where
-//!   the name comes from (`crate::jobs::JobManager` reaches `jobs/manager.rs`, which `jobs/mod.rs`
+//!   the name comes from (`crate::jobs::JobManager` reaches `jobs/core/manager.rs`, which `jobs/mod.rs`
 //!   re-exports it from). A module file's own `use child::…` paths (without `self::`) are read for
 //!   that only: a module file declares its children, so they are not edges of their own;
 //! * **methods** need no rule of their own: every type's inherent `impl` blocks are in the file

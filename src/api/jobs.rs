@@ -1,5 +1,5 @@
 //! Handlers of the jobs' lifecycle under `/v1/jobs`: submit, list, inspect, cancel, extend,
-//! delete. Each only translates between HTTP and the job manager (`AppState::jobs`).
+//! delete. Each only translates between HTTP and the job manager (`State<JobManager>`).
 
 use axum::Json;
 use axum::extract::rejection::QueryRejection;

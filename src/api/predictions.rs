@@ -1,6 +1,6 @@
 //! Handlers of `/v1/jobs/{id}/predict` (a job's noise table at another ray budget) and
 //! `/v1/jobs/{id}/budget` (the budget that reaches a target noise soonest). They only translate
-//! between HTTP and the predictions handle (`AppState::predictions`).
+//! between HTTP and the predictions handle (`State<Predictions>`).
 
 use axum::Json;
 use axum::extract::State;

@@ -1,6 +1,6 @@
 //! Handlers of a job's statistics: its result (JSON or CSV tables), re-solves, evaluations of
 //! given weights, the moments export and the history. Each only translates between HTTP and the
-//! statistics handle (`AppState::statistics`).
+//! handles it takes (`State<Statistics>`, `State<Evaluations>`).
 
 use axum::Json;
 use axum::extract::rejection::QueryRejection;
