@@ -81,7 +81,7 @@ pub struct JobResource {
     /// What the data of the latest checkpoint cannot support (see the result's `warnings`).
     pub warnings: Vec<Warning>,
     /// On a server that runs jobs on a cluster (`--executor slurm`), while the job runs: its
-    /// tasks, each with its Slurm job id, state, iterations and log. Absent otherwise.
+    /// tasks, each with its id in the batch system, state, iterations and log. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub execution: Option<ExecutionView>,
     /// For a job holding merged statistics (a study, or a job that took merges): each source —
