@@ -40,10 +40,9 @@ impl Services {
     /// and merged documents checked with `provenance`, at most `documents` merges or studies
     /// process documents at once.
     pub fn new(jobs: JobManager, peers: Peers, provenance: Provenance, documents: usize) -> Self {
-        let provenance = Arc::new(provenance);
-        let statistics = Statistics::new(jobs.clone(), provenance.clone());
+        let statistics = Statistics::new(jobs.clone(), Arc::new(provenance));
         Self {
-            merges: Merges::new(statistics.clone(), peers, provenance, documents),
+            merges: Merges::new(statistics.clone(), peers, documents),
             artifacts: Artifacts::new(statistics.clone()),
             evaluations: Evaluations::new(statistics.clone()),
             solves: Solves::new(statistics.clone()),

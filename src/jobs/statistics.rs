@@ -43,7 +43,7 @@ pub(super) struct Latest {
 #[derive(Clone)]
 pub struct Statistics {
     pub(super) jobs: JobManager,
-    /// The signing key for exports (`crate::trust::signing`).
+    /// The signing key for exports and the keys merges require (`crate::trust::signing`).
     pub(super) provenance: Arc<Provenance>,
 }
 

@@ -36,7 +36,6 @@ use crate::sim::document::{DocumentError, MomentsDocument, merged_spec};
 use crate::sim::spec::{JobSpec, SpecError};
 use crate::sim::stats::moments::Moments;
 use crate::store::{Checkpoint, NewJob};
-use crate::trust::signing::Provenance;
 
 /// Merges and studies; cheap to clone. It owns what only merges need: the peers they may pull
 /// from, the keys merged documents are checked against, and the processing slots.
@@ -46,8 +45,6 @@ pub struct Merges {
     statistics: Statistics,
     /// The allowed peers and the client that pulls from them.
     peers: Arc<Peers>,
-    /// This server's key and the keys merges require (`crate::trust::signing`).
-    provenance: Arc<Provenance>,
     /// Merges and studies parsing or merging documents at once (`--max-document-requests`): each
     /// holds parsed documents. Taken only for that, never while a request waits on a peer.
     processing: Arc<tokio::sync::Semaphore>,
@@ -58,13 +55,12 @@ const PROCESSING_WAIT: Duration = Duration::from_secs(10);
 
 impl Merges {
     /// Merges and studies of the jobs `statistics` reads: they pull from `peers`, check
-    /// documents with `provenance`, and at most `processing` of them parse or merge documents at
-    /// once.
-    pub fn new(statistics: Statistics, peers: Peers, provenance: Arc<Provenance>, processing: usize) -> Self {
+    /// documents with the statistics' keys (this server's and the `--trust` ones), and at most
+    /// `processing` of them parse or merge documents at once.
+    pub fn new(statistics: Statistics, peers: Peers, processing: usize) -> Self {
         Self {
             statistics,
             peers: Arc::new(peers),
-            provenance,
             processing: Arc::new(tokio::sync::Semaphore::new(processing.max(1))),
         }
     }
@@ -111,7 +107,7 @@ impl Merges {
         // With --trust, only documents signed by a trusted key (checked after the checksum, which
         // the signature covers, was recomputed from the content).
         let at = field.strip_suffix(".from").or_else(|| field.strip_suffix("from")).unwrap_or(&field);
-        let signed_by = self.provenance.vouch(&doc, at)?;
+        let signed_by = self.statistics.provenance.vouch(&doc, at)?;
         Ok((doc, signed_by))
     }
 
