@@ -21,6 +21,7 @@ mod labels;
 mod limits;
 mod peers;
 mod prediction;
+mod radii;
 mod readme;
 mod recommendation;
 mod references;

@@ -13,6 +13,7 @@ use super::documents::{document_job, read_document, solver_options};
 use super::{CliError, thread_pool};
 use crate::sim::model::config::Engine;
 use crate::sim::model::params::check;
+use crate::sim::solve::budget::error::error_plan_of;
 use crate::sim::solve::budget::{BestBudget, BudgetPlan, CostSource, Costs, SUPPORT_RELATIVE_SE, plan};
 use crate::sim::solve::predict::Budget;
 use crate::sim::spec::JobSpec;
@@ -40,6 +41,15 @@ pub struct BudgetArgs {
     /// instead of taking the reference's: the plan then depends on the machine and the moment.
     #[arg(long)]
     pub measure_costs: bool,
+    /// Plan to a target RMSE about the true pixel value instead — noise and the merge radius's
+    /// bias together — over the run's own R and every radius it tallied (`radii`): the fastest
+    /// (N_F, N_B, R′, strategy), beside the best at the run's R, the paper's setup and a
+    /// progressive schedule (docs/model.md §13). In percent.
+    #[arg(long, value_name = "P", allow_hyphen_values = true)]
+    pub target_rmse: Option<f64>,
+    /// With --target-rmse: seconds per merge event and pixel (default: the reference's, 8e-8).
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
+    pub merge_cost: Option<f64>,
     /// Print the plan (every point evaluated) as JSON.
     #[arg(long)]
     pub json: bool,
@@ -80,7 +90,9 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
     } else {
         Costs::REFERENCE
     };
-    let costs = base.with_given(args.light_cost, args.camera_cost, args.iteration_cost, args.pixels);
+    let costs = base
+        .with_given(args.light_cost, args.camera_cost, args.iteration_cost, args.pixels)
+        .with_merge(args.merge_cost);
     check(costs.pixels.is_finite() && (1.0..=1e10).contains(&costs.pixels), "--pixels", || {
         format!("must be in [1, 10^10], got {}", costs.pixels)
     })?;
@@ -88,8 +100,26 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
         ("--light-cost", costs.light_path),
         ("--camera-cost", costs.camera_path),
         ("--iteration-cost", costs.iteration),
+        ("--merge-cost", costs.merge),
     ] {
         check(v.is_finite() && (0.0..=1e6).contains(&v), name, || format!("must be in [0, 10^6] seconds, got {v}"))?;
+    }
+    if let Some(target) = args.target_rmse {
+        check(target.is_finite() && target > 0.0, "--target-rmse", || {
+            format!("must be a positive percentage, got {target}")
+        })?;
+        let config = job.config();
+        let reports = thread_pool(None)?.install(|| super::radii::reports(config, &doc.moments, &solver));
+        let p = error_plan_of(config, &doc.moments, &reports, &solver, costs, target)
+            .map_err(|e| CliError::Unusable { path: args.document.clone(), detail: e.to_string() })?;
+        let mut out = std::io::stdout().lock();
+        if args.json {
+            serde_json::to_writer_pretty(&mut out, &p).map_err(std::io::Error::from)?;
+            writeln!(out)?;
+        } else {
+            super::radii::write_error_plan(&mut out, &p)?;
+        }
+        return Ok(());
     }
     let measured = Budget { light_paths: doc.spec.light_paths, camera_paths: doc.spec.camera_paths };
     let p = plan(&doc.moments, &job.config().cells, &solver, measured, costs, args.target_rms)

@@ -178,7 +178,8 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let strategy = args.weights_of.unwrap_or(Strategy::Optimal);
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-    let report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
+    let mut report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
+    report.radii = super::radii::tallied(job.config(), &doc.moments, &solver);
     let mut spec = doc.spec.clone();
     spec.solver = solver.clone();
     write_csv(&spec, job.config(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
@@ -222,6 +223,7 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
         writeln!(out)?;
     } else {
         table::write_report(&mut out, &spec, &report, None, args.paper)?;
+        super::radii::write_radii(&mut out, &report.radii)?;
     }
     Ok(())
 }

@@ -13,6 +13,7 @@ mod evaluate;
 mod figure;
 mod predict;
 mod progress;
+mod radii;
 #[cfg(feature = "server")]
 mod remote;
 mod run;

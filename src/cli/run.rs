@@ -398,7 +398,8 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let expected = pool.install(|| expected_luminances(config));
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
-    let report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
+    let mut report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
+    report.radii = pool.install(|| super::radii::tallied(config, &moments, &job.spec().solver));
     write_csv(job.spec(), config, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {
@@ -406,6 +407,7 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
         writeln!(out)?;
     } else {
         table::write_report(&mut out, job.spec(), &report, Some((seconds, pool.current_num_threads())), args.paper)?;
+        super::radii::write_radii(&mut out, &report.radii)?;
     }
     Ok(())
 }

@@ -8,11 +8,15 @@ use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::core::error::JobError;
+use super::core::references::{expected_luminances, scene_reference};
 use super::core::resource::JobState;
 use super::statistics::{Latest, Statistics};
+use crate::sim::model::params::SpecError;
 use crate::sim::model::params::{check, check_path_counts};
+use crate::sim::solve::budget::error::{ErrorPlan, error_plan_of};
 use crate::sim::solve::budget::{BudgetPlan, Costs, plan};
-use crate::sim::solve::predict::{Budget, Prediction, predict};
+use crate::sim::solve::predict::{Budget, PredictError, Prediction, predict};
+use crate::sim::solve::radii::radius_reports;
 
 /// What to predict.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -84,8 +88,19 @@ impl Predictions {
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BudgetRequest {
-    /// The RMS to reach, in percent (e.g. 1).
-    pub target_rms: f64,
+    /// The RMS to reach, in percent (e.g. 1); absent with `target_rmse`: that value.
+    #[serde(default)]
+    pub target_rms: Option<f64>,
+    /// Also plan to a relative RMSE about the true pixel value, in percent — the noise and the
+    /// merge radius's bias together — over the job's own R and every radius it tallied
+    /// (`radii`): the fastest (N_F, N_B, R′, strategy), the best at the job's own R, the paper's
+    /// setup and a progressive schedule (`error_plan`, docs/model.md §13).
+    #[serde(default)]
+    pub target_rmse: Option<f64>,
+    /// t_M: seconds per merge event and pixel, for `target_rmse` (≥ 0; default: the reference's,
+    /// 8·10⁻⁸).
+    #[serde(default)]
+    pub merge_cost: Option<f64>,
     /// t_F: the renderer's seconds per light path (≥ 0; default: the reference's, 7.3·10⁻⁹).
     #[serde(default)]
     pub light_cost: Option<f64>,
@@ -118,27 +133,37 @@ pub struct JobBudget {
     /// and whether the best lies on its edge — as `optimis budget --json` prints it.
     #[serde(flatten)]
     pub plan: BudgetPlan,
+    /// With `target_rmse`: the plan to that error, the bias of every radius counted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_plan: Option<ErrorPlan>,
 }
 
 impl Predictions {
     /// Plans the ray budget that reaches `request.target_rms` soonest, per strategy, from the
     /// job's latest checkpoint (needs noise components); on the heavy pool, nothing stored.
     pub async fn budget(&self, id: i64, request: &BudgetRequest) -> Result<JobBudget, JobError> {
-        let costs = Costs::REFERENCE.with_given(
-            request.light_cost,
-            request.camera_cost,
-            request.iteration_cost,
-            request.pixels,
-        );
-        check(request.target_rms.is_finite() && request.target_rms > 0.0, "target_rms", || {
-            format!("must be a positive percentage, got {}", request.target_rms)
-        })?;
+        let costs = Costs::REFERENCE
+            .with_given(request.light_cost, request.camera_cost, request.iteration_cost, request.pixels)
+            .with_merge(request.merge_cost);
+        let positive = |field: &str, v: f64| {
+            check(v.is_finite() && v > 0.0, field, || format!("must be a positive percentage, got {v}"))
+        };
+        if let Some(p) = request.target_rmse {
+            positive("target_rmse", p)?;
+        }
+        let Some(target) = request.target_rms.or(request.target_rmse) else {
+            return Err(JobError::from(SpecError::new("target_rms", "give target_rms, target_rmse or both")));
+        };
+        positive("target_rms", target)?;
         check(costs.pixels.is_finite() && (1.0..=1e10).contains(&costs.pixels), "pixels", || {
             format!("must be in [1, 10^10], got {}", costs.pixels)
         })?;
-        for (field, v) in
-            [("light_cost", costs.light_path), ("camera_cost", costs.camera_path), ("iteration_cost", costs.iteration)]
-        {
+        for (field, v) in [
+            ("light_cost", costs.light_path),
+            ("camera_cost", costs.camera_path),
+            ("iteration_cost", costs.iteration),
+            ("merge_cost", costs.merge),
+        ] {
             check(v.is_finite() && (0.0..=1e6).contains(&v), field, || {
                 format!("must be in [0, 10^6] seconds, got {v}")
             })?;
@@ -149,15 +174,28 @@ impl Predictions {
             None => job.spec().solver.clone(),
         };
         let measured = Budget { light_paths: job.spec().light_paths, camera_paths: job.spec().camera_paths };
-        let target = request.target_rms;
-        let plan = self
+        let target_rmse = request.target_rmse;
+        let (plan, error_plan) = self
             .statistics
             .jobs
-            .compute_heavy(move |_| -> Result<BudgetPlan, JobError> {
-                plan(&moments, &job.config().cells, &solver, measured, costs, target)
-                    .map_err(|e| JobError::Conflict(e.to_string()))
+            .compute_heavy(move |_| -> Result<(BudgetPlan, Option<ErrorPlan>), JobError> {
+                let conflict = |e: PredictError| JobError::Conflict(e.to_string());
+                let plan = plan(&moments, &job.config().cells, &solver, measured, costs, target).map_err(conflict)?;
+                let error_plan = match target_rmse {
+                    // The quadratures behind the biases are bounded (about a second each) and
+                    // cached by configuration.
+                    Some(p) => {
+                        let config = job.config();
+                        let reference = scene_reference(config.scene());
+                        let reports =
+                            radius_reports(config, &moments, &solver, reference, &|c| expected_luminances(c).to_vec());
+                        Some(error_plan_of(config, &moments, &reports, &solver, costs, p).map_err(conflict)?)
+                    }
+                    None => None,
+                };
+                Ok((plan, error_plan))
             })
             .await??;
-        Ok(JobBudget { job_id: id, partial, state, plan })
+        Ok(JobBudget { job_id: id, partial, state, plan, error_plan })
     }
 }

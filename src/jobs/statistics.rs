@@ -17,6 +17,7 @@ use crate::sim::checks::published::applicable;
 use crate::sim::document::{Attestation, AttestationBasis, MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
 use crate::sim::solve::options::MAX_LAMBDA;
+use crate::sim::solve::radii::radius_reports;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::ValidJob;
@@ -148,7 +149,13 @@ impl Statistics {
                 let weights = weights_lambda.map(|lambda| WeightsQuery { lambda, strategy: Strategy::Optimal });
                 let expected = expected_luminances(job.config());
                 let inputs = ReportInputs { reference, expected: Some(&expected), weights };
-                build_report(&moments, &job.config().cells, &solver, &inputs)
+                let mut report = build_report(&moments, &job.config().cells, &solver, &inputs);
+                if !job.config().radii().is_empty() {
+                    report.radii = radius_reports(job.config(), &moments, &solver, reference, &|c| {
+                        expected_luminances(c).to_vec()
+                    });
+                }
+                report
             })
             .await?;
         Ok(JobResult { job_id: id, partial, state, references, report })

@@ -10,10 +10,10 @@ use super::spec::JobSpec;
 use crate::sim::stats::moments::MergeError;
 
 /// The fields of a spec that make the configuration fingerprint (docs/model.md: scene, R, N_F,
-/// N_B, cells, engine, folds, noise components); the rest — seed, iterations, shard, solver,
+/// N_B, cells, engine, folds, noise components, the smaller radii tallied); the rest — seed, iterations, shard, solver,
 /// execution, preset — may differ between runs that merge.
-const CONFIGURATION_FIELDS: [&str; 8] =
-    ["scene", "merge_radius", "light_paths", "camera_paths", "cells", "engine", "folds", "noise_components"];
+const CONFIGURATION_FIELDS: [&str; 9] =
+    ["scene", "merge_radius", "light_paths", "camera_paths", "cells", "engine", "folds", "noise_components", "radii"];
 
 /// The configuration fields in which `other` differs from `base`, as `path: other's vs base's`
 /// (e.g. `scene.l3: 9 vs 3`): what a refused merge names instead of two fingerprints.

@@ -15,6 +15,7 @@ use super::error::JobError;
 use super::references::expected_luminances;
 use super::resource::best_strategy;
 use crate::sim::math::digest::sha256_hex;
+use crate::sim::solve::radii::radius_reports;
 use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;
@@ -160,7 +161,11 @@ pub(crate) fn decode_checkpoint(
 pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option<f64>) -> Result<Checkpoint, JobError> {
     let expected = expected_luminances(job.config());
     let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
-    let report = build_report(moments, &job.config().cells, &job.spec().solver, &inputs);
+    let mut report = build_report(moments, &job.config().cells, &job.spec().solver, &inputs);
+    if !job.config().radii().is_empty() {
+        report.radii =
+            radius_reports(job.config(), moments, &job.spec().solver, reference, &|c| expected_luminances(c).to_vec());
+    }
     let best = best_strategy(&report.noise_table, report.recommended.as_ref().map(|r| r.strategy));
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;
     let history: Vec<StrategyPoint> = report

@@ -58,7 +58,9 @@ pub const MAX_FOLD_SUMS: usize = 2 * MAX_PACKED;
 /// every fold holds four packed matrices instead of one (ΣYYᵀ and the three component sums of
 /// `stats::components`), so a quarter as many. Format 4's component matrices are a little smaller,
 /// but the bound is counted as in format 3 so that every configuration keeps the folds (and so the
-/// fingerprint and the results) it had.
+/// fingerprint and the results) it had. The bound is per moments value: a run that tallies smaller
+/// radii keeps one value per radius beside its own (at most `MAX_RADII` + 1 of them, each this
+/// size), and keeps its folds — fewer folds would make every radius's standard errors coarser.
 pub fn folds_allowed(cells: usize, noise_components: bool) -> usize {
     let n = Layout::new(cells, MOMENTS_FORMAT_VERSION).dimension();
     let per_fold = packed_len(n) * if noise_components { 4 } else { 1 };

@@ -218,7 +218,14 @@ impl<'a> PathWeights<'a> {
     /// path starts where its density is `light_start` (see [`light_start`]).
     #[inline]
     pub fn of(&self, technique: Technique, light_start: f64) -> [f64; PathStrategy::COUNT] {
-        let config = self.config;
+        self.of_at(technique, light_start, self.config)
+    }
+
+    /// [`PathWeights::of`] under `config`, the same scene at another merge radius (a smaller
+    /// radius a run tallies): only the correlation-aware heuristics read R (the footprint area
+    /// πR² of their sharing probabilities), so the geometry is computed once for every radius.
+    #[inline]
+    pub fn of_at(&self, technique: Technique, light_start: f64, config: &SimConfig) -> [f64; PathStrategy::COUNT] {
         let plane = technique.index();
         let one_hot = |m: usize| if plane == m { 1.0 } else { 0.0 };
         let switch = match plane {

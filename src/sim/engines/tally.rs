@@ -54,6 +54,9 @@ pub struct ChunkScratch {
     /// The cell and weights of recent plane-3 merges, camera path j in slot j mod
     /// [`PLANE3_SLOTS`] (see [`ChunkScratch::plane3_weights`]).
     plane3: Box<[Plane3Weights; PLANE3_SLOTS]>,
+    /// One scratch per smaller radius the configuration tallies ([`SimConfig::radii`]), in its
+    /// order: the merges within R′ recorded again with R′'s kernel and weights.
+    pub(crate) radii: Vec<ChunkScratch>,
 }
 
 /// Slots of the plane-3 weight cache: one per camera path up to 256 (the paper has 100); with more
@@ -90,6 +93,8 @@ pub struct ChunkTally {
     pub blocks: Vec<[f64; BLOCKS]>,
     /// With noise components: Σ w·C of each per-path strategy per block (zeros without).
     pub block_strategies: BlockStrategies,
+    /// The same chunk's tally at each smaller radius of the configuration, in its order.
+    pub radii: Vec<ChunkTally>,
 }
 
 impl ChunkScratch {
@@ -114,6 +119,7 @@ impl ChunkScratch {
                     weights: [0.0; PathStrategy::COUNT],
                 }; PLANE3_SLOTS],
             ),
+            radii: Vec::new(),
         }
     }
 
@@ -144,6 +150,7 @@ impl ChunkScratch {
         if config.noise_components {
             scratch.blocks = vec![0.0; BLOCKS * 3 * cells];
         }
+        scratch.radii = config.radii.iter().map(Self::for_config).collect();
         scratch
     }
 
@@ -153,6 +160,9 @@ impl ChunkScratch {
     #[inline]
     pub fn set_light_half(&mut self, half: usize) {
         self.light_half = half & 1;
+        for sub in &mut self.radii {
+            sub.light_half = self.light_half;
+        }
     }
 
     /// Whether this scratch sums the noise components' blocks.
@@ -172,7 +182,8 @@ impl ChunkScratch {
     #[inline]
     pub fn toss_light_half(&mut self) {
         if let Some(coins) = &mut self.coins {
-            self.light_half = usize::from(uniform(coins) < 0.5);
+            let half = usize::from(uniform(coins) < 0.5);
+            self.set_light_half(half);
         }
     }
 
@@ -252,6 +263,10 @@ impl ChunkScratch {
         self.strategies = [0.0; PathStrategy::COUNT];
         self.merges = [0; 3];
         self.block_strategies = [[0.0; PathStrategy::COUNT]; BLOCKS];
+        tally.radii.resize_with(self.radii.len(), ChunkTally::default);
+        for (sub, out) in self.radii.iter_mut().zip(&mut tally.radii) {
+            sub.take_into(out);
+        }
     }
 }
 
@@ -274,6 +289,8 @@ pub struct IterationTally {
     pub block_values: Vec<f64>,
     /// Each block's per-path strategy C_s, normalised the same way.
     pub block_strategies: BlockStrategies,
+    /// The iteration's tally at each smaller radius of the configuration, in its order.
+    pub radii: Vec<IterationTally>,
 }
 
 impl IterationTally {
@@ -282,7 +299,7 @@ impl IterationTally {
         iteration: u64,
         cells: usize,
         norm: f64,
-        chunks: impl IntoIterator<Item = &'a ChunkTally>,
+        chunks: impl IntoIterator<Item = &'a ChunkTally, IntoIter: Clone>,
     ) -> Self {
         let mut tally = Self {
             iteration,
@@ -292,6 +309,7 @@ impl IterationTally {
             merges: [0; 3],
             block_values: Vec::new(),
             block_strategies: [[0.0; PathStrategy::COUNT]; BLOCKS],
+            radii: Vec::new(),
         };
         tally.set_from_chunks(iteration, cells, norm, chunks);
         tally
@@ -303,7 +321,26 @@ impl IterationTally {
         iteration: u64,
         cells: usize,
         norm: f64,
-        chunks: impl IntoIterator<Item = &'a ChunkTally>,
+        chunks: impl IntoIterator<Item = &'a ChunkTally, IntoIter: Clone>,
+    ) {
+        let chunks = chunks.into_iter();
+        self.set_own_from_chunks(iteration, cells, norm, chunks.clone());
+        // The smaller radii (which have none of their own): the same chunks' tallies at each, in
+        // the same order — a cloned iterator, so that an iteration allocates nothing once the
+        // buffers have grown.
+        let radii = chunks.clone().next().map_or(0, |c| c.radii.len());
+        self.radii.resize_with(radii, || IterationTally::from_chunks(iteration, cells, norm, []));
+        for (r, sub) in self.radii.iter_mut().enumerate() {
+            sub.set_own_from_chunks(iteration, cells, norm, chunks.clone().map(move |c| &c.radii[r]));
+        }
+    }
+
+    fn set_own_from_chunks<'a>(
+        &mut self,
+        iteration: u64,
+        cells: usize,
+        norm: f64,
+        chunks: impl Iterator<Item = &'a ChunkTally>,
     ) {
         self.iteration = iteration;
         let (sums, cell_counts) = (&mut self.cell_values, &mut self.cell_counts);

@@ -46,6 +46,10 @@ pub const MAX_FOLDS: usize = 20;
 /// all-data fit the result recommends than 2-fold's half), and the jackknife over 10 fold fits has
 /// 9 degrees of freedom (2σ intervals cover ≈ 92% under normality, against 88% with K = 5).
 pub const DEFAULT_FOLDS: usize = 10;
+/// Most smaller radii one run tallies: each adds a moments value the size of the run's own, so a
+/// run's sums are bounded by 7 times a plain run's (`engines::layout::folds_allowed`).
+pub const MAX_RADII: usize = 6;
+
 /// Length of a packed upper triangle of side n.
 pub const fn packed_len(n: usize) -> usize {
     n * (n + 1) / 2
@@ -107,6 +111,11 @@ pub struct SimConfig {
     /// paths split in halves, `stats::components`), from which `solve::predict` predicts the noise
     /// at any other N_F and N_B.
     pub(crate) noise_components: bool,
+    /// The smaller radii R′ < R the run also tallies (`radii` of the job; empty by default): each
+    /// this configuration at R′, with no radii of its own. The merges of a run at R contain those
+    /// at every R′ ≤ R (nested discs, docs/model.md §13), so one run fills a moments value per
+    /// radius, each exactly what a run at R′ would have summed from the same draws.
+    pub(crate) radii: Vec<SimConfig>,
     fingerprint: String,
 }
 
@@ -127,6 +136,9 @@ struct FingerprintInput<'a> {
     /// Absent unless set, so the fingerprints of configurations without components are unchanged.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     noise_components: bool,
+    /// Absent unless set, so the fingerprints of configurations without radii are unchanged.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    radii: Vec<f64>,
 }
 
 impl SimConfig {
@@ -149,6 +161,7 @@ impl SimConfig {
             engine,
             folds,
             noise_components: false,
+            radii: Vec::new(),
             fingerprint: String::new(),
         };
         config.fingerprint = config.compute_fingerprint();
@@ -198,8 +211,40 @@ impl SimConfig {
     /// This configuration with noise components kept (or not): another fingerprint.
     pub fn with_noise_components(mut self, on: bool) -> Self {
         self.noise_components = on;
+        for sub in &mut self.radii {
+            *sub = sub.clone().with_noise_components(on);
+        }
         self.fingerprint = self.compute_fingerprint();
         self
+    }
+
+    /// The smaller radii this run also tallies, each as its own configuration (see
+    /// [`SimConfig::with_radii`]).
+    pub fn radii(&self) -> &[SimConfig] {
+        &self.radii
+    }
+
+    /// This configuration also tallying the merges within each of `radii` (each < R, ascending,
+    /// checked by the spec's validation): another fingerprint. Each radius's configuration is this
+    /// one at R′ — the fingerprint a direct run at R′ has, so its moments merge with such a run's.
+    pub fn with_radii(mut self, radii: &[f64]) -> Self {
+        self.radii = radii.iter().map(|&r| self.at_radius(r)).collect();
+        self.fingerprint = self.compute_fingerprint();
+        self
+    }
+
+    /// This configuration at merge radius `r`, with no radii of its own.
+    pub fn at_radius(&self, r: f64) -> SimConfig {
+        SimConfig::new(
+            self.scene.clone(),
+            r,
+            self.light_paths,
+            self.camera_paths,
+            self.cells.clone(),
+            self.engine,
+            self.folds,
+        )
+        .with_noise_components(self.noise_components)
     }
 
     fn compute_fingerprint(&self) -> String {
@@ -217,8 +262,9 @@ impl SimConfig {
     /// The fingerprint the same configuration had in moments `format` (a supported one): what a
     /// checkpoint or document written by an earlier build carries.
     pub fn fingerprint_of_format(&self, format: u32) -> String {
-        let Self { scene, merge_radius, light_paths, camera_paths, cells, engine, folds, noise_components, .. } =
-            self.clone();
+        let Self {
+            scene, merge_radius, light_paths, camera_paths, cells, engine, folds, noise_components, radii, ..
+        } = self.clone();
         let input = FingerprintInput {
             format,
             generator: GENERATOR_ID,
@@ -234,6 +280,7 @@ impl SimConfig {
             },
             folds,
             noise_components,
+            radii: radii.iter().map(|c| c.merge_radius).collect(),
         };
         let canonical = serde_json::to_vec(&input).expect("a fingerprint input always serialises");
         sha256_hex(&canonical)
@@ -251,6 +298,7 @@ impl SimConfig {
             self.folds,
         )
         .with_noise_components(self.noise_components)
+        .with_radii(&self.radii.iter().map(|c| c.merge_radius).collect::<Vec<_>>())
     }
 
     /// The configuration fingerprint (hex SHA-256).

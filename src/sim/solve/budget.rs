@@ -33,6 +33,7 @@ use crate::sim::model::cells::CellGrid;
 use crate::sim::stats::moments::Moments;
 
 mod costs;
+pub mod error;
 pub use costs::{CostSource, Costs};
 
 /// One strategy at one budget.
@@ -243,15 +244,42 @@ pub fn plan(
     costs: Costs,
     target: f64,
 ) -> Result<BudgetPlan, PredictError> {
+    let timing = Timing { seconds: &|b| costs.iteration_seconds(b), allowance: &|_| Some(target) };
+    plan_with(moments, grid, solver, measured, costs, target, &timing)
+}
+
+/// How [`plan_with`] times a budget: the seconds of one iteration, and each strategy's noise
+/// allowance — the per-iteration RMS% that, averaged over iterations, reaches the target (the
+/// target itself for [`plan`]; √(P² − bias²) for a target error that includes a bias, `None`
+/// where the bias alone exceeds it).
+pub struct Timing<'a> {
+    /// Seconds of one iteration at a budget.
+    pub seconds: &'a dyn Fn(Budget) -> f64,
+    /// The RMS% of the average that a strategy may have.
+    pub allowance: &'a dyn Fn(Strategy) -> Option<f64>,
+}
+
+/// [`plan`] with the times of `timing` (docs/model.md §13: a radius's merges cost time, and its
+/// bias shrinks what the noise may be).
+pub fn plan_with(
+    moments: &Moments,
+    grid: &CellGrid,
+    solver: &SolverOptions,
+    measured: Budget,
+    costs: Costs,
+    target: f64,
+    timing: &Timing<'_>,
+) -> Result<BudgetPlan, PredictError> {
     let predictor = Predictor::new(moments, measured)?;
     let evaluate = |b: Budget, points: &mut Vec<BudgetPoint>| {
         let p = predictor.at(grid, solver, b);
-        let seconds = costs.iteration_seconds(b);
+        let seconds = (timing.seconds)(b);
         for row in p.noise_table.iter().filter(|r| !r.in_sample) {
+            let Some(allowance) = (timing.allowance)(row.strategy) else { continue };
             if let Some(r) = row.rms_percent.filter(|r| r.is_finite() && *r > 0.0) {
                 // At least one iteration: a budget whose single iteration beats the target still
                 // costs that iteration.
-                let iterations = (r / target).powi(2).max(1.0);
+                let iterations = (r / allowance).powi(2).max(1.0);
                 points.push(BudgetPoint {
                     strategy: row.strategy,
                     budget: b,

@@ -23,7 +23,9 @@
 //!   noise table as Markdown and LaTeX;
 //! * [`predict`] — the noise table and re-fitted weights at another ray budget, from one run's
 //!   noise components;
-//! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy;
+//! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy, and with
+//!   [`budget::error`] the (N_F, N_B, R′) that reaches a target error, bias included;
+//! * [`radii`] — a run's noise table and biases at each smaller radius it tallied;
 //! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run;
 //! * [`compare`] — runs compared strategy by strategy, ratios and differences with their SEs.
 //!
@@ -41,6 +43,7 @@ pub mod fitted;
 pub mod noise;
 pub mod options;
 pub mod predict;
+pub mod radii;
 pub mod recommend;
 pub mod report;
 pub mod rms_error;

@@ -151,6 +151,10 @@ pub struct RunReport {
     /// weights (`solve::effective`, a document of its own); not part of the document.
     #[serde(skip)]
     pub replicates: Option<FitReplicates>,
+    /// With `radii`: the figures at each smaller radius the run tallied and at its own R
+    /// (ascending), each row with its bias against the R → 0 reference (`solve::radii`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub radii: Vec<super::radii::RadiusReport>,
 }
 
 /// The rows of a weights table.
@@ -292,5 +296,6 @@ pub fn build_report(
         fingerprint: moments.fingerprint.clone(),
         coverage: moments.coverage.clone(),
         replicates,
+        radii: Vec::new(),
     }
 }

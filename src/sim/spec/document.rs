@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::annotations::validate_annotations;
 use super::execution::{EngineName, Execution, Shard, validate_execution, validate_range};
 use crate::sim::engines::layout::{MAX_FOLD_SUMS, folds_allowed};
-use crate::sim::model::config::{DEFAULT_FOLDS, MAX_FOLDS, MIN_FOLDS, SimConfig};
+use crate::sim::model::config::{DEFAULT_FOLDS, MAX_FOLDS, MAX_RADII, MIN_FOLDS, SimConfig};
 use crate::sim::model::illumination::validate_flux;
 use crate::sim::model::params::{
     CellSpec, MIN_LENGTH, SceneSpec, SpecError, check, check_path_counts, count, optional_count, validate_cells,
@@ -63,6 +63,15 @@ pub struct JobSpec {
     /// `camera_paths`; the moments hold four times the sums per fold. Part of the fingerprint.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub noise_components: bool,
+    /// Smaller merge radii R′ < `merge_radius` to tally as well (at most 6, ascending): the merges
+    /// of a run at R contain those at every R′ ≤ R, so one run gives the moments (and, with
+    /// `noise_components`, the noise at any N_F, N_B) at each R′ — what a direct run at R′ would
+    /// give — and the budget can choose the radius with the ray counts (`optimis budget
+    /// --target-rmse`, docs/model.md §13). Each radius costs a moments value of its own; the run
+    /// time grows by the merges it re-weighs (docs/results.md §22). Part of the fingerprint.
+    #[serde(default, skip_serializing_if = "Vec::is_empty", deserialize_with = "bounded_radii")]
+    #[cfg_attr(feature = "server", schema(max_items = 6))]
+    pub radii: Vec<f64>,
     /// How the weights are fitted: fixed weights, the penalty λ and the cross-validation grid.
     pub solver: SolverOptions,
     /// How light paths are drawn. Absent in documents stored before engines existed: `brute`.
@@ -132,6 +141,7 @@ impl JobSpec {
                 })?;
             }
         }
+        validate_radii(&self.radii, self.merge_radius)?;
         let allowed = folds_allowed(cells.len(), self.noise_components);
         let folds = self.folds.unwrap_or(DEFAULT_FOLDS.min(allowed));
         check((MIN_FOLDS..=allowed).contains(&folds), "folds", || {
@@ -150,9 +160,28 @@ impl JobSpec {
             self.engine.engine(),
             folds,
         )
-        .with_noise_components(self.noise_components);
+        .with_noise_components(self.noise_components)
+        .with_radii(&self.radii);
         Ok(ValidJob { spec: self.clone(), config: Arc::new(config) })
     }
+}
+
+/// Reads `radii`, refusing a list longer than [`MAX_RADII`] before it is collected.
+fn bounded_radii<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+    crate::sim::stats::bounded::bounded::<_, _, MAX_RADII>(d)
+}
+
+/// The smaller radii: finite, at least [`MIN_LENGTH`], below R, strictly ascending.
+fn validate_radii(radii: &[f64], merge_radius: f64) -> Result<(), SpecError> {
+    for (i, &r) in radii.iter().enumerate() {
+        check(r.is_finite() && r >= MIN_LENGTH && r < merge_radius, "radii", || {
+            format!("radii[{i}] must be in [{MIN_LENGTH:e}, merge_radius = {merge_radius}), got {r}")
+        })?;
+        check(i == 0 || r > radii[i - 1], "radii", || {
+            format!("radii must be strictly ascending, but radii[{i}] = {r} follows {}", radii[i - 1])
+        })?;
+    }
+    Ok(())
 }
 
 /// Most iterations of one job (the message of its check says 10^9).

@@ -47,6 +47,8 @@ pub struct MomentsAccumulator {
     index: SumIndex,
     folds: Vec<FoldAccumulator>,
     buffers: TermBuffers,
+    /// The sums at each smaller radius of the moments (`Moments::radii`), in their order.
+    radii: Vec<MomentsAccumulator>,
 }
 
 impl MomentsAccumulator {
@@ -62,7 +64,13 @@ impl MomentsAccumulator {
             merges_sq: [0; 3],
             cell_counts: vec![0; 3 * layout.cells],
         };
-        Self { layout, index, folds: vec![fold; moments.fold_count()], buffers: TermBuffers::default() }
+        Self {
+            layout,
+            index,
+            folds: vec![fold; moments.fold_count()],
+            buffers: TermBuffers::default(),
+            radii: moments.radii.iter().map(Self::like).collect(),
+        }
     }
 
     /// K, the folds (iteration s goes to fold s mod K).
@@ -79,7 +87,24 @@ impl MomentsAccumulator {
     /// [`Moments::add_iteration`]: a value that could overflow a sum, or a counter that would
     /// overflow, is an error and changes nothing.
     pub fn add_iteration(&mut self, tally: &IterationTally) -> Result<(), MergeError> {
+        if tally.radii.len() != self.radii.len() {
+            return Err(MergeError::Malformed(format!(
+                "an iteration tallied at {} smaller radii for moments that keep {}",
+                tally.radii.len(),
+                self.radii.len()
+            )));
+        }
         check_representable(tally)?;
+        tally.radii.iter().try_for_each(check_representable)?;
+        self.add_own(tally)?;
+        for (sub, sub_tally) in self.radii.iter_mut().zip(&tally.radii) {
+            sub.add_own(sub_tally)?;
+        }
+        Ok(())
+    }
+
+    /// [`MomentsAccumulator::add_iteration`] without the radii, its values checked.
+    fn add_own(&mut self, tally: &IterationTally) -> Result<(), MergeError> {
         let k = self.folds.len() as u64;
         let fold = &mut self.folds[(tally.iteration % k) as usize];
         let (merges, merges_sq) = add_tally_counters(fold.merges, fold.merges_sq, &fold.cell_counts, tally)?;
@@ -107,6 +132,7 @@ impl MomentsAccumulator {
         for fold in &mut self.folds {
             fold.clear();
         }
+        self.radii.iter_mut().for_each(Self::clear);
     }
 }
 
@@ -123,11 +149,12 @@ impl FoldAccumulator {
     }
 }
 
-/// Adds what `workers` summed — together, exactly iterations `range` of `seed` — to `moments`,
-/// and empties them. Refused with nothing changed if `moments` already holds one of those
-/// iterations or a counter would overflow. The sums cannot: every value added is at most 10²⁸⁰
-/// (fourth powers of tallies bounded by `MAX_TALLY_VALUE`), so no sum over at most 2⁶² iterations
-/// comes near the 2¹⁰⁰⁰ a moments value may hold.
+/// Adds what `workers` summed — together, exactly iterations `range` of `seed` — to `moments`
+/// (and each radius's to the moments of that radius), and empties them. Refused with nothing
+/// changed if `moments` already holds one of those iterations or a counter would overflow. The
+/// sums cannot: every value added is at most 10²⁸⁰ (fourth powers of tallies bounded by
+/// `MAX_TALLY_VALUE`), so no sum over at most 2⁶² iterations comes near the 2¹⁰⁰⁰ a moments value
+/// may hold.
 pub fn hand_over(
     workers: &mut [MomentsAccumulator],
     moments: &mut Moments,
@@ -144,9 +171,24 @@ pub fn hand_over(
     if !overlaps.is_empty() {
         return Err(MergeError::Overlap(overlaps));
     }
-    check_counters(workers, moments)?;
+    // Every check before any change: the run's counters, then each radius's.
+    check_counters(workers.iter(), moments)?;
+    for (r, sub) in moments.radii.iter().enumerate() {
+        check_counters(workers.iter().map(|w| &w.radii[r]), sub)?;
+    }
+    add_to(workers.iter_mut(), moments);
+    for (r, sub) in moments.radii.iter_mut().enumerate() {
+        add_to(workers.iter_mut().map(|w| &mut w.radii[r]), sub);
+        sub.coverage.insert(seed, range.start, range.end);
+    }
+    moments.coverage.insert(seed, range.start, range.end);
+    Ok(())
+}
+
+/// Adds the workers' sums and counters to `moments`' folds (checked beforehand) and empties them.
+fn add_to<'a>(workers: impl Iterator<Item = &'a mut MomentsAccumulator>, moments: &mut Moments) {
     let index = SumIndex::new(moments.layout(), moments.has_components());
-    for worker in workers.iter_mut() {
+    for worker in workers {
         for (target, fold) in moments.folds.iter_mut().zip(&mut worker.folds) {
             for &i in &fold.touched {
                 fold.sums[i as usize].add_to(target.sum_mut(&index, i as usize));
@@ -162,14 +204,15 @@ pub fn hand_over(
             fold.clear();
         }
     }
-    moments.coverage.insert(seed, range.start, range.end);
-    Ok(())
 }
 
 /// Whether every counter of `moments` plus `workers`' fits its type, pooled over the folds (what
 /// the noise table adds), and so per fold.
-fn check_counters(workers: &[MomentsAccumulator], moments: &Moments) -> Result<(), MergeError> {
-    let worker_folds = workers.iter().flat_map(|w| &w.folds).map(|f| Counters {
+fn check_counters<'a>(
+    workers: impl Iterator<Item = &'a MomentsAccumulator>,
+    moments: &Moments,
+) -> Result<(), MergeError> {
+    let worker_folds = workers.flat_map(|w| &w.folds).map(|f| Counters {
         merges: &f.merges,
         merges_sq: &f.merges_sq,
         cell_counts: &f.cell_counts,

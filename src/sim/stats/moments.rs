@@ -40,7 +40,7 @@ use crate::sim::engines::tally::IterationTally;
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
 use crate::sim::model::cells::MAX_CELLS;
 pub use crate::sim::model::config::packed_index;
-use crate::sim::model::config::{MAX_FOLDS, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
+use crate::sim::model::config::{MAX_FOLDS, MAX_RADII, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 
 /// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
 pub const MAX_TALLY_VALUE: f64 = 1e70;
@@ -279,6 +279,12 @@ pub struct Moments {
     /// Sums over the iterations of each fold: `folds[f]` holds the iterations s ≡ f (mod K).
     #[serde(deserialize_with = "bounded::<_, _, MAX_FOLDS>")]
     pub folds: Vec<FoldMoments>,
+    /// With `radii`: the same iterations' moments at each smaller radius R′ of the configuration,
+    /// in its order — each with R′'s configuration's fingerprint (what a direct run at R′ has),
+    /// the same coverage, and no radii of its own (docs/model.md §13).
+    #[serde(default, skip_serializing_if = "Vec::is_empty", deserialize_with = "bounded::<_, _, MAX_RADII>")]
+    #[cfg_attr(feature = "server", schema(no_recursion))]
+    pub radii: Vec<Moments>,
 }
 
 pub use super::merge_error::MergeError;
@@ -293,6 +299,7 @@ impl Moments {
             cells: k,
             coverage: Coverage::new(),
             folds: vec![FoldMoments::empty(Layout::of(config), config.noise_components); config.folds],
+            radii: config.radii.iter().map(Moments::new).collect(),
         }
     }
 
@@ -306,6 +313,7 @@ impl Moments {
             cells: self.cells,
             coverage: Coverage::new(),
             folds: vec![FoldMoments::empty(self.layout(), components); self.folds.len()],
+            radii: self.radii.iter().map(Moments::empty_like).collect(),
         }
     }
 
@@ -335,10 +343,24 @@ impl Moments {
         if self.coverage.contains(seed, s) {
             return Err(MergeError::Overlap(vec![Overlap { seed, range: [s, s + 1] }]));
         }
+        if tally.radii.len() != self.radii.len() {
+            return Err(MergeError::Malformed(format!(
+                "an iteration tallied at {} smaller radii for moments that keep {}",
+                tally.radii.len(),
+                self.radii.len()
+            )));
+        }
+        // Every value checked first, so that an iteration is refused whole (only a counter
+        // overflow, beyond 2^64 merges, could still stop it part-way).
+        check_representable(tally)?;
+        tally.radii.iter().try_for_each(check_representable)?;
         let k = self.folds.len() as u64;
         let layout = self.layout();
         self.folds[(s % k) as usize].add_iteration(layout, tally)?;
         self.coverage.insert(seed, s, s + 1);
+        for (sub, sub_tally) in self.radii.iter_mut().zip(&tally.radii) {
+            sub.add_iteration(seed, sub_tally)?;
+        }
         Ok(())
     }
 
@@ -359,7 +381,8 @@ impl Moments {
         if !counters_fit(&self.folds.iter().chain(&other.folds).map(FoldMoments::counters).collect::<Vec<_>>()) {
             return Err(overflow("pooled counts"));
         }
-        Ok(())
+        // The radii's fingerprints are in the parent's, so equal fingerprints mean equal radii.
+        self.radii.iter().zip(&other.radii).try_for_each(|(a, b)| a.check_mergeable(b))
     }
 
     /// Adds `other`'s iterations: exact addition, refused (with nothing changed) if the
@@ -374,6 +397,9 @@ impl Moments {
             a.add(b);
         }
         self.coverage = coverage;
+        for (a, b) in self.radii.iter_mut().zip(&other.radii) {
+            a.merge(b)?;
+        }
         Ok(())
     }
 
@@ -436,6 +462,20 @@ impl Moments {
         if !counters_fit(&self.folds.iter().map(FoldMoments::counters).collect::<Vec<_>>()) {
             return Err(MergeError::Malformed("the folds' counts overflow when pooled".into()));
         }
+        for (i, sub) in self.radii.iter().enumerate() {
+            let what = |e: String| MergeError::Malformed(format!("radius #{i}: {e}"));
+            if !sub.radii.is_empty() {
+                return Err(what("a radius's moments hold radii of their own".into()));
+            }
+            if sub.coverage != self.coverage
+                || sub.format_version != self.format_version
+                || sub.cells != self.cells
+                || sub.folds.len() != self.folds.len()
+            {
+                return Err(what("its coverage, format, cells or folds differ from the run's".into()));
+            }
+            sub.check_shape().map_err(|e| what(e.to_string()))?;
+        }
         Ok(())
     }
 
@@ -447,7 +487,7 @@ impl Moments {
                 return Err(overflow("a merged sum exceeds 2^1000"));
             }
         }
-        Ok(())
+        self.radii.iter().try_for_each(Moments::check_bounded)
     }
 
     /// All folds added together (they always fit: moments from outside are checked for it, and

@@ -13,6 +13,13 @@ pub fn check_well_formed(moments: &Moments) -> Result<(), MergeError> {
     for (f, fold) in moments.folds.iter().enumerate() {
         check_consistent(fold, moments.layout()).map_err(|e| MergeError::Malformed(format!("fold {f}: {e}")))?;
     }
+    // The shapes of the radii were checked with the run's; their sums here.
+    for (i, sub) in moments.radii.iter().enumerate() {
+        for (f, fold) in sub.folds.iter().enumerate() {
+            check_consistent(fold, sub.layout())
+                .map_err(|e| MergeError::Malformed(format!("radius #{i}, fold {f}: {e}")))?;
+        }
+    }
     Ok(())
 }
 

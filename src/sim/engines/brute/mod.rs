@@ -475,8 +475,8 @@ fn trace_flagged(
         if theta < theta_min {
             return;
         }
-        if deflect_onto_pixel(config, &d, x2, theta, rng).is_some() {
-            merge_plane1(config, theta, x2, x3, scratch);
+        if let Some(x1) = deflect_onto_pixel(config, &d, x2, theta, rng) {
+            merge_plane1(config, theta, x1, x2, x3, scratch);
         }
     }
 }

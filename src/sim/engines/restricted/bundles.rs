@@ -290,8 +290,8 @@ fn tally(config: &SimConfig, cameras: &CameraSet, c: &Candidate, scratch: &mut C
     scratch.toss_light_half();
     merge_plane3(config, cameras, cameras.plane3.candidates(c.x3), c.x3, scratch);
     merge_plane2(config, cameras, cameras.plane2.candidates(c.x2), c.x2, c.x3, &c.d, scratch);
-    if let Some((_, theta)) = c.x1 {
-        merge_plane1(config, theta, c.x2, c.x3, scratch);
+    if let Some((x1, theta)) = c.x1 {
+        merge_plane1(config, theta, x1, c.x2, c.x3, scratch);
     }
 }
 

@@ -17,6 +17,11 @@ pub struct Costs {
     pub iteration: f64,
     /// P: the pixels of the image the renderer computes.
     pub pixels: f64,
+    /// t_M: seconds per merge event and pixel (a kernel evaluation, the weights and the sums):
+    /// what makes a larger merge radius cost time (docs/model.md §13). Absent in plans made
+    /// before it existed: 0.
+    #[serde(default)]
+    pub merge: f64,
     /// Where t_F, t_B and t_0 come from.
     #[serde(default)]
     pub source: CostSource,
@@ -44,12 +49,16 @@ pub enum CostSource {
 
 impl Costs {
     /// The costs a plan takes when none are given: the brute force on the paper's scene, measured
-    /// on a 2-core machine (docs/results.md §7, "Ray budget"), for an image of 10⁶ pixels.
+    /// on a 2-core machine (docs/results.md §7, "Ray budget"), for an image of 10⁶ pixels; the cost
+    /// per merge is the restricted engine's time per merge event on the same machine (the slope of
+    /// its iteration time against the merges per iteration between R = 0.003 and 0.02,
+    /// docs/results.md §22).
     pub const REFERENCE: Costs = Costs {
         light_path: 7.3e-9,
         camera_path: 4.1e-6,
         iteration: 1.9e-4,
         pixels: 1e6,
+        merge: 8.0e-8,
         source: CostSource::Reference,
     };
 
@@ -68,6 +77,7 @@ impl Costs {
             camera_path: camera.unwrap_or(self.camera_path),
             iteration: iteration.unwrap_or(self.iteration),
             pixels: pixels.unwrap_or(self.pixels),
+            merge: self.merge,
             source: match given {
                 0 => self.source,
                 3 => CostSource::Given,
@@ -76,8 +86,18 @@ impl Costs {
         }
     }
 
-    /// Seconds of one renderer iteration at `b`.
+    /// These costs with the cost per merge `merge` (seconds per merge event and pixel) if given.
+    pub fn with_merge(self, merge: Option<f64>) -> Costs {
+        Costs { merge: merge.unwrap_or(self.merge), ..self }
+    }
+
+    /// Seconds of one renderer iteration at `b`, merges not counted.
     pub fn iteration_seconds(&self, b: Budget) -> f64 {
         self.light_path * b.light_paths as f64 + self.camera_path * b.camera_paths as f64 * self.pixels + self.iteration
+    }
+
+    /// Seconds of one renderer iteration at `b` with `merges` merge events per pixel.
+    pub fn iteration_seconds_with_merges(&self, b: Budget, merges: f64) -> f64 {
+        self.iteration_seconds(b) + self.merge * merges * self.pixels
     }
 }

@@ -10,7 +10,14 @@ fn the_log_grid_spans_its_ends_in_even_steps() {
 
 #[test]
 fn an_iteration_costs_its_light_paths_and_its_camera_paths_in_every_pixel() {
-    let c = Costs { light_path: 1e-8, camera_path: 1e-7, iteration: 0.5, pixels: 1e6, source: CostSource::Given };
+    let c = Costs {
+        light_path: 1e-8,
+        camera_path: 1e-7,
+        iteration: 0.5,
+        pixels: 1e6,
+        merge: 0.0,
+        source: CostSource::Given,
+    };
     let t = c.iteration_seconds(Budget { light_paths: 10_000_000, camera_paths: 100 });
     assert!((t - (0.1 + 10.0 + 0.5)).abs() < 1e-12);
 }

@@ -55,6 +55,7 @@ fn iteration(cells: usize, s: u64, rng: &mut StreamRng) -> IterationTally {
         merges: [1; 3],
         block_values: Vec::new(),
         block_strategies: Default::default(),
+        radii: Vec::new(),
     }
 }
 

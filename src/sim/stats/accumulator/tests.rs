@@ -50,6 +50,7 @@ fn tally(cells: usize, s: u64, components: bool) -> IterationTally {
         merges: [s % 3, 1, s % 7],
         block_values,
         block_strategies,
+        radii: Vec::new(),
     }
 }
 
