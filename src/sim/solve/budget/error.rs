@@ -130,6 +130,9 @@ pub struct ErrorPlan {
     /// Per (radius, strategy) that can reach the target, its fastest point (supported first), by
     /// time.
     pub candidates: Vec<ErrorPoint>,
+    /// Every point evaluated of best's strategy, at every radius: its curve over budgets and
+    /// radii (what a confirmation by direct runs picks neighbours from).
+    pub best_strategy_points: Vec<ErrorPoint>,
     /// The (strategy, radius) pairs whose bias alone reaches the target.
     pub out_of_reach: Vec<OutOfReach>,
     /// The progressive schedule at best's strategy and budget.
@@ -220,6 +223,18 @@ pub fn error_plan(
     }
     let (speedup_over_paper, speedup_over_paper_stderr) = speedup(best.as_ref(), paper.as_ref());
     let (speedup_over_own_radius, speedup_over_own_radius_stderr) = speedup(best.as_ref(), at_own_radius.as_ref());
+    let best_strategy_points = best
+        .as_ref()
+        .map(|b| {
+            radii
+                .iter()
+                .zip(&per_radius_points)
+                .flat_map(|(data, (r, pts))| {
+                    pts.iter().filter(|p| p.strategy == b.strategy).map(|p| error_point(p, *r, data.report))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
     let progressive =
         best.as_ref().and_then(|b| progressive(b, radii, &per_radius_points, grid, solver, measured, costs, target));
     Ok(ErrorPlan {
@@ -234,6 +249,7 @@ pub fn error_plan(
         speedup_over_own_radius,
         speedup_over_own_radius_stderr,
         candidates,
+        best_strategy_points,
         out_of_reach,
         progressive,
         notes,
