@@ -567,7 +567,8 @@ async fn budget_plans_the_ray_budget_as_the_cli_does() {
     }
     assert_eq!(
         api_default["costs"],
-        json!({ "light_path": 7.3e-9, "camera_path": 4.1e-6, "iteration": 1.9e-4, "pixels": 1e6, "source": "reference" })
+        json!({ "light_path": 7.3e-9, "camera_path": 4.1e-6, "iteration": 1.9e-4, "pixels": 1e6, "merge": 8e-8,
+            "source": "reference" })
     );
     let mixed = server.post(&format!("/v1/jobs/{id}/budget"), &json!({ "target_rms": 1.0, "light_cost": 2e-8 })).await;
     assert_eq!(mixed.json()["costs"]["source"], "mixed", "{}", mixed.text());

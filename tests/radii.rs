@@ -11,6 +11,7 @@
 //! restricted to S(R′) to its process on S(R′) — checked statistically by the acceptance study
 //! (docs/results.md §22).
 
+use crate::common::{TestServer, assert_problem};
 use optimis::sim::runner::run;
 use optimis::sim::solve::noise::noise_table;
 use optimis::sim::spec::{ValidJob, parse_job_spec};
@@ -113,4 +114,67 @@ fn moments_with_radii_merge_and_refuse_what_does_not_fit() {
     let mut bad = b.clone();
     bad.radii[0] = a.radii[0].clone();
     assert!(check_well_formed(&bad).is_err());
+}
+
+/// The server: a job with radii reports each radius (bias beside the RMS), and `POST
+/// /v1/jobs/{id}/budget` with `target_rmse` gives `optimis budget --target-rmse --json`'s plan.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_server_reports_each_radius_and_plans_to_a_target_error_as_the_cli_does() {
+    let server = TestServer::start().await;
+    let id = server
+        .submit_and_wait(&json!({ "preset": "paper-table1", "merge_radius": 0.02, "radii": [0.005, 0.01],
+            "light_paths": 1_000_000, "camera_paths": 20, "iterations": 3000, "seed": 5, "noise_components": true }))
+        .await;
+    let result = server.result(id).await;
+    let radii = result["radii"].as_array().expect("the report lists the radii").clone();
+    let at: Vec<f64> = radii.iter().map(|r| r["merge_radius"].as_f64().unwrap()).collect();
+    assert_eq!(at, [0.005, 0.01, 0.02]);
+    assert_eq!(radii.iter().map(|r| r["own"].as_bool().unwrap()).collect::<Vec<_>>(), [false, false, true]);
+    // The switch's bias is first order in R (docs/model.md §11): +0.85%, +1.68%, +3.30% here.
+    let switch: Vec<f64> = radii
+        .iter()
+        .map(|r| {
+            let row = r["rows"].as_array().unwrap().iter().find(|x| x["strategy"] == "switch").unwrap().clone();
+            assert_eq!(row["bias_source"], "quadrature");
+            row["bias_percent"].as_f64().unwrap()
+        })
+        .collect();
+    for (b, expected) in switch.iter().zip([0.845, 1.681, 3.297]) {
+        assert!((b - expected).abs() < 0.01, "switch bias {switch:?}");
+    }
+
+    let body = json!({ "target_rmse": 1.0 });
+    let reply = server.post(&format!("/v1/jobs/{id}/budget"), &body).await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    let plan = reply.json();
+    let error_plan = &plan["error_plan"];
+    assert_eq!(error_plan["radii"], json!([0.005, 0.01, 0.02]));
+    assert_eq!(plan["target_rms_percent"], 1.0, "target_rms defaults to target_rmse");
+    let best = &error_plan["best"];
+    assert!(best["seconds_to_target"].as_f64().unwrap() > 0.0 && best["seconds_to_target_stderr"].is_number());
+    let out_of_reach = error_plan["out_of_reach"].as_array().unwrap();
+    assert!(
+        out_of_reach.iter().any(|o| o["strategy"] == "switch" && o["merge_radius"] == 0.02),
+        "the switch's 3.3% bias at R = 0.02 is beyond a 1% target: {out_of_reach:?}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("m.json"), server.get(&format!("/v1/jobs/{id}/moments")).await.text()).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_optimis"))
+        .current_dir(dir.path())
+        .args(["budget", "m.json", "--target-rmse", "1", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let cli: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(&cli, error_plan, "the API's error plan is the CLI's");
+
+    for (body, field) in [
+        (json!({ "target_rmse": -1 }), "target_rmse"),
+        (json!({ "target_rmse": 1, "merge_cost": -1e-8 }), "merge_cost"),
+        (json!({ "light_cost": 1e-8 }), "target_rms"),
+    ] {
+        let problem = assert_problem(server.post(&format!("/v1/jobs/{id}/budget"), &body).await, 422);
+        assert_eq!(problem["field"], field, "{problem}");
+    }
+    server.stop().await;
 }

@@ -49,6 +49,12 @@ pub struct JobSubmission {
     /// Run iterations [first_iteration, first_iteration + iterations).
     #[schema(nullable = false)]
     first_iteration: Option<u64>,
+    /// Smaller merge radii R′ to tally as well: at most 6, ascending, each in [1e-9,
+    /// merge_radius). One run then holds the moments at every R′ (the merges within R′ of the same
+    /// iterations), each radius's noise table and bias in the result, and the budget can plan the
+    /// radius (`target_rmse`). Part of the fingerprint.
+    #[schema(nullable = false, max_items = 6)]
+    radii: Option<Vec<f64>>,
     #[schema(nullable = false)]
     cells: Option<CellPatch>,
     #[schema(nullable = false)]
