@@ -366,7 +366,9 @@ def test_predict_and_budget(client: Client) -> None:
     # No costs: the reference's, as `optimis budget` and the dashboard take them.
     reference = client.budget(job["id"], target_rms=1)
     assert reference["costs"] == {"light_path": 7.3e-9, "camera_path": 4.1e-6, "iteration": 1.9e-4,
-                                  "pixels": 1e6, "source": "reference"}
+                                  "merge": 8e-8, "pixels": 1e6, "source": "reference"}
+    # Without target_rmse there is no error plan.
+    assert "error_plan" not in reference or reference["error_plan"] is None
     # A job without noise components cannot predict: 409.
     plain = client.submit({**FAST, "seed": 31})
     client.wait(plain["id"], timeout=120)

@@ -46,9 +46,11 @@ from ._errors import (
 )
 from ._frames import (
     compare_frame,
+    error_plan_frame,
     history_frame,
     noise_table_frame,
     paper_figures,
+    radii_frame,
     sweep_table_frame,
     weights_frame,
 )
@@ -97,11 +99,13 @@ __all__ = [
     "check_vectors",
     "compare_frame",
     "effective_weights_frame",
+    "error_plan_frame",
     "history_frame",
     "lobe_pdf",
     "model_path",
     "noise_table_frame",
     "paper_figures",
+    "radii_frame",
     "read_vectors",
     "start_density",
     "sweep_table_frame",

@@ -26,7 +26,16 @@ from ._errors import (
     UnexpectedRedirect,
     WaitTimeout,
 )
-from ._frames import _columns, _frame, compare_frame, history_frame, noise_table_frame, sweep_table_frame, weights_frame
+from ._frames import (
+    _columns,
+    _frame,
+    compare_frame,
+    history_frame,
+    noise_table_frame,
+    radii_frame,
+    sweep_table_frame,
+    weights_frame,
+)
 from ._transport import Deadline, WatchedAdapter
 from .weights import WeightFunction
 
@@ -468,7 +477,9 @@ class Client:
         """Submit a job (``POST /v1/jobs``) and return its resource (``id``, ``state``, ``spec``, …).
 
         `job` is a job document: a preset and any fields to override, e.g. ``{"preset":
-        "paper-table1", "iterations": 10000, "seed": 1}``. `name`, `labels` (merged over the
+        "paper-table1", "iterations": 10000, "seed": 1}``; ``"radii": [0.005, 0.01]`` (ascending,
+        each below ``merge_radius``, at most 6) tallies those smaller merge radii in the same run,
+        for :meth:`radii` and the error plan of :meth:`budget`. `name`, `labels` (merged over the
         document's own) and `notes` describe it without changing the computation. With
         `idempotency_key`, a repeated submission of the same document returns the original job.
         Raises :class:`ApiError` (422, ``field`` naming the bad field) for an invalid document.
@@ -585,8 +596,9 @@ class Client:
 
         ``partial`` is true until the job succeeded. Holds ``noise_table`` (one row per strategy),
         ``recommended`` (the row to use, and why), ``weights`` (the recommended table; empty for a
-        per-path strategy), ``weights_fit``, ``gain``, ``warnings`` and ``references`` (the
-        published tables that apply). With `lam`, ``weights`` is the table fitted in-sample on all
+        per-path strategy), ``weights_fit``, ``gain``, ``warnings``, ``references`` (the
+        published tables that apply) and, for a job run with ``radii``, ``radii`` (the figures at
+        each radius, :meth:`radii`). With `lam`, ``weights`` is the table fitted in-sample on all
         iterations at λ = `lam` (``0``: the paper's procedure) instead; the noise table is the same.
         Raises :class:`ApiError` 409 while the job has no checkpoint yet.
         """
@@ -601,6 +613,14 @@ class Client:
         configuration); see :func:`optimis_client.noise_table_frame` for a result already fetched.
         """
         return noise_table_frame(self.result(id))
+
+    def radii(self, id: int) -> pd.DataFrame:
+        """A job's figures at each radius it tallied (a job run with ``"radii": [R′, …]``) as a
+        DataFrame: one row per radius (ascending, the job's own R last) and strategy, with the RMS,
+        the bias against the R → 0 reference and their errors, and the radius's merges per
+        iteration; see :func:`optimis_client.radii_frame` for the columns and for a result already
+        fetched. Empty for a job run without ``radii``."""
+        return radii_frame(self.result(id))
 
     def weights(self, id: int, *, lam: Optional[float] = None) -> pd.DataFrame:
         """A job's weights table as a DataFrame, one row per cell (empty for a per-path
@@ -737,10 +757,12 @@ class Client:
         self,
         id: int,
         *,
-        target_rms: float,
+        target_rms: Optional[float] = None,
+        target_rmse: Optional[float] = None,
         light_cost: Optional[float] = None,
         camera_cost: Optional[float] = None,
         iteration_cost: Optional[float] = None,
+        merge_cost: Optional[float] = None,
         pixels: float = 1e6,
         solver: Optional[Mapping[str, Any]] = None,
     ) -> Json:
@@ -750,11 +772,35 @@ class Client:
         `pixels` pixels. A cost left as None is the server's reference cost (the same that
         ``optimis budget`` and the dashboard take; ``plan["costs"]["source"]`` says which were
         given). Each speed-up over the paper's configuration has a standard error. Needs a job run
-        with ``"noise_components": true``."""
-        body: Json = {"target_rms": target_rms, "pixels": pixels}
-        for name, cost in (("light_cost", light_cost), ("camera_cost", camera_cost), ("iteration_cost", iteration_cost)):
-            if cost is not None:
-                body[name] = cost
+        with ``"noise_components": true``.
+
+        With `target_rmse` (percent), the answer also holds ``error_plan``: the plan to a relative
+        RMSE about the true pixel value — the noise and the merge radius's bias together — over
+        the job's own R and every radius it tallied (a job run with ``"radii": [R′, …]``): the
+        fastest (N_F, N_B, R′, strategy) that keeps the fixed weights and that the run supports
+        (``best``), the fastest such point at the job's own R (``at_own_radius``), the paper's
+        setup (``paper``, when the job tallied R = 0.003), the speed-ups over them with standard
+        errors, each (radius, strategy)'s fastest point (``candidates``), the pairs whose bias
+        alone reaches the target (``out_of_reach``), a progressive schedule (``progressive``) and
+        ``notes``;
+        :func:`optimis_client.error_plan_frame` makes a DataFrame of it. `merge_cost` is the
+        renderer's seconds per merge event and pixel (t_M; None: the reference's), which makes a
+        larger radius cost time. `target_rms` may then be left out: it defaults to `target_rmse`.
+
+        Giving neither target, or a value the server refuses (e.g. a target or cost below 0), is an
+        :class:`ApiError` 422 whose ``field`` names it (``target_rms`` when neither was given).
+        """
+        body: Json = {"pixels": pixels}
+        for name, value in (
+            ("target_rms", target_rms),
+            ("target_rmse", target_rmse),
+            ("light_cost", light_cost),
+            ("camera_cost", camera_cost),
+            ("iteration_cost", iteration_cost),
+            ("merge_cost", merge_cost),
+        ):
+            if value is not None:
+                body[name] = value
         if solver is not None:
             body["solver"] = dict(solver)
         return self._json("POST", f"/v1/jobs/{int(id)}/budget", json=body, timeout=max(self.timeout, 120.0))

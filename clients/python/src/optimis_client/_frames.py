@@ -243,3 +243,166 @@ def compare_frame(comparison: Mapping[str, Any], ids: Optional[Sequence[int]] = 
     frame.attrs["runs"] = runs
     frame.attrs["notes"] = list(comparison.get("notes") or [])
     return frame
+
+
+#: The columns of :func:`error_plan_frame`, in order (any further member of a point follows them).
+ERROR_PLAN_COLUMNS = (
+    "strategy",
+    "merge_radius",
+    "own",
+    "light_paths",
+    "camera_paths",
+    "rms_percent",
+    "rms_percent_stderr",
+    "bias_percent",
+    "bias_percent_stderr",
+    "iterations",
+    "seconds_per_iteration",
+    "seconds_to_target",
+    "seconds_to_target_stderr",
+    "supported",
+    "respects_fixed",
+    "best",
+)
+
+# The float columns of :func:`error_plan_frame` (NaN where the JSON has null).
+_ERROR_PLAN_NUMBERS = (
+    "merge_radius",
+    "rms_percent",
+    "rms_percent_stderr",
+    "bias_percent",
+    "bias_percent_stderr",
+    "iterations",
+    "seconds_per_iteration",
+    "seconds_to_target",
+    "seconds_to_target_stderr",
+)
+
+#: The columns of :func:`radii_frame`, in order (any further member of a row follows them).
+RADII_COLUMNS = (
+    "merge_radius",
+    "own",
+    "strategy",
+    "recommended",
+    "luminance",
+    "luminance_stderr",
+    "rms_percent",
+    "rms_percent_stderr",
+    "bias_percent",
+    "bias_percent_stderr",
+    "bias_source",
+    "respects_fixed",
+    "merges_plane1",
+    "merges_plane2",
+    "merges_plane3",
+)
+
+# The float columns of :func:`radii_frame` (NaN where the JSON has null).
+_RADII_NUMBERS = (
+    "merge_radius",
+    "luminance",
+    "luminance_stderr",
+    "rms_percent",
+    "rms_percent_stderr",
+    "bias_percent",
+    "bias_percent_stderr",
+    "merges_plane1",
+    "merges_plane2",
+    "merges_plane3",
+)
+
+
+def _same_point(a: Mapping[str, Any], b: Optional[Mapping[str, Any]]) -> bool:
+    """Whether two error points are the same (strategy, radius, budget)."""
+    return b is not None and all(a.get(k) == b.get(k) for k in ("strategy", "merge_radius", "budget"))
+
+
+def error_plan_frame(plan: Mapping[str, Any]) -> pd.DataFrame:
+    """The plan to a target error (``POST /v1/jobs/{id}/budget`` with ``target_rmse``): its
+    candidates, one row per (radius, strategy) that can reach the target — its fastest point — in
+    the server's order (the points that keep the fixed weights first, then those the run supports,
+    each by time to the target).
+
+    `plan` is the budget call's answer (:meth:`Client.budget`) or its ``error_plan`` member; an
+    answer without one (asked without ``target_rmse``) raises :class:`ValueError`.
+
+    Columns: ``strategy``; ``merge_radius`` (R′, one of the radii the run tallied or its own R) and
+    ``own`` (whether it is the run's own R); the budget ``light_paths`` (N_F) and ``camera_paths``
+    (N_B); ``rms_percent`` (the predicted RMS% of one iteration there) and ``bias_percent`` (the
+    strategy's bias at R′, % of L), each with its ``_stderr``; ``iterations`` to the target
+    (max(1, σ²/(P² − b²))), ``seconds_per_iteration`` (merges included), ``seconds_to_target`` and
+    its ``seconds_to_target_stderr``; ``supported`` (the run supports the prediction),
+    ``respects_fixed`` (the strategy keeps the solver's fixed weights); ``best`` (true on the plan's
+    fastest point, at most one row). Missing errors are ``NaN``.
+
+    ``frame.attrs`` keeps the plan's other members: ``target_rmse_percent``, ``costs`` (``merge``:
+    t_M), ``radii`` (ascending, the run's own R last), ``best``, ``at_own_radius`` and ``paper``
+    (points as the JSON has them, or None), ``speedup_over_paper``, ``speedup_over_own_radius`` and
+    their ``_stderr``, ``out_of_reach`` (the (strategy, radius) pairs whose bias alone reaches the
+    target), ``progressive`` and ``notes``.
+    """
+    if "candidates" not in plan:
+        inner = plan.get("error_plan")
+        if not isinstance(inner, Mapping):
+            raise ValueError("the budget plan has no error_plan: ask for one with target_rmse")
+        plan = inner
+    radii = list(plan.get("radii") or [])
+    own = radii[-1] if radii else None
+    best = plan.get("best")
+    records = []
+    for point in plan.get("candidates") or []:
+        budget = point.get("budget") or {}
+        record: Dict[str, Any] = {
+            "strategy": point.get("strategy"),
+            "merge_radius": point.get("merge_radius"),
+            "own": own is not None and point.get("merge_radius") == own,
+            "light_paths": budget.get("light_paths"),
+            "camera_paths": budget.get("camera_paths"),
+        }
+        record.update({k: v for k, v in point.items() if k != "budget" and k not in record})
+        record["best"] = _same_point(point, best)
+        records.append(record)
+    frame = _frame(records, _columns(records, ERROR_PLAN_COLUMNS))
+    if records:
+        for column in _ERROR_PLAN_NUMBERS:
+            frame[column] = pd.to_numeric(frame[column], errors="coerce").astype("float64")
+    frame.attrs.update({k: v for k, v in plan.items() if k != "candidates"})
+    return frame
+
+
+def radii_frame(result: Mapping[str, Any]) -> pd.DataFrame:
+    """A result's figures at each radius the run tallied (its ``radii``: a job given ``"radii":
+    [R′, …]``) in long format: one row per radius and strategy, the radii ascending (the run's own
+    R last), the strategies in the server's order.
+
+    Columns: ``merge_radius`` (R′) and ``own`` (whether it is the run's own R); ``strategy`` and
+    ``recommended`` (whether the noise table at R′ recommends this row); ``luminance`` (L̂ at R′),
+    ``rms_percent`` (RMS% of one iteration at R′ and the run's N_F, N_B) and ``bias_percent``
+    (100·(E[C] at R′ − L)/L, against the R → 0 reference: the error no number of iterations
+    removes), each with its ``_stderr``; ``bias_source`` (``quadrature`` or ``monte_carlo``),
+    ``respects_fixed``; ``merges_plane1``, ``merges_plane2``, ``merges_plane3`` (the radius's merge
+    events per iteration at planes 1, 2 and 3, the same on each of its rows). Missing figures are
+    ``NaN``. Empty (with these columns) for a run without ``radii``. ``frame.attrs["radii"]`` keeps
+    each radius's members but its rows.
+    """
+    radii = list(result.get("radii") or [])
+    records = []
+    for radius in radii:
+        merges = list(radius.get("merges_per_iteration") or []) + [None, None, None]
+        for row in radius.get("rows") or []:
+            record: Dict[str, Any] = {
+                "merge_radius": radius.get("merge_radius"),
+                "own": radius.get("own"),
+                "strategy": row.get("strategy"),
+                "recommended": row.get("strategy") == radius.get("recommended"),
+            }
+            record.update({k: v for k, v in row.items() if k not in record})
+            for plane in range(3):
+                record[f"merges_plane{plane + 1}"] = merges[plane]
+            records.append(record)
+    frame = _frame(records, _columns(records, RADII_COLUMNS))
+    if records:
+        for column in _RADII_NUMBERS:
+            frame[column] = pd.to_numeric(frame[column], errors="coerce").astype("float64")
+    frame.attrs["radii"] = [{k: v for k, v in radius.items() if k != "rows"} for radius in radii]
+    return frame
