@@ -247,6 +247,7 @@ mod tests {
             ("JobSubmission", "first_iteration", &[("minimum", 0.0)]),
             ("JobSubmission", "name", &[("minLength", 1.0), ("maxLength", MAX_NAME as f64)]),
             ("JobSubmission", "notes", &[("maxLength", MAX_NOTES as f64)]),
+            ("JobSubmission", "radii", &[("maxItems", crate::sim::model::config::MAX_RADII as f64)]),
             ("ScenePatch", "l2", &lengths),
             ("ScenePatch", "l3", &lengths),
             ("ScenePatch", "beta_deg", &both(MIN_BETA_DEG, MAX_BETA_DEG)),

@@ -48,7 +48,7 @@ pub struct RadiusRow {
     pub rms_percent: Option<f64>,
     /// Its standard error.
     pub rms_percent_stderr: Option<f64>,
-    /// 100·(E[C_s] at R′ − L)/L: the error that no number of iterations removes.
+    /// 100·(E\[C_s\] at R′ − L)/L: the error that no number of iterations removes.
     pub bias_percent: Option<f64>,
     /// Its error (the quadrature's tolerance, or L̂'s standard error), in percent of L.
     pub bias_percent_stderr: Option<f64>,
