@@ -188,6 +188,7 @@ async fn every_dashboard_file_is_served() {
         "noisetable.js",
         "paper.js",
         "plots.js",
+        "radiitable.js",
         "results.js",
         "solves.js",
         "specfields.js",
