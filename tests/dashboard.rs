@@ -180,6 +180,7 @@ async fn every_dashboard_file_is_served() {
         "compare.js",
         "csv.js",
         "csvtables.js",
+        "errorplan.js",
         "fig2.js",
         "form.js",
         "format.js",
