@@ -32,6 +32,8 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
     ("results.js", JS, include_bytes!("dashboard/results.js")),
     ("budget.js", JS, include_bytes!("dashboard/budget.js")),
     ("budgetplan.js", JS, include_bytes!("dashboard/budgetplan.js")),
+    ("errorplan.js", JS, include_bytes!("dashboard/errorplan.js")),
+    ("radiitable.js", JS, include_bytes!("dashboard/radiitable.js")),
     ("solves.js", JS, include_bytes!("dashboard/solves.js")),
     ("form.js", JS, include_bytes!("dashboard/form.js")),
     ("specfields.js", JS, include_bytes!("dashboard/specfields.js")),

@@ -16,7 +16,8 @@
 // The steps are in harness.mjs (checks, waiting, the API, charts and their axes), files.mjs
 // (downloads, CSV, PNG, docs/csv.md's columns, the README's screenshots), jobs.mjs (the list, the
 // form, a job followed live), research.mjs (the paper's Table 1, Fig. 2, the compare page),
-// downloads.mjs (a job's CSV, SVG and PNG files), budget.mjs (the ray-budget panel), sweeps.mjs and
+// downloads.mjs (a job's CSV, SVG and PNG files), budget.mjs (the ray-budget panel), radii.mjs (a
+// job with smaller merge radii: its table per radius and its plan to a target RMSE), sweeps.mjs and
 // runs.mjs (the runs table's varying columns, the list's state in the URL, a sweep's compare page);
 // this module signs in and runs them in order.
 
@@ -32,6 +33,7 @@ import {
   submitJob,
 } from './jobs.mjs';
 import { checkBudget, submitNoiseJob } from './budget.mjs';
+import { checkRadii, submitRadiiJob } from './radii.mjs';
 import { checkDownloads } from './downloads.mjs';
 import {
   checkCompare, checkFigure2, checkPaperJob, checkSolves, checkTableJobs, submitPaperPair, submitTableJobs,
@@ -75,11 +77,13 @@ async function run(browser) {
   const pair = await submitPaperPair();
   const tableJobs = await submitTableJobs();
   const noiseJob = await submitNoiseJob();
+  const radiiJob = await submitRadiiJob(page);
   const spot = await checkPaperJob(page, pair.spot);
   await checkDownloads(page, pair.spot, spot);
   await checkSolves(page, pair.spot);
   await checkTableJobs(page, tableJobs);
   await checkBudget(page, noiseJob, pair.spot);
+  await checkRadii(page, radiiJob);
   await checkCompare(page, pair, [spot.result, (await callApi(`/v1/jobs/${pair.uniform}/result`)).json]);
   const sweep = await openSweep(page);
   await checkSweepSummary(page, sweep);

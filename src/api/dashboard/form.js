@@ -71,6 +71,15 @@ function parseExtra(text) {
 }
 
 function parseField(name, text, kind) {
+  // A list of numbers (radii): comma-separated, sent as a JSON array.
+  if (kind === 'numbers') {
+    return text.split(',').map((part) => {
+      const item = part.trim();
+      const value = Number(item);
+      if (item === '' || !Number.isFinite(value)) throw new FormError(`${name}: “${item}” is not a number (give numbers separated by commas, such as 0.001, 0.002).`, name);
+      return value;
+    });
+  }
   const value = Number(text);
   if (!Number.isFinite(value)) throw new FormError(`${name}: “${text}” is not a number.`, name);
   // Counts are sent as JSON numbers, exact only up to 2⁵³.

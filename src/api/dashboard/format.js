@@ -88,6 +88,23 @@ export function formatScientific(x, digits = 3) {
   return m === 1 ? power : `${String(m).replace('-', '−')}·${power}`;
 }
 
+/**
+ * A value ± its error over a wide range (formatScientific's), with a real minus: as themselves
+ * when the value prints plainly (`0.0118 ± 2·10⁻⁵`, `3.3 ± 1.64`), else both on the value's power
+ * of ten (`(4.06 ± 0.476)·10⁵`, `(−2.03 ± 0.2)·10⁻⁴`); without an error, the value alone.
+ */
+export function formatScientificWithError(x, se) {
+  const minus = (text) => text.replace(/^-/, '−');
+  if (se === null || se === undefined || !Number.isFinite(x) || x === 0) {
+    return se === null || se === undefined ? minus(formatScientific(x)) : `${minus(formatScientific(x))} ± ${formatScientific(se)}`;
+  }
+  const e = Math.floor(Math.log10(Math.abs(Number(x.toPrecision(3)))) + 1e-12);
+  if (e >= -2 && e < 5) return `${minus(formatScientific(x))} ± ${formatScientific(se)}`;
+  const mantissa = (v) => minus(String(Number((v / 10 ** e).toPrecision(3))));
+  const power = `10${[...String(e)].map((c) => SUPERSCRIPTS[c]).join('')}`;
+  return `(${mantissa(x)} ± ${mantissa(se)})·${power}`;
+}
+
 /** A number with a real minus sign: `−0.126`. */
 export const signed = (x, digits) => `${x < 0 ? '−' : ''}${fixed(Math.abs(x), digits)}`;
 

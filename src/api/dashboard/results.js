@@ -1,7 +1,8 @@
 // Results of a job: fetching its result (or a kept solve's, solves.js) and history as checkpoints
 // arrive — then Fig. 2's data, the recommended row's effective weights (GET …/effective) and the
 // in-sample λ = 0 table (GET …/result?lambda=0), each fetched once per checkpoint — and showing
-// them: the noise table (noisetable.js), Fig. 2's two panels (fig2.js) and the history charts
+// them: the noise table (noisetable.js) and, for a job run with radii, its figures at each radius
+// (radiitable.js), Fig. 2's two panels (fig2.js) and the history charts
 // (plots.js), with the CSV downloads of the noise table, the recommended weights table, the
 // effective weights and the history, and the SVG/PNG downloads of the charts (chartfiles.js).
 
@@ -13,6 +14,7 @@ import { fixed, formatCount, h, showMessage, withError } from './format.js';
 import { drawEffective, drawLambdaZero, effectiveQuery, figureSource } from './fig2.js';
 import { noiseRows, paperNote, recommendedNote, referenceNote } from './noisetable.js';
 import { drawHistory, drawLuminance } from './plots.js';
+import { radiiSection } from './radiitable.js';
 import { SolvesPanel } from './solves.js';
 
 /**
@@ -147,6 +149,7 @@ export class ResultsLoader {
     refs.gain.textContent = '';
     refs.warnings.hidden = true;
     refs.merges.textContent = '';
+    refs.radii.replaceChildren();
     this.plots.weights.clear('The weights appear after the first checkpoint.');
     this.plots.lambdaZero.clear('The λ = 0 table appears after the first checkpoint.');
     showMessage(refs['weights-note'], '');
@@ -184,6 +187,10 @@ export class ResultsLoader {
       h('code', {}, w.code), ` ${w.message}`, w.cells?.length ? ` (cells ${w.cells.join(', ')})` : '')));
     refs.warnings.hidden = result.warnings.length === 0;
     refs.merges.textContent = describeMerges(result.merges_per_iteration);
+    // The details the reader opened stay open when the next checkpoint redraws them.
+    const shown = refs.radii.querySelector('[data-ref="radii-table"]');
+    const open = shown ? new Set([...shown.querySelectorAll('details[open]')].map((d) => d.dataset.radius)) : null;
+    refs.radii.replaceChildren(...[radiiSection(result, open)].filter(Boolean));
     this.figure = figureSource(result, null, this.solve === 'default');
     this.weightsButton.hidden = this.figure.kind !== 'recommended';
     // Until the first figure arrives, say that it is coming; later ones replace the last in place.

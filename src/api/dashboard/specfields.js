@@ -16,6 +16,7 @@ const KNOWN = [
   ['light_paths', ['', ['N', 'F']]],
   ['camera_paths', ['', ['N', 'B']]],
   ['merge_radius', ['', ['R']]],
+  ['radii', ['radii ', ['R′']]],
   ['scene.l2', ['', ['L', '2']]],
   ['scene.l3', ['', ['L', '3']]],
   ['scene.beta_deg', ['', ['β']]],
