@@ -18,7 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{BudgetPoint, Costs, Timing, plan_with};
+use super::{BudgetPoint, Costs, SUPPORT_RELATIVE_SE, Timing, plan_with};
 use crate::sim::model::cells::CellGrid;
 use crate::sim::model::config::SimConfig;
 use crate::sim::solve::options::SolverOptions;
@@ -59,7 +59,9 @@ pub struct ErrorPoint {
     pub seconds_to_target: f64,
     /// Its standard error: the delta method on σ and b.
     pub seconds_to_target_stderr: Option<f64>,
-    /// Whether the run supports the prediction (its RMS SE within the plan's limit of itself).
+    /// Whether the run supports the prediction: its RMS SE within the plan's limit of itself
+    /// (`support_relative_se`, 25%) and its time's SE — the bias's error included — within twice
+    /// that (a fitted row's Monte-Carlo bias can be too uncertain to rank a time on).
     pub supported: bool,
     /// Whether the strategy keeps the solver's fixed weights.
     pub respects_fixed: bool,
@@ -75,6 +77,9 @@ pub struct OutOfReach {
     pub merge_radius: f64,
     /// Its bias, % of L.
     pub bias_percent: f64,
+    /// Its error (a fitted row's Monte-Carlo bias may be out of reach by its noise only: then
+    /// the bias minus twice its error is below the target).
+    pub bias_percent_stderr: Option<f64>,
 }
 
 /// The progressive schedule's prediction.
@@ -187,7 +192,13 @@ pub fn error_plan(
         let bias = |s: Strategy| report.rows.iter().find(|x| x.strategy == s).and_then(|x| x.bias_percent);
         for row in &report.rows {
             if let Some(b) = row.bias_percent.filter(|b| b.abs() >= target) {
-                out_of_reach.push(OutOfReach { strategy: row.strategy, merge_radius: r, bias_percent: b });
+                let bias_percent_stderr = row.bias_percent_stderr;
+                out_of_reach.push(OutOfReach {
+                    strategy: row.strategy,
+                    merge_radius: r,
+                    bias_percent: b,
+                    bias_percent_stderr,
+                });
             }
         }
         let merges = report.merges_per_iteration;
@@ -292,7 +303,7 @@ fn error_point(p: &BudgetPoint, radius: f64, report: &RadiusReport) -> ErrorPoin
         seconds_per_iteration: p.seconds_per_iteration,
         seconds_to_target: p.seconds_to_target,
         seconds_to_target_stderr: stderr,
-        supported: p.supported(),
+        supported: p.supported() && stderr.is_some_and(|se| se <= 2.0 * SUPPORT_RELATIVE_SE * p.seconds_to_target),
         respects_fixed: p.respects_fixed,
     }
 }
