@@ -18,6 +18,12 @@
 //! and 1.2× at R = 0.05, where merges are nearly all the work — 1.5 on the merges' and iterations'
 //! share bounds both; tracing is not repeated, so the traced paths keep their weight.
 //!
+//! With `radii`, each merge within a smaller radius R′ is weighed and recorded again (its own
+//! tally, `engines::merge`): the merge term is multiplied by 1 + Σ (R′/R)², the share of the merges
+//! that fall within each R′ where the vertex densities are smooth at the scale of R (measured:
+//! radii [0.003, 0.005, 0.01] at R = 0.02 made the paper's iterations 1.32× as long, against the
+//! factor 1.34; docs/results.md §22).
+//!
 //! E[merge events] is N_F·Σ_j P(the light vertex falls within R of camera vertex j) at planes 2 and
 //! 3 (the closed forms of [`crate::sim::checks::expectation`]; both engines share it by Campbell's theorem). It
 //! depends on the camera paths, so it is averaged over a pilot of camera paths drawn from a stream
@@ -50,7 +56,7 @@ const PILOT_SEED: u64 = 0x0b5e_55ed_c057;
 pub struct IterationWork {
     /// Light paths traced: N_F (brute force) or the expected candidates (restricted engine).
     pub light_paths: f64,
-    /// Expected merge events at planes 2 and 3.
+    /// Expected merge events at planes 2 and 3, those recorded again at smaller radii included.
     pub merges: f64,
     /// N_B.
     pub camera_paths: f64,
@@ -107,9 +113,10 @@ pub fn iteration_work(config: &SimConfig) -> IterationWork {
         Some(plan) => plan.plane1_mass() + per_camera_candidates / cameras * n_b as f64,
         None => n_f,
     };
+    let radii: f64 = config.radii.iter().map(|sub| (sub.merge_radius / radius).powi(2)).sum();
     IterationWork {
         light_paths,
-        merges: n_f * per_camera_merges / cameras * n_b as f64,
+        merges: (1.0 + radii) * n_f * per_camera_merges / cameras * n_b as f64,
         camera_paths: n_b as f64,
         components: if config.noise_components { COMPONENTS_FACTOR } else { 1.0 },
     }
@@ -167,5 +174,16 @@ mod tests {
         assert_eq!(with.total(), plain.light_paths + COMPONENTS_FACTOR * per_merge);
         // At R = 0.5 the merges are most of the work: the total grows by about a third.
         assert!(with.total() > 1.3 * plain.total(), "{plain:?} vs {with:?}");
+    }
+
+    /// Issue 44: the merges recorded again at each smaller radius count in the work, as the share
+    /// of the merges within it.
+    #[test]
+    fn radii_count_in_the_work() {
+        let plain = iteration_work(&config(json!({ "merge_radius": 0.02 })));
+        let with = iteration_work(&config(json!({ "merge_radius": 0.02, "radii": [0.005, 0.01] })));
+        assert_eq!(plain.light_paths, with.light_paths, "the paths are traced once");
+        let factor = 1.0 + 0.25f64.powi(2) + 0.5f64.powi(2);
+        assert!((with.merges - factor * plain.merges).abs() <= 1e-9 * with.merges, "{plain:?} vs {with:?}");
     }
 }
