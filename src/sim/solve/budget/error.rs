@@ -229,8 +229,12 @@ pub fn error_plan(
             "the paper's setup (switch at N_F = 10^7, N_B = 100, R = {PAPER_RADIUS}) needs the radius {PAPER_RADIUS} among the run's radii"
         ));
     }
-    if best.is_none() {
-        notes.push("no supported point that keeps the fixed weights reaches the target".to_string());
+    match (&best, own_radius) {
+        (None, _) => notes.push("no supported point that keeps the fixed weights reaches the target".to_string()),
+        (Some(b), Some(r)) if b.merge_radius == r && radii.len() > 1 => notes.push(format!(
+            "the fastest radius is the run's own R = {r}, the largest it can see: a run at a larger R (with this one among its radii) may plan faster still"
+        )),
+        _ => {}
     }
     let (speedup_over_paper, speedup_over_paper_stderr) = speedup(best.as_ref(), paper.as_ref());
     let (speedup_over_own_radius, speedup_over_own_radius_stderr) = speedup(best.as_ref(), at_own_radius.as_ref());
