@@ -15,9 +15,7 @@
 use std::ops::Range;
 
 use super::coverage::Coverage;
-use super::moments::{
-    Counters, FoldMoments, MergeError, Moments, add_tally_counters, check_representable, counters_fit,
-};
+use super::moments::{Counters, FoldMoments, MergeError, Moments, add_tally_counters, check_iteration, counters_fit};
 use super::terms::{SumIndex, TermBuffers, for_each_term};
 use crate::sim::engines::layout::Layout;
 use crate::sim::engines::tally::IterationTally;
@@ -87,15 +85,7 @@ impl MomentsAccumulator {
     /// [`Moments::add_iteration`]: a value that could overflow a sum, or a counter that would
     /// overflow, is an error and changes nothing.
     pub fn add_iteration(&mut self, tally: &IterationTally) -> Result<(), MergeError> {
-        if tally.radii.len() != self.radii.len() {
-            return Err(MergeError::Malformed(format!(
-                "an iteration tallied at {} smaller radii for moments that keep {}",
-                tally.radii.len(),
-                self.radii.len()
-            )));
-        }
-        check_representable(tally)?;
-        tally.radii.iter().try_for_each(check_representable)?;
+        check_iteration(tally, self.radii.len())?;
         self.add_own(tally)?;
         for (sub, sub_tally) in self.radii.iter_mut().zip(&tally.radii) {
             sub.add_own(sub_tally)?;

@@ -242,6 +242,21 @@ pub(super) fn check_representable(tally: &IterationTally) -> Result<(), MergeErr
     }
 }
 
+/// What an iteration must be before anything of it is added to moments (or a worker's sums) that
+/// keep `radii` smaller radii: tallied at as many radii, and every value representable — checked
+/// first, so that an iteration is refused whole (only a counter overflow, beyond 2^64 merges,
+/// could still stop it part-way).
+pub(super) fn check_iteration(tally: &IterationTally, radii: usize) -> Result<(), MergeError> {
+    if tally.radii.len() != radii {
+        return Err(MergeError::Malformed(format!(
+            "an iteration tallied at {} smaller radii for moments that keep {radii}",
+            tally.radii.len()
+        )));
+    }
+    check_representable(tally)?;
+    tally.radii.iter().try_for_each(check_representable)
+}
+
 /// The merge counters with `tally`'s added (checked), and whether its cell counts fit beside
 /// `cell_counts`: the first step of adding an iteration, which changes nothing when it fails.
 pub(super) fn add_tally_counters(
@@ -343,17 +358,7 @@ impl Moments {
         if self.coverage.contains(seed, s) {
             return Err(MergeError::Overlap(vec![Overlap { seed, range: [s, s + 1] }]));
         }
-        if tally.radii.len() != self.radii.len() {
-            return Err(MergeError::Malformed(format!(
-                "an iteration tallied at {} smaller radii for moments that keep {}",
-                tally.radii.len(),
-                self.radii.len()
-            )));
-        }
-        // Every value checked first, so that an iteration is refused whole (only a counter
-        // overflow, beyond 2^64 merges, could still stop it part-way).
-        check_representable(tally)?;
-        tally.radii.iter().try_for_each(check_representable)?;
+        check_iteration(tally, self.radii.len())?;
         let k = self.folds.len() as u64;
         let layout = self.layout();
         self.folds[(s % k) as usize].add_iteration(layout, tally)?;
