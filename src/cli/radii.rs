@@ -10,7 +10,8 @@ use crate::sim::checks::references::expected_luminances;
 use crate::sim::model::config::SimConfig;
 use crate::sim::solve::budget::error::{ErrorPlan, ErrorPoint};
 use crate::sim::solve::options::SolverOptions;
-use crate::sim::solve::radii::{BiasSource, RadiusReport, radius_reports};
+use crate::sim::solve::radii::{BiasSource, RadiusReport};
+use crate::sim::solve::radius_reports::radius_reports;
 use crate::sim::stats::moments::Moments;
 
 /// The reports at every radius of the run (its own alone without `radii`).

@@ -16,7 +16,7 @@ use crate::sim::model::params::{check, check_path_counts};
 use crate::sim::solve::budget::error::{ErrorPlan, error_plan_of};
 use crate::sim::solve::budget::{BudgetPlan, Costs, plan};
 use crate::sim::solve::predict::{Budget, PredictError, Prediction, predict};
-use crate::sim::solve::radii::radius_reports;
+use crate::sim::solve::radius_reports::radius_reports;
 
 /// What to predict.
 #[derive(Debug, Clone, Deserialize, ToSchema)]

@@ -17,7 +17,7 @@ use crate::sim::checks::published::applicable;
 use crate::sim::document::{Attestation, AttestationBasis, MomentsDocument, merged_spec};
 use crate::sim::model::params::check;
 use crate::sim::solve::options::MAX_LAMBDA;
-use crate::sim::solve::radii::radius_reports;
+use crate::sim::solve::radius_reports::radius_reports;
 use crate::sim::solve::report::{ReportInputs, RunReport, WeightsQuery, build_report};
 use crate::sim::solve::strategy::Strategy;
 use crate::sim::spec::ValidJob;

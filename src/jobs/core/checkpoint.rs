@@ -15,7 +15,7 @@ use super::error::JobError;
 use super::references::expected_luminances;
 use super::resource::best_strategy;
 use crate::sim::math::digest::sha256_hex;
-use crate::sim::solve::radii::radius_reports;
+use crate::sim::solve::radius_reports::radius_reports;
 use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;

@@ -25,7 +25,8 @@
 //!   noise components;
 //! * [`budget`] — the (N_F, N_B) that reaches a target noise soonest, per strategy, and with
 //!   [`budget::error`] the (N_F, N_B, R′) that reaches a target error, bias included;
-//! * [`radii`] — a run's noise table and biases at each smaller radius it tallied;
+//! * [`radii`] — a run's noise table and biases at each smaller radius it tallied, and
+//!   [`radius_reports`] that computes them;
 //! * [`evaluate`] — any weights (another run's recommendation, a table) scored on a run;
 //! * [`compare`] — runs compared strategy by strategy, ratios and differences with their SEs.
 //!
@@ -44,6 +45,7 @@ pub mod noise;
 pub mod options;
 pub mod predict;
 pub mod radii;
+pub mod radius_reports;
 pub mod recommend;
 pub mod report;
 pub mod rms_error;

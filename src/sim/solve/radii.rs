@@ -1,6 +1,7 @@
-//! The figures of a run at each merge radius it tallied (`radii`, docs/model.md §13): the noise
-//! table of the moments at R′ — exactly what a run at R′ would have summed — and each row's bias
-//! against the R → 0 reference L (§11), with its error.
+//! The figures of a run at each merge radius it tallied (`radii`, docs/model.md §13), as a result
+//! document carries them: each radius's noise-table rows — exactly what a run at R′ would have
+//! summed — with each row's bias against the R → 0 reference L (§11) and its error
+//! ([`super::radius_reports`] computes them).
 //!
 //! A per-path strategy's bias is its expected luminance at R′ by quadrature (`checks::expected`,
 //! to 10⁻⁷ of L) minus L: deterministic, its error the quadrature's tolerance. A fitted row's
@@ -10,13 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::expectation::ExpectedLuminance;
-use super::noise::merge_rates;
-use super::options::SolverOptions;
-use super::report::{ReportInputs, build_report};
 use super::strategy::Strategy;
-use crate::sim::model::config::SimConfig;
-use crate::sim::stats::moments::Moments;
 
 /// The relative accuracy the quadrature of `checks::expected` is refined to (its outer and inner
 /// tolerances, each 10⁻⁷ of the largest strategy's value): the error of a quadrature bias.
@@ -72,72 +67,4 @@ pub struct RadiusReport {
     pub recommended: Option<Strategy>,
     /// Every row of the noise table at R′ but the in-sample fit, with its bias.
     pub rows: Vec<RadiusRow>,
-}
-
-/// The figures at each radius the run tallied and at its own, ascending by radius (its own alone
-/// without `radii`). `expected(config)` gives each per-path strategy's expected luminance at
-/// `config`'s radius (the server caches it by fingerprint), `reference` the R → 0 value L.
-pub fn radius_reports(
-    config: &SimConfig,
-    moments: &Moments,
-    solver: &SolverOptions,
-    reference: Option<f64>,
-    expected: &dyn Fn(&SimConfig) -> Vec<ExpectedLuminance>,
-) -> Vec<RadiusReport> {
-    let mut out: Vec<RadiusReport> = config
-        .radii()
-        .iter()
-        .zip(&moments.radii)
-        .map(|(sub, m)| radius_report(sub, m, solver, reference, &expected(sub), false))
-        .collect();
-    out.push(radius_report(config, moments, solver, reference, &expected(config), true));
-    out
-}
-
-fn radius_report(
-    config: &SimConfig,
-    moments: &Moments,
-    solver: &SolverOptions,
-    reference: Option<f64>,
-    expected: &[ExpectedLuminance],
-    own: bool,
-) -> RadiusReport {
-    let inputs = ReportInputs { reference, expected: Some(expected), weights: None };
-    let report = build_report(moments, config.cells(), solver, &inputs);
-    let rows = report
-        .noise_table
-        .iter()
-        .filter(|r| !r.in_sample)
-        .map(|r| {
-            let (bias, bias_se, source) = match (reference, r.expected_luminance, r.strategy.path()) {
-                (Some(l), Some(e), Some(_)) => {
-                    (Some(100.0 * (e - l) / l), Some(100.0 * QUADRATURE_RELATIVE_ERROR), BiasSource::Quadrature)
-                }
-                (Some(l), _, None) => (
-                    r.luminance.map(|x| 100.0 * (x - l) / l),
-                    r.luminance_stderr.map(|se| 100.0 * se / l),
-                    BiasSource::MonteCarlo,
-                ),
-                _ => (None, None, BiasSource::Quadrature),
-            };
-            RadiusRow {
-                strategy: r.strategy,
-                luminance: r.luminance,
-                luminance_stderr: r.luminance_stderr,
-                rms_percent: r.rms_percent,
-                rms_percent_stderr: r.rms_percent_stderr,
-                bias_percent: bias,
-                bias_percent_stderr: bias_se,
-                bias_source: source,
-                respects_fixed: r.respects_fixed,
-            }
-        })
-        .collect();
-    RadiusReport {
-        merge_radius: config.merge_radius(),
-        own,
-        merges_per_iteration: merge_rates(moments).map(|r| r.mean),
-        recommended: report.recommended.map(|r| r.strategy),
-        rows,
-    }
 }

@@ -14,8 +14,9 @@
 
 use std::ops::Range;
 
+use super::admission::check_iteration;
 use super::coverage::Coverage;
-use super::moments::{Counters, FoldMoments, MergeError, Moments, add_tally_counters, check_iteration, counters_fit};
+use super::moments::{Counters, FoldMoments, MergeError, Moments, add_tally_counters, counters_fit};
 use super::terms::{SumIndex, TermBuffers, for_each_term};
 use crate::sim::engines::layout::Layout;
 use crate::sim::engines::tally::IterationTally;

@@ -2,6 +2,7 @@
 //!
 //! * [`bounded`] — list deserialisation bounded by the largest valid value;
 //! * [`terms`] — what one iteration adds to which sum, for every accumulator;
+//! * [`admission`] — what an iteration's tally must be before any of it is summed;
 //! * [`accumulator`] — the runner's per-worker fast exact sums, handed to the moments in one go;
 //! * [`coverage`] — the (seed, iteration range) pairs a moments value holds;
 //! * [`moments`] — the additive sufficient statistics, their checks and merges; [`merge_error`] —
@@ -10,6 +11,7 @@
 //! Imports: crate::sim::engines, crate::sim::math, crate::sim::model
 
 pub mod accumulator;
+pub mod admission;
 pub mod bounded;
 pub mod components;
 pub mod coverage;

@@ -29,6 +29,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::admission::{check_iteration, check_representable};
 use super::bounded::bounded;
 
 use super::components::ComponentSums;
@@ -42,8 +43,7 @@ use crate::sim::model::cells::MAX_CELLS;
 pub use crate::sim::model::config::packed_index;
 use crate::sim::model::config::{MAX_FOLDS, MAX_RADII, MIN_FOLDS, MOMENTS_FORMAT_VERSION, SimConfig, packed_len};
 
-/// Largest magnitude of one iteration's normalised values (see `FoldMoments::add_iteration`).
-pub const MAX_TALLY_VALUE: f64 = 1e70;
+pub use super::admission::MAX_TALLY_VALUE;
 
 /// Longest per-slot list (three planes per cell).
 const MAX_SLOTS: usize = 3 * MAX_CELLS;
@@ -224,37 +224,6 @@ pub(super) fn counters_fit(folds: &[Counters<'_>]) -> bool {
 
 fn overflow(what: &str) -> MergeError {
     MergeError::Overflow(what.to_string())
-}
-
-/// Refuses an iteration whose values could overflow a sum: products of up to four values enter
-/// the sums (ΣYYᵀ, Σ C⁴), and beyond 10⁷⁰ they would leave the doubles. No valid scene comes near
-/// (its values are below 10⁴⁰), so this only stops a configuration the validation did not foresee,
-/// as an error instead of a poisoned sum.
-pub(super) fn check_representable(tally: &IterationTally) -> Result<(), MergeError> {
-    let representable = |v: f64| v.is_finite() && v.abs() <= MAX_TALLY_VALUE;
-    if tally.cell_values.iter().all(|&v| representable(v)) && tally.strategies.iter().all(|&v| representable(v)) {
-        Ok(())
-    } else {
-        Err(MergeError::Overflow(format!(
-            "iteration {} produced a contribution beyond {MAX_TALLY_VALUE:e} (an extreme scene)",
-            tally.iteration
-        )))
-    }
-}
-
-/// What an iteration must be before anything of it is added to moments (or a worker's sums) that
-/// keep `radii` smaller radii: tallied at as many radii, and every value representable — checked
-/// first, so that an iteration is refused whole (only a counter overflow, beyond 2^64 merges,
-/// could still stop it part-way).
-pub(super) fn check_iteration(tally: &IterationTally, radii: usize) -> Result<(), MergeError> {
-    if tally.radii.len() != radii {
-        return Err(MergeError::Malformed(format!(
-            "an iteration tallied at {} smaller radii for moments that keep {radii}",
-            tally.radii.len()
-        )));
-    }
-    check_representable(tally)?;
-    tally.radii.iter().try_for_each(check_representable)
 }
 
 /// The merge counters with `tally`'s added (checked), and whether its cell counts fit beside
