@@ -114,6 +114,16 @@ fn moments_with_radii_merge_and_refuse_what_does_not_fit() {
     let mut bad = b.clone();
     bad.radii[0] = a.radii[0].clone();
     assert!(check_well_formed(&bad).is_err());
+    // Radii dropped (or fewer than the configuration's) are not that configuration's moments, and
+    // do not merge with moments that keep them.
+    assert!(whole.is_of(job_a.config()));
+    let mut dropped = b.clone();
+    dropped.radii.clear();
+    check_well_formed(&dropped).expect("well formed on its own");
+    assert!(!dropped.is_of(job_a.config()), "a value without its radii is not the configuration's");
+    let mut fresh = run_job(&job_a);
+    assert!(fresh.merge(&dropped).is_err(), "moments without their radii do not merge");
+    assert_eq!(fresh, run_job(&job_a), "a refused merge changes nothing");
 }
 
 /// The server: a job with radii reports each radius (bias beside the RMS), and `POST

@@ -109,7 +109,7 @@ pub fn budget(args: BudgetArgs) -> Result<(), CliError> {
             format!("must be a positive percentage, got {target}")
         })?;
         let config = job.config();
-        let reports = thread_pool(None)?.install(|| super::radii::reports(config, &doc.moments, &solver));
+        let reports = thread_pool(None)?.install(|| super::radii::reports(config, &doc.moments, &solver, None));
         let p = error_plan_of(config, &doc.moments, &reports, &solver, costs, target)
             .map_err(|e| CliError::Unusable { path: args.document.clone(), detail: e.to_string() })?;
         let mut out = std::io::stdout().lock();

@@ -179,7 +179,7 @@ pub fn report(args: ReportArgs) -> Result<(), CliError> {
     let weights = args.weights_lambda.map(|lambda| WeightsQuery { lambda, strategy });
     let inputs = ReportInputs { reference, expected: Some(&expected), weights };
     let mut report = build_report(&doc.moments, &job.config().cells, &solver, &inputs);
-    report.radii = super::radii::tallied(job.config(), &doc.moments, &solver);
+    report.radii = super::radii::tallied(job.config(), &doc.moments, &solver, &report);
     let mut spec = doc.spec.clone();
     spec.solver = solver.clone();
     write_csv(&spec, job.config(), &report, args.csv.as_deref(), args.weights_csv.as_deref())?;

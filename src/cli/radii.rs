@@ -12,17 +12,30 @@ use crate::sim::solve::budget::error::{ErrorPlan, ErrorPoint};
 use crate::sim::solve::options::SolverOptions;
 use crate::sim::solve::radii::{BiasSource, RadiusReport};
 use crate::sim::solve::radius_reports::radius_reports;
+use crate::sim::solve::report::RunReport;
 use crate::sim::stats::moments::Moments;
 
-/// The reports at every radius of the run (its own alone without `radii`).
-pub(super) fn reports(config: &SimConfig, moments: &Moments, solver: &SolverOptions) -> Vec<RadiusReport> {
-    let reference = reference_luminance(config.scene()).ok();
-    radius_reports(config, moments, solver, reference, &|c| expected_luminances(c))
+/// The reports at every radius of the run (its own alone without `radii`), the run's own report at
+/// R reused when given (it was built with the same reference and expectations).
+pub(super) fn reports(
+    config: &SimConfig,
+    moments: &Moments,
+    solver: &SolverOptions,
+    own: Option<&RunReport>,
+) -> Vec<RadiusReport> {
+    let reference = own.map_or_else(|| reference_luminance(config.scene()).ok(), |r| r.reference_luminance);
+    radius_reports(config, moments, solver, reference, &|c| expected_luminances(c), own)
 }
 
-/// The reports when the run tallied radii (none otherwise: the report's own table is R's).
-pub(super) fn tallied(config: &SimConfig, moments: &Moments, solver: &SolverOptions) -> Vec<RadiusReport> {
-    if config.radii().is_empty() { Vec::new() } else { reports(config, moments, solver) }
+/// The reports when the run tallied radii (none otherwise: the report's own table is R's), from
+/// the run's report at R.
+pub(super) fn tallied(
+    config: &SimConfig,
+    moments: &Moments,
+    solver: &SolverOptions,
+    own: &RunReport,
+) -> Vec<RadiusReport> {
+    if config.radii().is_empty() { Vec::new() } else { reports(config, moments, solver, Some(own)) }
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {

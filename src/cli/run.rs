@@ -399,7 +399,7 @@ pub fn run(args: RunArgs) -> Result<(), CliError> {
     let inputs =
         ReportInputs { reference: reference_luminance(&config.scene).ok(), expected: Some(&expected), weights: None };
     let mut report = build_report(&moments, &config.cells, &job.spec().solver, &inputs);
-    report.radii = pool.install(|| super::radii::tallied(config, &moments, &job.spec().solver));
+    report.radii = pool.install(|| super::radii::tallied(config, &moments, &job.spec().solver, &report));
     write_csv(job.spec(), config, &report, args.csv.as_deref(), args.weights_csv.as_deref())?;
     let mut out = std::io::stdout().lock();
     if args.json {

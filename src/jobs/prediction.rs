@@ -187,8 +187,14 @@ impl Predictions {
                     Some(p) => {
                         let config = job.config();
                         let reference = scene_reference(config.scene());
-                        let reports =
-                            radius_reports(config, &moments, &solver, reference, &|c| expected_luminances(c).to_vec());
+                        let reports = radius_reports(
+                            config,
+                            &moments,
+                            &solver,
+                            reference,
+                            &|c| expected_luminances(c).to_vec(),
+                            None,
+                        );
                         Some(error_plan_of(config, &moments, &reports, &solver, costs, p).map_err(conflict)?)
                     }
                     None => None,

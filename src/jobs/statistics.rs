@@ -15,6 +15,7 @@ use super::core::references::expected_luminances;
 use super::core::resource::JobState;
 use crate::sim::checks::published::applicable;
 use crate::sim::document::{Attestation, AttestationBasis, MomentsDocument, merged_spec};
+use crate::sim::model::config::SimConfig;
 use crate::sim::model::params::check;
 use crate::sim::solve::options::MAX_LAMBDA;
 use crate::sim::solve::radius_reports::radius_reports;
@@ -151,9 +152,8 @@ impl Statistics {
                 let inputs = ReportInputs { reference, expected: Some(&expected), weights };
                 let mut report = build_report(&moments, &job.config().cells, &solver, &inputs);
                 if !job.config().radii().is_empty() {
-                    report.radii = radius_reports(job.config(), &moments, &solver, reference, &|c| {
-                        expected_luminances(c).to_vec()
-                    });
+                    let expected = |c: &SimConfig| expected_luminances(c).to_vec();
+                    report.radii = radius_reports(job.config(), &moments, &solver, reference, &expected, Some(&report));
                 }
                 report
             })

@@ -194,7 +194,7 @@ impl MomentsDocument {
         }
         let job = self.spec.validate().map_err(|e| DocumentError::Inconsistent(format!("invalid spec: {e}")))?;
         // A document an earlier build wrote carries its format's fingerprint.
-        if job.config().fingerprint_of_format(self.moments.format_version) != self.fingerprint {
+        if !self.moments.is_of(job.config()) {
             return Err(DocumentError::Inconsistent("the spec does not describe the moments' configuration".into()));
         }
         self.check_spec_covers()?;

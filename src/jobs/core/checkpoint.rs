@@ -15,6 +15,7 @@ use super::error::JobError;
 use super::references::expected_luminances;
 use super::resource::best_strategy;
 use crate::sim::math::digest::sha256_hex;
+use crate::sim::model::config::SimConfig;
 use crate::sim::solve::radius_reports::radius_reports;
 use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
@@ -134,7 +135,7 @@ pub(crate) fn decode_checkpoint(
         .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
     check_well_formed(&moments).map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
     // A job an earlier build started keeps its checkpoint's format (and resumes in it).
-    if moments.fingerprint != job.config().fingerprint_of_format(moments.format_version) {
+    if !moments.is_of(job.config()) {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));
     }
     if moments.iterations() != checkpoint.iterations_done {
@@ -163,8 +164,8 @@ pub(crate) fn checkpoint_of(moments: &Moments, job: &ValidJob, reference: Option
     let inputs = ReportInputs { reference, expected: Some(&expected), weights: None };
     let mut report = build_report(moments, &job.config().cells, &job.spec().solver, &inputs);
     if !job.config().radii().is_empty() {
-        report.radii =
-            radius_reports(job.config(), moments, &job.spec().solver, reference, &|c| expected_luminances(c).to_vec());
+        let at = |c: &SimConfig| expected_luminances(c).to_vec();
+        report.radii = radius_reports(job.config(), moments, &job.spec().solver, reference, &at, Some(&report));
     }
     let best = best_strategy(&report.noise_table, report.recommended.as_ref().map(|r| r.strategy));
     let bytes = serde_json::to_vec(moments).map_err(|e| JobError::Internal(e.to_string()))?;

@@ -5,40 +5,57 @@ use super::expectation::ExpectedLuminance;
 use super::noise::merge_rates;
 use super::options::SolverOptions;
 use super::radii::{BiasSource, QUADRATURE_RELATIVE_ERROR, RadiusReport, RadiusRow};
-use super::report::{ReportInputs, build_report};
+use super::report::{ReportInputs, RunReport, build_report};
 use crate::sim::model::config::SimConfig;
 use crate::sim::stats::moments::Moments;
 
 /// The figures at each radius the run tallied and at its own, ascending by radius (its own alone
 /// without `radii`). `expected(config)` gives each per-path strategy's expected luminance at
-/// `config`'s radius (the server caches it by fingerprint), `reference` the R → 0 value L.
+/// `config`'s radius (the server caches it by fingerprint), `reference` the R → 0 value L; `own`
+/// the run's report at R with these inputs when the caller has it (it is not built twice).
 pub fn radius_reports(
     config: &SimConfig,
     moments: &Moments,
     solver: &SolverOptions,
     reference: Option<f64>,
     expected: &dyn Fn(&SimConfig) -> Vec<ExpectedLuminance>,
+    own: Option<&RunReport>,
 ) -> Vec<RadiusReport> {
+    let report_at = |config: &SimConfig, moments: &Moments| {
+        let expected = expected(config);
+        build_report(
+            moments,
+            config.cells(),
+            solver,
+            &ReportInputs { reference, expected: Some(&expected), weights: None },
+        )
+    };
     let mut out: Vec<RadiusReport> = config
         .radii()
         .iter()
         .zip(&moments.radii)
-        .map(|(sub, m)| radius_report(sub, m, solver, reference, &expected(sub), false))
+        .map(|(sub, m)| radius_report(&report_at(sub, m), sub, m, reference, false))
         .collect();
-    out.push(radius_report(config, moments, solver, reference, &expected(config), true));
+    let built;
+    let own_report = match own {
+        Some(report) => report,
+        None => {
+            built = report_at(config, moments);
+            &built
+        }
+    };
+    out.push(radius_report(own_report, config, moments, reference, true));
     out
 }
 
+/// One radius's figures from its report.
 fn radius_report(
+    report: &RunReport,
     config: &SimConfig,
     moments: &Moments,
-    solver: &SolverOptions,
     reference: Option<f64>,
-    expected: &[ExpectedLuminance],
     own: bool,
 ) -> RadiusReport {
-    let inputs = ReportInputs { reference, expected: Some(expected), weights: None };
-    let report = build_report(moments, config.cells(), solver, &inputs);
     let rows = report
         .noise_table
         .iter()
@@ -72,7 +89,7 @@ fn radius_report(
         merge_radius: config.merge_radius(),
         own,
         merges_per_iteration: merge_rates(moments).map(|r| r.mean),
-        recommended: report.recommended.map(|r| r.strategy),
+        recommended: report.recommended.as_ref().map(|r| r.strategy),
         rows,
     }
 }
