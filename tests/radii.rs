@@ -16,7 +16,7 @@ use optimis::sim::runner::run;
 use optimis::sim::solve::noise::noise_table;
 use optimis::sim::spec::{ValidJob, parse_job_spec};
 use optimis::sim::stats::moments::Moments;
-use optimis::sim::stats::well_formed::check_well_formed;
+use optimis::sim::stats::well_formed::{belongs_to, check_well_formed};
 use serde_json::{Value, json};
 
 fn job(doc: Value) -> ValidJob {
@@ -116,11 +116,11 @@ fn moments_with_radii_merge_and_refuse_what_does_not_fit() {
     assert!(check_well_formed(&bad).is_err());
     // Radii dropped (or fewer than the configuration's) are not that configuration's moments, and
     // do not merge with moments that keep them.
-    assert!(whole.is_of(job_a.config()));
+    assert!(belongs_to(&whole, job_a.config()));
     let mut dropped = b.clone();
     dropped.radii.clear();
     check_well_formed(&dropped).expect("well formed on its own");
-    assert!(!dropped.is_of(job_a.config()), "a value without its radii is not the configuration's");
+    assert!(!belongs_to(&dropped, job_a.config()), "a value without its radii is not the configuration's");
     let mut fresh = run_job(&job_a);
     assert!(fresh.merge(&dropped).is_err(), "moments without their radii do not merge");
     assert_eq!(fresh, run_job(&job_a), "a refused merge changes nothing");

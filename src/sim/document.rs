@@ -32,7 +32,7 @@ use super::spec::JobSpec;
 use crate::sim::math::digest::sha256_hex;
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::{MergeError, Moments};
-use crate::sim::stats::well_formed::check_well_formed;
+use crate::sim::stats::well_formed::{belongs_to, check_well_formed};
 
 /// The `kind` of every moments document.
 pub const DOCUMENT_KIND: &str = "optimis-moments";
@@ -194,7 +194,7 @@ impl MomentsDocument {
         }
         let job = self.spec.validate().map_err(|e| DocumentError::Inconsistent(format!("invalid spec: {e}")))?;
         // A document an earlier build wrote carries its format's fingerprint.
-        if !self.moments.is_of(job.config()) {
+        if !belongs_to(&self.moments, job.config()) {
             return Err(DocumentError::Inconsistent("the spec does not describe the moments' configuration".into()));
         }
         self.check_spec_covers()?;

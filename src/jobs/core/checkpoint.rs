@@ -21,7 +21,7 @@ use crate::sim::solve::report::{ReportInputs, build_report};
 use crate::sim::spec::{JobSpec, ValidJob};
 use crate::sim::stats::coverage::Coverage;
 use crate::sim::stats::moments::Moments;
-use crate::sim::stats::well_formed::check_well_formed;
+use crate::sim::stats::well_formed::{belongs_to, check_well_formed};
 use crate::store::{Checkpoint, Store, StoreError};
 
 /// How long a verification of a job's stored moments stands: a result read after it hashes them
@@ -135,7 +135,7 @@ pub(crate) fn decode_checkpoint(
         .map_err(|e| corrupt(format!("checkpoint moments unreadable: {e}")))?;
     check_well_formed(&moments).map_err(|e| corrupt(format!("checkpoint moments: {e}")))?;
     // A job an earlier build started keeps its checkpoint's format (and resumes in it).
-    if !moments.is_of(job.config()) {
+    if !belongs_to(&moments, job.config()) {
         return Err(corrupt("checkpoint moments belong to another configuration".into()));
     }
     if moments.iterations() != checkpoint.iterations_done {

@@ -301,16 +301,6 @@ impl Moments {
         }
     }
 
-    /// Whether these moments are `config`'s: its fingerprint (as their format spells it) and, radius
-    /// by radius, its smaller radii's — so that a document or checkpoint whose radii were dropped,
-    /// added or swapped is refused where its fingerprint is checked.
-    pub fn is_of(&self, config: &SimConfig) -> bool {
-        let of = |m: &Moments, c: &SimConfig| m.fingerprint == c.fingerprint_of_format(m.format_version);
-        of(self, config)
-            && self.radii.len() == config.radii().len()
-            && self.radii.iter().zip(config.radii()).all(|(m, c)| of(m, c))
-    }
-
     /// What these moments' format holds (checked supported by [`check_well_formed`](super::well_formed::check_well_formed)).
     pub fn layout(&self) -> Layout {
         Layout { cells: self.cells, format: self.format_version }

@@ -1,10 +1,12 @@
 //! The checks of moments read from outside that a parser cannot make (see `moments`, "Moments
 //! read from outside"): [`check_well_formed`] — the shape, and on every fold that the sums agree
-//! with their counts. Free functions beside the types, so that `moments.rs` calls nothing here.
+//! with their counts — and [`belongs_to`], whether they are a configuration's, radii included.
+//! Free functions beside the types, so that `moments.rs` calls nothing here.
 
 use super::moments::{FoldMoments, MergeError, Moments, packed_index};
 use crate::sim::engines::layout::Layout;
 use crate::sim::math::exact_sum::{ExactSum, MAX_MAGNITUDE};
+use crate::sim::model::config::SimConfig;
 
 /// Every check for moments read from outside (a file, a peer, a database row): the structure
 /// and that the sums agree with their counts (see the module documentation of `moments`).
@@ -21,6 +23,16 @@ pub fn check_well_formed(moments: &Moments) -> Result<(), MergeError> {
         }
     }
     Ok(())
+}
+
+/// Whether `moments` are `config`'s: its fingerprint (as their format spells it) and, radius by
+/// radius, its smaller radii's — so that a document or checkpoint whose radii were dropped, added
+/// or swapped is refused where its configuration is checked.
+pub fn belongs_to(moments: &Moments, config: &SimConfig) -> bool {
+    let of = |m: &Moments, c: &SimConfig| m.fingerprint == c.fingerprint_of_format(m.format_version);
+    of(moments, config)
+        && moments.radii.len() == config.radii().len()
+        && moments.radii.iter().zip(config.radii()).all(|(m, c)| of(m, c))
 }
 
 /// What a parser cannot check of one fold: that the sums agree with their counts. Fails with the
